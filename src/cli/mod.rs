@@ -1,0 +1,67 @@
+//! The `hytask` command line. One file per subcommand; each owns its argument struct and a
+//! `run` function returning `anyhow::Result<ExitCode>` (errors are reported here, once).
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+mod check;
+mod client;
+mod gcode;
+mod latency;
+mod plan;
+mod plot;
+mod run;
+mod serve;
+
+/// hytask: realtime hybrid task-based controller for machine tools and robots.
+#[derive(Debug, Parser)]
+#[command(name = "hytask", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run the daemon: load a machine, start its realtime tasks, serve the control socket.
+    Serve(serve::ServeArgs),
+    /// Run a G-code job (on the daemon, or on an embedded simulated machine if none runs).
+    Run(run::RunArgs),
+    /// Talk to a running daemon: status, estop, home, jog, mdi, ...
+    #[command(flatten)]
+    Client(client::ClientCommand),
+    /// Validate a machine configuration file and print the resolved machine.
+    Check(check::CheckArgs),
+    /// Measure hytask's periodic-thread wake-up latency, cyclictest-style.
+    Latency(latency::LatencyArgs),
+    /// G-code tools (canonical trace, ...).
+    Gcode(gcode::GcodeArgs),
+    /// Plan a G-code file: cycle-time estimate and peak velocity/acceleration/jerk per axis.
+    Plan(plan::PlanArgs),
+    /// Plot the planned toolpath of a G-code file to SVG.
+    Plot(plot::PlotArgs),
+}
+
+/// Entry point of the binary.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Serve(a) => serve::run(a),
+        Command::Run(a) => run::run(a),
+        Command::Client(a) => client::run(a),
+        Command::Check(a) => check::run(a),
+        Command::Latency(a) => latency::run(a),
+        Command::Gcode(a) => gcode::run(a),
+        Command::Plan(a) => plan::run(a),
+        Command::Plot(a) => plot::run(a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("hytask: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,2 @@
+//! The machine description: one TOML file, `deny_unknown_fields`, validated with errors that
+//! name section and key.

@@ -1,0 +1,1 @@
+//! The control socket: JSON lines `{id, method, params}` over a Unix domain socket.

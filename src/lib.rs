@@ -1,0 +1,21 @@
+//! hytask: a realtime controller daemon for machine tools and robots, built on the hybrid
+//! task model of Orocos (Soetens & Bruyninckx, "Realtime Hybrid Task-Based Control for Robots
+//! and Machine Tools").
+//!
+//! Module map (dependencies point downwards only):
+//! - [`cli`]: the `hytask` command line (daemon, job client, tools).
+//! - [`control`]: the control socket (JSON lines over a Unix socket).
+//! - [`machine`]: deployment of a machine from its configuration: tasks, threads, safety.
+//! - [`config`]: the TOML machine description, validated with errors that name the key.
+//! - [`motion`]: lookahead planner, kinematics and the realtime interpolator.
+//! - [`gcode`]: RS274/NGC (LinuxCNC dialect) front end: text in, canonical commands out.
+//! - [`rt`]: the reusable realtime task model: activities, data objects, buffers, events,
+//!   commands, lifecycle, timing statistics. It knows nothing of machines.
+
+pub mod cli;
+pub mod config;
+pub mod control;
+pub mod gcode;
+pub mod machine;
+pub mod motion;
+pub mod rt;

@@ -1,0 +1,2 @@
+//! Deployment of a machine: builds HAL backends, tasks and threads from the configuration,
+//! checks the topology and runs the machine state machine and its safety paths.

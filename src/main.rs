@@ -1,0 +1,5 @@
+//! The `hytask` binary: a thin shell over [`hytask::cli`].
+
+fn main() -> std::process::ExitCode {
+    hytask::cli::main()
+}
