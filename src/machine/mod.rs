@@ -1,2 +1,4 @@
 //! Deployment of a machine: builds HAL backends, tasks and threads from the configuration,
 //! checks the topology and runs the machine state machine and its safety paths.
+
+pub mod api;

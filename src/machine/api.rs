@@ -1,0 +1,323 @@
+//! The machine's non-realtime facade: what an operator (the control socket, the CLI, a
+//! test) can ask of a running machine, as one trait with typed requests and replies.
+//!
+//! Why a trait: the control socket depends on the *behaviour* of a machine, not on how it
+//! is deployed. The real implementation ([`super::Machine`]) turns each call into commands
+//! to realtime tasks and waits for them to be accepted or rejected; a test double can
+//! implement the same trait to exercise the protocol alone. Every call is non-blocking in
+//! the realtime sense: at worst it waits a few servo cycles for a command's acceptance.
+
+use serde::{Deserialize, Serialize};
+
+/// The machine's operating mode (the machine state machine's states).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// E-stop active: drives disabled, outputs safe, until `estop.reset`.
+    Estop,
+    /// E-stop released, machine off (drives disabled).
+    Off,
+    /// On and idle: accepts jobs, MDI, jog, home.
+    Idle,
+    /// Homing one or more axes.
+    Homing,
+    /// Jogging.
+    Manual,
+    /// Running a job or an MDI line.
+    Running,
+    /// Feed hold: decelerated to a stop on the path, resumable.
+    Holding,
+    /// A fault stopped the machine; `machine.on` after the cause is cleared.
+    Fault,
+}
+
+/// Why a request could not be carried out.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ApiError {
+    /// The machine refused in its current state (the reason says what would make it accept).
+    #[error("rejected: {0}")]
+    Rejected(String),
+    /// A parameter is out of range or names nothing.
+    #[error("invalid parameter: {0}")]
+    InvalidParams(String),
+    /// G-code that does not interpret; names file, line and column.
+    #[error("{0}")]
+    Gcode(String),
+    /// Accepted, but the operation failed while running.
+    #[error("failed: {0}")]
+    Failed(String),
+    /// No answer from the realtime side in time.
+    #[error("timed out: {0}")]
+    Timeout(String),
+    /// The method does not exist on this machine (e.g. sim inputs on real hardware).
+    #[error("not supported: {0}")]
+    NotSupported(String),
+}
+
+/// A thread's timing statistics, for `status`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ThreadTiming {
+    /// Thread name from the config.
+    pub name: String,
+    /// Configured period, µs.
+    pub period_us: u64,
+    /// SCHED_FIFO priority.
+    pub priority: i32,
+    /// Cycles run.
+    pub cycles: u64,
+    /// Wake-up latency, min/avg/max, µs.
+    pub latency_us: MinAvgMax,
+    /// Execution time of one cycle, min/avg/max, µs.
+    pub exec_us: MinAvgMax,
+    /// Cycles that overran their period.
+    pub overruns: u64,
+}
+
+/// Min/avg/max triple.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct MinAvgMax {
+    /// Minimum.
+    pub min: f64,
+    /// Mean.
+    pub avg: f64,
+    /// Maximum.
+    pub max: f64,
+}
+
+/// One axis in `status`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct AxisStatus {
+    /// Axis letter.
+    pub name: String,
+    /// Commanded position, mm or deg.
+    pub commanded: f64,
+    /// Actual (feedback) position.
+    pub actual: f64,
+    /// Actual velocity, units/s.
+    pub velocity: f64,
+    /// commanded - actual.
+    pub following_error: f64,
+    /// Largest |following error| seen during the current/last job.
+    pub max_following_error: f64,
+    /// Homed since the machine was switched on.
+    pub homed: bool,
+    /// Drive state name (CiA 402 vocabulary).
+    pub drive_state: String,
+    /// Drive fault, if any.
+    pub fault: Option<String>,
+}
+
+/// Job progress in `status` and progress events.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct JobStatus {
+    /// Job name (file name or "mdi").
+    pub name: String,
+    /// State: none, loaded, running, holding, done, aborted, failed.
+    pub state: String,
+    /// Current source line.
+    pub line: u32,
+    /// Total lines in the program.
+    pub total_lines: u32,
+    /// Fraction of planned time elapsed, 0..1.
+    pub progress: f64,
+    /// Planned duration, s.
+    pub planned_time_s: f64,
+    /// Elapsed motion time, s.
+    pub elapsed_s: f64,
+    /// Path length of the job, mm.
+    pub distance_mm: f64,
+    /// Distance remaining, mm.
+    pub distance_to_go_mm: f64,
+    /// Why it ended, when it failed or was aborted.
+    pub reason: Option<String>,
+}
+
+/// Overrides in effect.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Overrides {
+    /// Feed override, 0..=2.
+    pub feed: f64,
+    /// Rapid override, 0..=1.
+    pub rapid: f64,
+    /// Spindle override, 0..=2.
+    pub spindle: f64,
+}
+
+impl Default for Overrides {
+    fn default() -> Self {
+        Overrides {
+            feed: 1.0,
+            rapid: 1.0,
+            spindle: 1.0,
+        }
+    }
+}
+
+/// The answer to `status`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Status {
+    /// Machine name from the config.
+    pub machine: String,
+    /// Operating mode.
+    pub mode: Mode,
+    /// Whether threads run with SCHED_FIFO and locked memory.
+    pub realtime: bool,
+    /// Axes.
+    pub axes: Vec<AxisStatus>,
+    /// Current or last job.
+    pub job: JobStatus,
+    /// Overrides.
+    pub overrides: Overrides,
+    /// Spindle speed commanded, rpm (signed: negative is counter-clockwise).
+    pub spindle_rpm: f64,
+    /// Active faults, newest last.
+    pub faults: Vec<String>,
+    /// Realtime thread timing.
+    pub threads: Vec<ThreadTiming>,
+}
+
+/// Jog request.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JogRequest {
+    /// Axis letter.
+    pub axis: String,
+    /// Signed velocity, units/s.
+    pub velocity: f64,
+    /// Incremental distance (unsigned; the sign comes from the velocity). Absent: continuous
+    /// jog until `jog.stop` or the soft limit.
+    #[serde(default)]
+    pub distance: Option<f64>,
+}
+
+/// Where a job's G-code comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobSource {
+    /// Path of a G-code file on the daemon's host.
+    #[serde(default)]
+    pub path: Option<String>,
+    /// Inline program text.
+    #[serde(default)]
+    pub text: Option<String>,
+    /// Display name for inline programs.
+    #[serde(default)]
+    pub name: Option<String>,
+}
+
+/// The answer to `job.load`: the job was interpreted and planned in full.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct JobInfo {
+    /// Name.
+    pub name: String,
+    /// Source lines.
+    pub lines: u32,
+    /// Canonical commands.
+    pub commands: usize,
+    /// Planned duration, s.
+    pub planned_time_s: f64,
+    /// Path length, mm.
+    pub distance_mm: f64,
+}
+
+/// Override request (absent fields keep their value).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OverrideRequest {
+    /// Feed override 0..=2.
+    #[serde(default)]
+    pub feed: Option<f64>,
+    /// Rapid override 0..=1.
+    #[serde(default)]
+    pub rapid: Option<f64>,
+    /// Spindle override 0..=2.
+    #[serde(default)]
+    pub spindle: Option<f64>,
+}
+
+/// A task as data: its operations, events and ports (the paper's task interface).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TaskInfo {
+    /// Task name.
+    pub name: String,
+    /// Lifecycle state.
+    pub state: String,
+    /// Thread it runs on.
+    pub thread: String,
+    /// Operations: name, doc, parameters.
+    pub operations: Vec<OperationInfo>,
+    /// Events it emits.
+    pub events: Vec<String>,
+    /// Ports: name and direction.
+    pub ports: Vec<String>,
+}
+
+/// An operation as data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OperationInfo {
+    /// Name.
+    pub name: String,
+    /// What it does.
+    pub doc: String,
+    /// Parameters as `name: type`.
+    pub params: Vec<String>,
+}
+
+/// An event pushed to subscribers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MachineEvent {
+    /// Topic: `mode`, `fault`, `progress`, `job`, `message`, `task`.
+    pub topic: String,
+    /// Event data.
+    pub data: serde_json::Value,
+}
+
+/// What a running machine offers its operators. Methods return once the realtime side has
+/// accepted or rejected the request (or, for queries, with a consistent snapshot).
+pub trait MachineApi: Send + Sync + 'static {
+    /// A snapshot of the whole machine.
+    fn status(&self) -> Status;
+    /// Trip the e-stop: all axes quick-stop within one servo cycle.
+    fn estop(&self) -> Result<(), ApiError>;
+    /// Release the e-stop (the machine goes to `Off`).
+    fn estop_reset(&self) -> Result<(), ApiError>;
+    /// Enable drives (`Off`/`Fault` → `Idle`).
+    fn machine_on(&self) -> Result<(), ApiError>;
+    /// Disable drives after a controlled stop.
+    fn machine_off(&self) -> Result<(), ApiError>;
+    /// Home one axis (`Some("X")`) or all axes in order.
+    fn home(&self, axis: Option<&str>) -> Result<(), ApiError>;
+    /// Jog an axis.
+    fn jog(&self, req: &JogRequest) -> Result<(), ApiError>;
+    /// Stop a continuous jog with a controlled deceleration.
+    fn jog_stop(&self) -> Result<(), ApiError>;
+    /// Execute one line of G-code.
+    fn mdi(&self, line: &str) -> Result<(), ApiError>;
+    /// Interpret and plan a job in full; refused as a whole on any error.
+    fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError>;
+    /// Start the loaded job.
+    fn job_run(&self) -> Result<(), ApiError>;
+    /// Feed hold.
+    fn job_pause(&self) -> Result<(), ApiError>;
+    /// Resume after a feed hold.
+    fn job_resume(&self) -> Result<(), ApiError>;
+    /// Abort with a controlled stop.
+    fn job_abort(&self) -> Result<(), ApiError>;
+    /// Run until the next source line, then hold.
+    fn job_step(&self) -> Result<(), ApiError>;
+    /// Change overrides.
+    fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError>;
+    /// The tasks with their interfaces.
+    fn tasks(&self) -> Vec<TaskInfo>;
+    /// Call a task operation by name with JSON arguments; returns its final status.
+    fn call(
+        &self,
+        task: &str,
+        operation: &str,
+        args: &serde_json::Value,
+    ) -> Result<serde_json::Value, ApiError>;
+    /// Set a simulated input (sim backends only).
+    fn set_sim_input(&self, name: &str, value: f64) -> Result<(), ApiError>;
+    /// A receiver of machine events (for `subscribe`).
+    fn subscribe(&self) -> tokio::sync::broadcast::Receiver<MachineEvent>;
+}

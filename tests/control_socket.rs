@@ -1,0 +1,379 @@
+//! Control socket robustness, against a machine double: malformed and oversized requests,
+//! unknown methods, event push and lag, slow and vanished clients, many concurrent clients.
+//! The real daemon is exercised end to end in `tests/daemon_e2e.rs`.
+#![allow(clippy::unwrap_used)]
+
+use hytask::control::client::{Client, ClientError};
+use hytask::control::server::{bind, serve, SocketOptions};
+use hytask::machine::api::*;
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::unix::net::UnixStream;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::sync::broadcast;
+
+struct Double {
+    events: broadcast::Sender<MachineEvent>,
+    estops: AtomicU32,
+}
+
+impl MachineApi for Double {
+    fn status(&self) -> Status {
+        Status {
+            machine: "double".into(),
+            mode: Mode::Idle,
+            realtime: false,
+            axes: vec![],
+            job: JobStatus::default(),
+            overrides: Overrides::default(),
+            spindle_rpm: 0.0,
+            faults: vec![],
+            threads: vec![],
+        }
+    }
+    fn estop(&self) -> Result<(), ApiError> {
+        self.estops.fetch_add(1, Ordering::SeqCst);
+        Ok(())
+    }
+    fn estop_reset(&self) -> Result<(), ApiError> {
+        Err(ApiError::Rejected("e-stop input still active".into()))
+    }
+    fn machine_on(&self) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn machine_off(&self) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn home(&self, axis: Option<&str>) -> Result<(), ApiError> {
+        match axis {
+            Some("Q") => Err(ApiError::InvalidParams("no axis Q".into())),
+            _ => Ok(()),
+        }
+    }
+    fn jog(&self, _: &JogRequest) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn jog_stop(&self) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn mdi(&self, _: &str) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError> {
+        Ok(JobInfo {
+            name: src.name.clone().unwrap_or_default(),
+            lines: 1,
+            commands: 1,
+            planned_time_s: 0.0,
+            distance_mm: 0.0,
+        })
+    }
+    fn job_run(&self) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn job_pause(&self) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn job_resume(&self) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn job_abort(&self) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn job_step(&self) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn set_overrides(&self, r: &OverrideRequest) -> Result<Overrides, ApiError> {
+        Ok(Overrides {
+            feed: r.feed.unwrap_or(1.0),
+            ..Overrides::default()
+        })
+    }
+    fn tasks(&self) -> Vec<TaskInfo> {
+        vec![]
+    }
+    fn call(&self, task: &str, op: &str, _: &Value) -> Result<Value, ApiError> {
+        Err(ApiError::InvalidParams(format!("no operation {task}.{op}")))
+    }
+    fn set_sim_input(&self, _: &str, _: f64) -> Result<(), ApiError> {
+        Ok(())
+    }
+    fn subscribe(&self) -> broadcast::Receiver<MachineEvent> {
+        self.events.subscribe()
+    }
+}
+
+struct Server {
+    _dir: tempfile::TempDir,
+    path: std::path::PathBuf,
+    machine: Arc<Double>,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Server {
+    fn start() -> Server {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("control.sock");
+        let machine = Arc::new(Double {
+            events: broadcast::channel(64).0,
+            estops: AtomicU32::new(0),
+        });
+        let listener = bind(&SocketOptions {
+            path: path.clone(),
+            mode: 0o660,
+            group: None,
+        })
+        .unwrap();
+        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+        let m: Arc<dyn MachineApi> = machine.clone();
+        let thread = std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .unwrap();
+            rt.block_on(async move {
+                let l = tokio::net::UnixListener::from_std(listener).unwrap();
+                serve(l, m, async {
+                    let _ = rx.await;
+                })
+                .await;
+            });
+        });
+        Server {
+            _dir: dir,
+            path,
+            machine,
+            stop: Some(tx),
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        if let Some(s) = self.stop.take() {
+            let _ = s.send(());
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn raw(path: &std::path::Path) -> (BufReader<UnixStream>, UnixStream) {
+    let s = UnixStream::connect(path).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    (BufReader::new(s.try_clone().unwrap()), s)
+}
+
+fn read_json(r: &mut BufReader<UnixStream>) -> Value {
+    let mut line = String::new();
+    r.read_line(&mut line).unwrap();
+    serde_json::from_str(&line).unwrap()
+}
+
+#[test]
+fn socket_has_configured_mode_and_refuses_a_second_daemon() {
+    use std::os::unix::fs::PermissionsExt;
+    let srv = Server::start();
+    let mode = std::fs::metadata(&srv.path).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o660);
+    let err = bind(&SocketOptions {
+        path: srv.path.clone(),
+        mode: 0o660,
+        group: None,
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("already listening"), "{err}");
+}
+
+#[test]
+fn malformed_and_unknown_requests_get_errors_and_the_connection_survives() {
+    let srv = Server::start();
+    let (mut r, mut w) = raw(&srv.path);
+    w.write_all(b"{this is not json\n").unwrap();
+    assert_eq!(read_json(&mut r)["error"]["code"], json!(-32700));
+    w.write_all(b"[1,2,3]\n").unwrap();
+    assert_eq!(read_json(&mut r)["error"]["code"], json!(-32600));
+    w.write_all(b"{\"id\":9,\"method\":\"sttaus\"}\n").unwrap();
+    let v = read_json(&mut r);
+    assert_eq!(v["id"], json!(9));
+    assert_eq!(v["error"]["code"], json!(-32601));
+    assert!(v["error"]["message"].as_str().unwrap().contains("status"));
+    w.write_all(b"{\"id\":10,\"method\":\"status\",\"params\":{\"x\":1}}\n")
+        .unwrap();
+    assert_eq!(read_json(&mut r)["error"]["code"], json!(-32602));
+    w.write_all(b"{\"id\":11,\"method\":\"override\",\"params\":{\"feed\":7}}\n")
+        .unwrap();
+    let v = read_json(&mut r);
+    assert!(v["error"]["message"].as_str().unwrap().contains("feed"));
+    // Blank lines are ignored; the next request still works.
+    w.write_all(b"\n\n{\"id\":12,\"method\":\"status\"}\n")
+        .unwrap();
+    let v = read_json(&mut r);
+    assert_eq!(v["id"], json!(12));
+    assert_eq!(v["result"]["machine"], json!("double"));
+}
+
+#[test]
+fn machine_refusals_map_to_their_codes() {
+    let srv = Server::start();
+    let mut c = Client::connect(&srv.path).unwrap();
+    match c.call("estop.reset", Value::Null) {
+        Err(ClientError::Remote { code: 1, message }) => assert!(message.contains("e-stop")),
+        other => panic!("{other:?}"),
+    }
+    match c.call("home", json!({"axis": "Q"})) {
+        Err(ClientError::Remote { code: -32602, .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    match c.call("job.load", json!({"path": "a", "text": "b"})) {
+        Err(ClientError::Remote {
+            code: -32602,
+            message,
+        }) => assert!(message.contains("exactly one")),
+        other => panic!("{other:?}"),
+    }
+    c.call("estop", Value::Null).unwrap();
+    assert_eq!(srv.machine.estops.load(Ordering::SeqCst), 1);
+}
+
+#[test]
+fn oversized_request_is_refused_and_the_connection_stays_usable() {
+    let srv = Server::start();
+    let (mut r, mut w) = raw(&srv.path);
+    let writer = std::thread::spawn(move || {
+        let big = vec![b'x'; hytask::control::protocol::MAX_REQUEST_BYTES + 10];
+        w.write_all(&big).unwrap();
+        w.write_all(b"\n{\"id\":2,\"method\":\"status\"}\n")
+            .unwrap();
+        w
+    });
+    let v = read_json(&mut r);
+    assert_eq!(v["error"]["code"], json!(-32600));
+    assert!(v["error"]["message"].as_str().unwrap().contains("larger"));
+    let v = read_json(&mut r);
+    assert_eq!(v["id"], json!(2));
+    drop(writer.join().unwrap());
+}
+
+#[test]
+fn subscribed_clients_receive_events_and_slow_ones_are_told_they_lagged() {
+    let srv = Server::start();
+    let mut fast = Client::connect(&srv.path).unwrap();
+    let topics = fast.call("subscribe", json!({"topics": ["mode"]})).unwrap();
+    assert_eq!(topics["topics"], json!(["mode"]));
+    match fast.call("subscribe", json!({"topics": ["nope"]})) {
+        Err(ClientError::Remote { code: -32602, .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    // The failed subscribe left the old subscription in place.
+    let ev = |topic: &str, n: u64| MachineEvent {
+        topic: topic.into(),
+        data: json!({"n": n}),
+    };
+    srv.machine.events.send(ev("fault", 0)).unwrap();
+    srv.machine.events.send(ev("mode", 1)).unwrap();
+    let e = fast.next_event(Duration::from_secs(5)).unwrap().unwrap();
+    assert_eq!((e.topic.as_str(), &e.data), ("mode", &json!({"n": 1})));
+
+    // A client that subscribes and never reads: flood it; the daemon and the other
+    // client stay responsive, and the slow one is told how much it missed.
+    let (mut slow_r, mut slow_w) = raw(&srv.path);
+    slow_w
+        .write_all(b"{\"id\":1,\"method\":\"subscribe\"}\n")
+        .unwrap();
+    let _ = read_json(&mut slow_r);
+    for n in 0..5000 {
+        let _ = srv.machine.events.send(ev("progress", n));
+        if n % 500 == 0 {
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+    let t0 = Instant::now();
+    fast.call("status", Value::Null).unwrap();
+    assert!(t0.elapsed() < Duration::from_secs(2));
+    let mut lagged = false;
+    let mut buf = String::new();
+    slow_r
+        .get_ref()
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    // Drain what was queued; then one more event must produce a `lagged` notice.
+    let mut drained = 0;
+    let mut all = Vec::new();
+    let mut chunk = [0u8; 65536];
+    slow_r
+        .get_ref()
+        .set_read_timeout(Some(Duration::from_millis(500)))
+        .unwrap();
+    while let Ok(n) = slow_r.read(&mut chunk) {
+        if n == 0 {
+            break;
+        }
+        all.extend_from_slice(&chunk[..n]);
+        drained += n;
+    }
+    assert!(drained > 0);
+    // Delivery resumes after the lag: later events arrive.
+    for n in 0..10 {
+        srv.machine
+            .events
+            .send(ev("progress", 100_000 + n))
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    slow_r
+        .get_ref()
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let mut resumed = false;
+    for _ in 0..12 {
+        buf.clear();
+        let n = slow_r
+            .read_line(&mut buf)
+            .map_err(|e| format!("{e}; drained {} bytes", all.len()))
+            .unwrap();
+        if n == 0 {
+            break;
+        }
+        lagged |= buf.contains("\"lagged\"");
+        if buf.contains("1000") {
+            resumed = true;
+            break;
+        }
+    }
+    assert!(resumed, "events stopped after the lag");
+    let text = String::from_utf8_lossy(&all);
+    assert!(lagged || text.contains("\"lagged\""), "no lagged notice");
+}
+
+#[test]
+fn vanished_clients_do_not_disturb_others_and_fifty_clients_are_served() {
+    let srv = Server::start();
+    for _ in 0..20 {
+        let mut s = UnixStream::connect(&srv.path).unwrap();
+        s.write_all(b"{\"id\":1,\"method\":\"status\"}").unwrap();
+        drop(s); // vanish mid-request
+    }
+    let path = srv.path.clone();
+    let handles: Vec<_> = (0..50)
+        .map(|_| {
+            let path = path.clone();
+            std::thread::spawn(move || {
+                let mut c = Client::connect(&path).unwrap();
+                for _ in 0..20 {
+                    let s = c.call("status", Value::Null).unwrap();
+                    assert_eq!(s["mode"], json!("idle"));
+                }
+            })
+        })
+        .collect();
+    for h in handles {
+        h.join().unwrap();
+    }
+}
