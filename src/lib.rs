@@ -5,6 +5,7 @@
 //! Module map (dependencies point downwards only):
 //! - [`cli`]: the `hytask` command line (daemon, job client, tools).
 //! - [`control`]: the control socket (JSON lines over a Unix socket).
+//! - [`daemon`]: daemon life: systemd notify/watchdog, signals, the serve loop.
 //! - [`machine`]: deployment of a machine from its configuration: tasks, threads, safety.
 //! - [`config`]: the TOML machine description, validated with errors that name the key.
 //! - [`motion`]: lookahead planner, kinematics and the realtime interpolator.
@@ -15,6 +16,7 @@
 pub mod cli;
 pub mod config;
 pub mod control;
+pub mod daemon;
 pub mod gcode;
 pub mod machine;
 pub mod motion;
