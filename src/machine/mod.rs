@@ -2,3 +2,5 @@
 //! checks the topology and runs the machine state machine and its safety paths.
 
 pub mod api;
+pub mod mode;
+pub mod safety;
