@@ -11,7 +11,7 @@ use std::time::Duration;
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
     /// Socket error (daemon not running, connection lost, timeout).
-    #[error("control socket: {0}")]
+    #[error(transparent)]
     Io(#[from] std::io::Error),
     /// The daemon sent something that is not a valid reply.
     #[error("control socket: bad reply: {0}")]
