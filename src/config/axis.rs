@@ -198,7 +198,13 @@ impl AxisConfig {
             return;
         }
         let v = h.velocity;
-        if !(v.is_finite() && v != 0.0 && v.abs() <= self.max_velocity) {
+        // Compare with max_velocity only when that is valid (it is reported on its own).
+        let vmax = if self.max_velocity > 0.0 {
+            self.max_velocity
+        } else {
+            f64::INFINITY
+        };
+        if !(v.is_finite() && v != 0.0 && v.abs() <= vmax) {
             issues.push(
                 format!("{key}.home.velocity"),
                 format!(

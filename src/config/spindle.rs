@@ -51,7 +51,8 @@ impl SpindleConfig {
     pub(super) fn validate(&self, issues: &mut Issues) {
         issues.positive("spindle.max_rpm", self.max_rpm);
         issues.non_negative("spindle.min_rpm", self.min_rpm);
-        if self.min_rpm.is_finite() && self.max_rpm.is_finite() && self.min_rpm >= self.max_rpm {
+        // Compared only when max_rpm is valid (otherwise that is the one error to report).
+        if self.min_rpm.is_finite() && self.max_rpm > 0.0 && self.min_rpm >= self.max_rpm {
             issues.push(
                 "spindle.min_rpm",
                 format!(

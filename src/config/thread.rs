@@ -73,7 +73,11 @@ pub(super) fn validate(threads: &[ThreadConfig], issues: &mut Issues) {
             } else {
                 (earlier, t, &other, &key)
             };
-            if fast.period_us < slow.period_us && fast.priority < slow.priority {
+            // Out-of-range priorities are reported above; comparing them would only repeat it.
+            let both_valid = [fast.priority, slow.priority]
+                .iter()
+                .all(|p| (1..=99).contains(p));
+            if both_valid && fast.period_us < slow.period_us && fast.priority < slow.priority {
                 issues.push(
                     format!("{fast_key}.priority"),
                     format!(
