@@ -123,6 +123,21 @@ pub trait AxisDrive: ErrorType {
     fn fault_reset(&mut self) -> Result<(), Self::Error>;
 }
 
+/// Everything a drive reports in one cycle, read at once by [`AxisFeedback::status`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisStatus {
+    /// Actual position in machine units.
+    pub position: f64,
+    /// Actual velocity in machine units per second.
+    pub velocity: f64,
+    /// Power state.
+    pub state: DriveState,
+    /// Active fault code, if faulted.
+    pub fault: Option<FaultCode>,
+    /// Limit and home switches.
+    pub switches: AxisSwitches,
+}
+
 /// What a drive reports back every cycle.
 pub trait AxisFeedback: ErrorType {
     /// The actual position in machine units.
@@ -144,6 +159,18 @@ pub trait AxisFeedback: ErrorType {
     /// [`drive_state`](AxisFeedback::drive_state)).
     fn is_operational(&mut self) -> Result<bool, Self::Error> {
         Ok(self.drive_state()?.is_operational())
+    }
+
+    /// All feedback of this cycle in one value (what the drive task publishes to the
+    /// monitor). A CANopen backend reads it from one TPDO, so it is consistent.
+    fn status(&mut self) -> Result<AxisStatus, Self::Error> {
+        Ok(AxisStatus {
+            position: self.actual_position()?,
+            velocity: self.actual_velocity()?,
+            state: self.drive_state()?,
+            fault: self.fault_code()?,
+            switches: self.switches()?,
+        })
     }
 
     /// The following error for a commanded `target`: `target - actual`. The monitor compares

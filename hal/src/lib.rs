@@ -27,14 +27,16 @@
 
 pub mod axis;
 pub mod can;
+pub mod erased;
 pub mod error;
 pub mod io;
 pub mod sim;
 
 pub use axis::{
-    Axis, AxisDrive, AxisFeedback, AxisSwitches, DriveState, FaultCode, Homing, HomingFailure,
-    HomingMethod, HomingParams, HomingStatus,
+    Axis, AxisDrive, AxisFeedback, AxisStatus, AxisSwitches, DriveState, FaultCode, Homing,
+    HomingFailure, HomingMethod, HomingParams, HomingStatus,
 };
 pub use can::{CanBus, CanFrame, CanId, FrameError};
+pub use erased::{dyn_axis, DynAxis, Erased, HalError};
 pub use error::{Error, ErrorKind, ErrorType};
 pub use io::{AnalogInputs, AnalogOutputs, DigitalInputs, DigitalOutputs};

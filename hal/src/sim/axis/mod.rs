@@ -120,8 +120,19 @@ impl SimAxis {
 
     /// Advances the simulation by `dt` (one servo cycle). Non-blocking, allocation-free.
     pub fn tick(&mut self, dt: Duration) {
-        let dt = dt.as_secs_f64();
-        if dt <= 0.0 {
+        self.step(dt.as_secs_f64());
+    }
+
+    /// Advances the simulation to the absolute time `now` (measured from creation), for
+    /// callers that pass a clock reading instead of a period: the step is the time since
+    /// the last call, so a late servo cycle moves the motor further, as in reality. A `now`
+    /// that is not later than the simulated time does nothing.
+    pub fn advance_to(&mut self, now: Duration) {
+        self.step(now.as_secs_f64() - self.time_s);
+    }
+
+    fn step(&mut self, dt: f64) {
+        if dt.is_nan() || dt <= 0.0 {
             return;
         }
         self.time_s += dt;

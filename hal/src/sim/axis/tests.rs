@@ -512,3 +512,35 @@ fn works_behind_a_trait_object() {
         Box::new(SimAxis::new(config()).unwrap());
     assert_eq!(axis.drive_state().unwrap(), DriveState::NotReadyToSwitchOn);
 }
+
+#[test]
+fn advance_to_steps_by_the_time_since_the_last_call() {
+    let mut axis = SimAxis::new(config()).unwrap();
+    axis.advance_to(Duration::from_millis(1));
+    axis.enable().unwrap();
+    for ms in 2..=4 {
+        axis.advance_to(Duration::from_millis(ms));
+    }
+    assert!(axis.is_operational().unwrap());
+    assert!((axis.time_s() - 0.004).abs() < 1e-12);
+    axis.set_target_position(1.0).unwrap();
+    axis.advance_to(Duration::from_millis(3)); // in the past: nothing happens
+    assert!((axis.time_s() - 0.004).abs() < 1e-12);
+    assert_eq!(axis.actual_position().unwrap(), 0.0);
+    axis.advance_to(Duration::from_millis(504));
+    assert!((axis.actual_position().unwrap() - 1.0).abs() < 1e-3);
+}
+
+#[test]
+fn status_reads_the_whole_feedback_in_one_call() {
+    let mut axis = enabled(SimAxisConfig {
+        positive_limit: Some(0.0),
+        ..config()
+    });
+    let status = axis.status().unwrap();
+    assert_eq!(status.state, DriveState::OperationEnabled);
+    assert_eq!(status.position, 0.0);
+    assert_eq!(status.velocity, 0.0);
+    assert_eq!(status.fault, None);
+    assert!(status.switches.positive_limit);
+}
