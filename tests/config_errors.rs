@@ -417,3 +417,74 @@ fn a_missing_file_is_an_io_error_naming_the_path() {
         "{err}"
     );
 }
+
+/// Every table of the file, including inline ones, rejects a key it does not know and names
+/// it with its full path.
+#[test]
+fn every_section_rejects_unknown_keys() {
+    let cases: &[(&str, &str, &str)] = &[
+        ("[machine]\n", "[machine]\nzzz = 1\n", "machine.zzz"),
+        (
+            "[[thread]]\nname = \"servo\"",
+            "[[thread]]\nzzz = 1\nname = \"servo\"",
+            "thread[0].zzz",
+        ),
+        (
+            "[[axis]]\nname = \"X\"",
+            "[[axis]]\nzzz = 1\nname = \"X\"",
+            "axis[0].zzz",
+        ),
+        (
+            "sequence = 0 }",
+            "sequence = 0, zzz = 1 }",
+            "axis[2].home.zzz",
+        ),
+        (
+            "[[drive]]\nname = \"x\"",
+            "[[drive]]\nzzz = 1\nname = \"x\"",
+            "drive[0].zzz",
+        ),
+        (
+            "[drive.sim]\n",
+            "[drive.sim]\nzzz = 1\n",
+            "drive[0].sim.zzz",
+        ),
+        (
+            "{ min = 0.5, max = 5.0 }",
+            "{ min = 0.5, max = 5.0, zzz = 1 }",
+            "drive[2].sim.home_switch.zzz",
+        ),
+        ("[[io]]\n", "[[io]]\nzzz = 1\n", "io[0].zzz"),
+        (
+            "{ name = \"probe\" }",
+            "{ name = \"probe\", zzz = 1 }",
+            "io[0].digital_inputs[1].zzz",
+        ),
+        (
+            "{ name = \"spindle_speed\" }",
+            "{ name = \"spindle_speed\", zzz = 1 }",
+            "io[0].analog_outputs[0].zzz",
+        ),
+        ("[spindle]\n", "[spindle]\nzzz = 1\n", "spindle.zzz"),
+        ("[coolant]\n", "[coolant]\nzzz = 1\n", "coolant.zzz"),
+        ("[control]\n", "[control]\nzzz = 1\n", "control.zzz"),
+        ("[logging]\n", "[logging]\nzzz = 1\n", "logging.zzz"),
+        ("[motion]\n", "[motion]\nzzz = 1\n", "motion.zzz"),
+        ("[safety]\n", "[safety]\nzzz = 1\n", "safety.zzz"),
+        (
+            "[machine]\n",
+            "[tool_table]\npath = \"t.tbl\"\nzzz = 1\n[machine]\n",
+            "tool_table.zzz",
+        ),
+        (
+            "kinematics = \"identity\"",
+            "kinematics = \"scara\"\nscara = { link1_mm = 1.0, link2_mm = 1.0, zzz = 1 }",
+            "machine.scara.zzz",
+        ),
+    ];
+    for (from, to, key) in cases {
+        let (found, msg) = parse_error(&[(from, to)]);
+        assert_eq!(&found, key, "{msg}");
+        assert!(msg.contains("unknown field `zzz`"), "{key}: {msg}");
+    }
+}

@@ -149,3 +149,45 @@ fn sim_axis_built_from_config_homes_to_the_configured_position() {
     let pos = axis.actual_position().unwrap();
     assert!((pos - axis_cfg.home.position).abs() < 0.05, "{pos}");
 }
+
+/// The configuration builds the simulated I/O: pressing the e-stop through the outside
+/// handle is seen on the configured channel.
+#[test]
+fn sim_io_built_from_config_has_the_named_channels() {
+    use hytask_hal::{AnalogOutputs, DigitalInputs, DigitalOutputs};
+    let m = config::builtin_sim().unwrap();
+    let estop = m.find_io(&m.safety.estop_input).unwrap();
+    let dev = &m.io[estop.device];
+    let mut io = dev.sim_io().unwrap();
+    assert_eq!(io.digital_input_count(), dev.digital_inputs.len());
+    assert_eq!(io.digital_output_count(), dev.digital_outputs.len());
+    assert_eq!(io.analog_output_count(), dev.analog_outputs.len());
+    let outside = io.handle();
+    outside.set_digital_input(estop.channel, true).unwrap();
+    let point = &dev.digital_inputs[estop.channel];
+    assert!(point.active(io.read_digital_input(estop.channel).unwrap()));
+    let flood = m.find_io("coolant_flood").unwrap();
+    io.set_high(flood.channel).unwrap();
+    assert!(outside.digital_output(flood.channel).unwrap());
+    let speed = m.find_io("spindle_speed").unwrap();
+    io.write_analog_output(speed.channel, 12000.0).unwrap();
+    assert_eq!(outside.analog_output(speed.channel).unwrap(), 12000.0);
+}
+
+#[test]
+fn channel_inversion_and_scaling() {
+    let m = shipped("example-canopen.toml");
+    let cab = &m.io[0];
+    assert!(cab.sim_io().is_none(), "not a sim device");
+    let estop = &cab.digital_inputs[0];
+    assert!(estop.invert);
+    assert!(
+        estop.active(false),
+        "an open normally-closed chain is an active e-stop"
+    );
+    assert!(!estop.active(true));
+    assert!(estop.level(false));
+    let speed = &cab.analog_outputs[0];
+    assert_eq!(speed.to_engineering(10_000.0), 24_000.0);
+    assert_eq!(speed.to_raw(24_000.0), 10_000.0);
+}

@@ -23,7 +23,28 @@
 //!
 //! Backends: [`sim`] (simulated axis with a motor model, simulated I/O, in-memory CAN bus)
 //! now; CANopen CiA 402 over SocketCAN and Modbus come later and implement the same traits.
+//! Backends chosen by configuration live side by side behind [`Erased`] / [`DynAxis`],
+//! which give every backend the same error type ([`HalError`]) without allocating.
 //! This crate depends on nothing of the daemon.
+//!
+//! # How to add a backend
+//!
+//! 1. Give it its own module (`canopen/`, `modbus/`) and its own `thiserror` error enum;
+//!    implement [`Error::kind`] for it, mapping link problems to
+//!    [`ErrorKind::Timeout`]/[`ErrorKind::Disconnected`] and device refusals to the other
+//!    kinds, never the other way round.
+//! 2. Implement [`ErrorType`] and the capability traits the hardware has (an I/O coupler
+//!    implements the I/O traits only). Keep every trait method non-blocking and bounded:
+//!    slow links (Modbus TCP, SDO transfers) run on their own thread and exchange a
+//!    process image with the realtime side through lock-free structures.
+//! 3. Share a physical link through one owner (the bus) and hand out device handles (the
+//!    `embedded-hal` `SpiBus`/`SpiDevice` split): one SocketCAN socket per interface
+//!    implementing [`CanBus`], CANopen node handles routed by COB-ID above it.
+//! 4. Test it against the simulator where one exists (a CANopen master against a simulated
+//!    CiA 402 node on [`sim::SimCanBus`]) and check the no-allocation rule the way
+//!    `tests/no_alloc.rs` does.
+//! 5. Add its settings to the machine configuration (`backend = "..."` plus a sub-table)
+//!    and mark it available there.
 
 pub mod axis;
 pub mod can;

@@ -8,6 +8,7 @@
 //! input or register number.
 
 use super::error::Issues;
+use hytask_hal::sim::SimIo;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::fmt;
@@ -75,12 +76,25 @@ pub struct DigitalPoint {
     /// Machine-wide unique channel name.
     pub name: String,
     /// Invert the signal (for normally-closed contacts such as an e-stop chain: the
-    /// channel then reads "active" when the circuit opens).
+    /// channel then reads "active" when the circuit opens). Applied by the machine when it
+    /// reads or writes the channel by name ([`DigitalPoint::active`]), not by the backend.
     #[serde(default)]
     pub invert: bool,
     /// Modbus coil / discrete input number; Modbus only, default: the channel index.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub register: Option<u16>,
+}
+
+impl DigitalPoint {
+    /// The channel's logical state ("active") from the level the device reports.
+    pub fn active(&self, level: bool) -> bool {
+        level != self.invert
+    }
+
+    /// The level to write to the device for the logical state `active`.
+    pub fn level(&self, active: bool) -> bool {
+        active != self.invert
+    }
 }
 
 /// A named analog channel, in engineering units: `value = raw * scale + offset`.
@@ -179,6 +193,21 @@ impl IoConfig {
         }
     }
 
+    /// A simulated device with this device's channel counts; `None` unless the backend is
+    /// `sim`. Inversion and scaling stay with the channel definitions
+    /// ([`DigitalPoint::active`], [`AnalogPoint::to_engineering`]): the simulator holds raw
+    /// values, like real hardware.
+    pub fn sim_io(&self) -> Option<SimIo> {
+        (self.backend == IoBackend::Sim).then(|| {
+            SimIo::new(
+                self.digital_inputs.len(),
+                self.digital_outputs.len(),
+                self.analog_inputs.len(),
+                self.analog_outputs.len(),
+            )
+        })
+    }
+
     fn registers(&self, kind: IoKind) -> Vec<Option<u16>> {
         match kind {
             IoKind::DigitalInput => self.digital_inputs.iter().map(|p| p.register).collect(),
@@ -251,6 +280,17 @@ impl IoConfig {
 }
 
 impl AnalogPoint {
+    /// Engineering value from the device's raw value.
+    pub fn to_engineering(&self, raw: f64) -> f64 {
+        raw * self.scale + self.offset
+    }
+
+    /// Raw device value for an engineering value (the inverse of
+    /// [`to_engineering`](AnalogPoint::to_engineering); `scale` is never 0 once validated).
+    pub fn to_raw(&self, value: f64) -> f64 {
+        (value - self.offset) / self.scale
+    }
+
     fn validate(&self, key: &str, issues: &mut Issues) {
         if self.scale == 0.0 || !self.scale.is_finite() {
             issues.push(
