@@ -488,3 +488,16 @@ fn every_section_rejects_unknown_keys() {
         assert!(msg.contains("unknown field `zzz`"), "{key}: {msg}");
     }
 }
+
+#[test]
+fn a_missing_section_is_named() {
+    let start = BUILTIN_SIM_TOML.find("[safety]").unwrap();
+    let text = &BUILTIN_SIM_TOML[..start];
+    match config::parse(text, "t") {
+        Err(ConfigError::Parse { key, message, .. }) => {
+            assert_eq!(key, "(root)");
+            assert!(message.contains("missing field `safety`"), "{message}");
+        }
+        other => panic!("expected a parse error, got {other:?}"),
+    }
+}

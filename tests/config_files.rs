@@ -191,3 +191,12 @@ fn channel_inversion_and_scaling() {
     assert_eq!(speed.to_engineering(10_000.0), 24_000.0);
     assert_eq!(speed.to_raw(24_000.0), 10_000.0);
 }
+
+#[test]
+fn z_homes_before_x_and_y() {
+    let m = config::builtin_sim().unwrap();
+    assert_eq!(
+        m.homing_order(),
+        [vec![AxisName::Z], vec![AxisName::X, AxisName::Y]]
+    );
+}

@@ -247,6 +247,24 @@ impl MachineConfig {
         self.axes.iter().find(|a| a.name == name)
     }
 
+    /// The axes grouped in homing order: groups by ascending `home.sequence`; the axes of
+    /// one group home together, in file order within the group.
+    pub fn homing_order(&self) -> Vec<Vec<AxisName>> {
+        let mut sequences: Vec<u8> = self.axes.iter().map(|a| a.home.sequence).collect();
+        sequences.sort_unstable();
+        sequences.dedup();
+        sequences
+            .into_iter()
+            .map(|s| {
+                self.axes
+                    .iter()
+                    .filter(|a| a.home.sequence == s)
+                    .map(|a| a.name)
+                    .collect()
+            })
+            .collect()
+    }
+
     /// The drive named `name`.
     pub fn drive(&self, name: &str) -> Option<&DriveConfig> {
         self.drives.iter().find(|d| d.name == name)
