@@ -200,3 +200,35 @@ fn z_homes_before_x_and_y() {
         [vec![AxisName::Z], vec![AxisName::X, AxisName::Y]]
     );
 }
+
+/// The fault-injection keys shown commented out in sim.toml are valid and reach the
+/// simulator.
+#[test]
+fn commented_fault_injection_in_sim_toml_works_when_enabled() {
+    let text: String = config::BUILTIN_SIM_TOML
+        .lines()
+        .map(|l| {
+            for key in [
+                "fault_at_s",
+                "fault_code",
+                "stall_at_s",
+                "following_error_window",
+            ] {
+                if let Some(rest) = l.strip_prefix("# ").filter(|r| r.starts_with(key)) {
+                    return format!("{rest}\n");
+                }
+            }
+            format!("{l}\n")
+        })
+        .collect();
+    let m = config::parse(&text, "sim with faults").unwrap();
+    let z = m.axis(AxisName::Z).unwrap();
+    let sim = m.drive("z").unwrap().sim_axis_config(z).unwrap();
+    assert_eq!(sim.faults.drive_fault_at_s, Some(30.0));
+    assert_eq!(
+        sim.faults.drive_fault_code,
+        hytask_hal::FaultCode::OVERCURRENT
+    );
+    assert_eq!(sim.faults.stall_at_s, Some(30.0));
+    assert_eq!(sim.following_error_window, Some(5.0));
+}

@@ -306,6 +306,13 @@ mod tests {
                 SimAxis::new(SimAxisConfig::default()).unwrap(),
             ))),
         ];
-        assert_eq!(axes.len(), 2);
+        for mut axis in axes {
+            assert_eq!(axis.drive_state().unwrap(), DriveState::NotReadyToSwitchOn);
+            assert_eq!(
+                axis.enable().map_err(|e| e.kind()),
+                Ok(()),
+                "commands reach the wrapped backend"
+            );
+        }
     }
 }
