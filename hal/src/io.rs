@@ -15,7 +15,8 @@ pub trait DigitalInputs: ErrorType {
     /// How many digital inputs the device has.
     fn digital_input_count(&self) -> usize;
 
-    /// Reads input `index`: `true` is high (active, after any inversion the backend applies).
+    /// Reads input `index`: `true` is high. This is the electrical level the device reports;
+    /// the inversion of normally-closed contacts is configuration, applied above the HAL.
     fn read_digital_input(&mut self, index: usize) -> Result<bool, Self::Error>;
 
     /// True when input `index` is high.
