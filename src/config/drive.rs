@@ -1,0 +1,335 @@
+//! `[[drive]]`: how each axis' motor is reached: a simulated drive, or a CANopen CiA 402
+//! drive.
+//!
+//! The backend is declared in the file (`backend = "sim" | "canopen"`) with its settings in
+//! a sub-table named after it (`[drive.sim]`, `[drive.canopen]`). A backend that this build
+//! cannot run (today: `canopen`) still parses and validates, so a real machine's file can
+//! be checked on any computer; deploying it reports "not available in this build" (see
+//! [`DriveBackend::is_available`]).
+
+use super::axis::{AxisConfig, HomeMethod};
+use super::error::Issues;
+use hytask_hal::sim::{FaultInjection, SimAxisConfig, SwitchRange};
+use hytask_hal::FaultCode;
+use serde::{Deserialize, Serialize};
+
+/// How far the simulated drive's own velocity and acceleration limits exceed the axis'
+/// planning limits: a real drive is sized with headroom, so the position loop can catch up
+/// at full planned speed.
+pub const SIM_DRIVE_HEADROOM: f64 = 1.25;
+
+/// `[[drive]]`: one drive (joint).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriveConfig {
+    /// Name axes use to refer to this drive; unique.
+    pub name: String,
+    /// Which backend runs it.
+    pub backend: DriveBackend,
+    /// Settings of the simulated drive; only with `backend = "sim"` (defaults if absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sim: Option<SimDriveConfig>,
+    /// Settings of a CANopen drive; required with `backend = "canopen"`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub canopen: Option<CanopenDriveConfig>,
+}
+
+/// Drive backends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DriveBackend {
+    /// The simulated axis of `hytask-hal` (motor model, switches, fault injection).
+    Sim,
+    /// A CiA 402 drive on a CAN bus (SocketCAN), in cyclic synchronous position mode.
+    /// Not available in this build yet.
+    Canopen,
+}
+
+impl DriveBackend {
+    /// True when this build can run the backend.
+    pub fn is_available(self) -> bool {
+        match self {
+            DriveBackend::Sim => true,
+            DriveBackend::Canopen => false,
+        }
+    }
+
+    /// The name used in the file.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            DriveBackend::Sim => "sim",
+            DriveBackend::Canopen => "canopen",
+        }
+    }
+}
+
+/// `[drive.sim]`: the simulated motor and machine. Positions are physical, in the axis'
+/// machine units, as seen before homing (the simulator starts with reported = physical).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimDriveConfig {
+    /// Position-loop time constant in seconds: following error = speed × lag (0 ..= 1).
+    #[serde(default = "default_lag_s")]
+    pub lag_s: f64,
+    /// Quick-stop deceleration in units/s². Default: twice the axis' max_acceleration.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quick_stop_deceleration: Option<f64>,
+    /// The drive's own following-error window (it faults beyond it); none if absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub following_error_window: Option<f64>,
+    /// Position at power-on.
+    #[serde(default)]
+    pub initial_position: f64,
+    /// Negative limit switch: active at and below this position.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub negative_limit: Option<f64>,
+    /// Positive limit switch: active at and above this position.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub positive_limit: Option<f64>,
+    /// Home switch: active between `min` and `max`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub home_switch: Option<SwitchConfig>,
+    /// Inject a drive fault at this simulated time (seconds after start).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fault_at_s: Option<f64>,
+    /// Fault code of the injected fault (CiA 402 0x603F), e.g. 0x2310 over-current.
+    #[serde(default = "default_fault_code")]
+    pub fault_code: u16,
+    /// Stall the motor (position stops following) at this simulated time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stall_at_s: Option<f64>,
+}
+
+fn default_lag_s() -> f64 {
+    0.005
+}
+
+fn default_fault_code() -> u16 {
+    FaultCode::GENERIC.0
+}
+
+impl Default for SimDriveConfig {
+    fn default() -> Self {
+        SimDriveConfig {
+            lag_s: default_lag_s(),
+            quick_stop_deceleration: None,
+            following_error_window: None,
+            initial_position: 0.0,
+            negative_limit: None,
+            positive_limit: None,
+            home_switch: None,
+            fault_at_s: None,
+            fault_code: default_fault_code(),
+            stall_at_s: None,
+        }
+    }
+}
+
+/// A switch's active region.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SwitchConfig {
+    /// Lower end of the active region.
+    pub min: f64,
+    /// Upper end of the active region.
+    pub max: f64,
+}
+
+/// `[drive.canopen]`: a CiA 402 drive on a CAN bus.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CanopenDriveConfig {
+    /// SocketCAN interface (e.g. `can0`, `vcan0`); drives on one interface share one bus
+    /// owner.
+    pub interface: String,
+    /// CANopen node id (1 ..= 127), unique per interface.
+    pub node_id: u8,
+    /// Heartbeat period the drive is configured to produce, in ms; a missed heartbeat is a
+    /// link failure (`Timeout`).
+    #[serde(default = "default_heartbeat_ms")]
+    pub heartbeat_ms: u32,
+    /// How long to wait for an SDO answer during configuration, in ms.
+    #[serde(default = "default_sdo_timeout_ms")]
+    pub sdo_timeout_ms: u32,
+}
+
+fn default_heartbeat_ms() -> u32 {
+    100
+}
+
+fn default_sdo_timeout_ms() -> u32 {
+    100
+}
+
+impl DriveConfig {
+    /// The key prefix used in messages: `drive[0] (x)`.
+    pub fn key(index: usize, name: &str) -> String {
+        format!("drive[{index}] ({name})")
+    }
+
+    /// Fills defaults that depend on the backend: a sim drive without `[drive.sim]` gets
+    /// the default settings, so the resolved machine shows them.
+    pub(super) fn resolve(&mut self, axis: Option<&AxisConfig>) {
+        if self.backend == DriveBackend::Sim {
+            let sim = self.sim.get_or_insert_with(SimDriveConfig::default);
+            if let (None, Some(a)) = (sim.quick_stop_deceleration, axis) {
+                sim.quick_stop_deceleration = Some(2.0 * a.max_acceleration);
+            }
+        }
+    }
+
+    /// The simulator's parameters for this drive moving `axis`; `None` unless the backend
+    /// is `sim`.
+    pub fn sim_axis_config(&self, axis: &AxisConfig) -> Option<SimAxisConfig> {
+        if self.backend != DriveBackend::Sim {
+            return None;
+        }
+        let sim = self.sim.clone().unwrap_or_default();
+        Some(SimAxisConfig {
+            max_velocity: axis.max_velocity * SIM_DRIVE_HEADROOM,
+            max_acceleration: axis.max_acceleration * SIM_DRIVE_HEADROOM,
+            lag_s: sim.lag_s,
+            quick_stop_deceleration: sim
+                .quick_stop_deceleration
+                .unwrap_or(2.0 * axis.max_acceleration),
+            following_error_window: sim.following_error_window,
+            initial_position: sim.initial_position,
+            negative_limit: sim.negative_limit,
+            positive_limit: sim.positive_limit,
+            home_switch: sim.home_switch.map(|s| SwitchRange {
+                min: s.min,
+                max: s.max,
+            }),
+            faults: FaultInjection {
+                drive_fault_at_s: sim.fault_at_s,
+                drive_fault_code: FaultCode(sim.fault_code),
+                stall_at_s: sim.stall_at_s,
+            },
+        })
+    }
+
+    /// Checks the drive's own values; `axis` is the axis it moves (if any), to check that
+    /// the simulated switches support the axis' homing method.
+    pub(super) fn validate(&self, key: &str, axis: Option<&AxisConfig>, issues: &mut Issues) {
+        issues.name(format!("{key}.name"), &self.name);
+        let backend = self.backend.as_str();
+        if self.backend != DriveBackend::Sim && self.sim.is_some() {
+            issues.push(
+                format!("{key}.sim"),
+                format!("only used with backend = \"sim\" (backend is \"{backend}\")"),
+            );
+        }
+        if self.backend != DriveBackend::Canopen && self.canopen.is_some() {
+            issues.push(
+                format!("{key}.canopen"),
+                format!("only used with backend = \"canopen\" (backend is \"{backend}\")"),
+            );
+        }
+        match self.backend {
+            DriveBackend::Sim => {
+                if let Some(sim) = &self.sim {
+                    sim.validate(&format!("{key}.sim"), axis, issues);
+                }
+            }
+            DriveBackend::Canopen => match &self.canopen {
+                Some(c) => c.validate(&format!("{key}.canopen"), issues),
+                None => issues.push(
+                    format!("{key}.canopen"),
+                    "required with backend = \"canopen\" (interface, node_id)",
+                ),
+            },
+        }
+    }
+}
+
+impl SimDriveConfig {
+    fn validate(&self, key: &str, axis: Option<&AxisConfig>, issues: &mut Issues) {
+        issues.in_range(format!("{key}.lag_s"), self.lag_s, 0.0, 1.0);
+        if let Some(d) = self.quick_stop_deceleration {
+            issues.positive(format!("{key}.quick_stop_deceleration"), d);
+        }
+        if let Some(w) = self.following_error_window {
+            issues.positive(format!("{key}.following_error_window"), w);
+        }
+        issues.finite(format!("{key}.initial_position"), self.initial_position);
+        if let Some(n) = self.negative_limit {
+            issues.finite(format!("{key}.negative_limit"), n);
+        }
+        if let Some(p) = self.positive_limit {
+            issues.finite(format!("{key}.positive_limit"), p);
+        }
+        if let (Some(n), Some(p)) = (self.negative_limit, self.positive_limit) {
+            if n >= p {
+                issues.push(
+                    format!("{key}.positive_limit"),
+                    format!("must be above negative_limit ({n}), got {p}"),
+                );
+            }
+        }
+        if let Some(s) = self.home_switch {
+            if !(s.min.is_finite() && s.max.is_finite() && s.min <= s.max) {
+                issues.push(
+                    format!("{key}.home_switch"),
+                    format!("min must be <= max, got {}..{}", s.min, s.max),
+                );
+            }
+        }
+        if let Some(t) = self.fault_at_s {
+            issues.non_negative(format!("{key}.fault_at_s"), t);
+        }
+        if let Some(t) = self.stall_at_s {
+            issues.non_negative(format!("{key}.stall_at_s"), t);
+        }
+        let Some(axis) = axis else { return };
+        let needs = match axis.home.method {
+            HomeMethod::Switch if self.home_switch.is_none() => Some("home_switch"),
+            HomeMethod::LimitSwitch
+                if axis.home.velocity > 0.0 && self.positive_limit.is_none() =>
+            {
+                Some("positive_limit")
+            }
+            HomeMethod::LimitSwitch
+                if axis.home.velocity < 0.0 && self.negative_limit.is_none() =>
+            {
+                Some("negative_limit")
+            }
+            _ => None,
+        };
+        if let Some(what) = needs {
+            issues.push(
+                format!("{key}.{what}"),
+                format!(
+                    "required: axis {} homes with method = \"{}\"",
+                    axis.name,
+                    match axis.home.method {
+                        HomeMethod::Switch => "switch",
+                        _ => "limit_switch",
+                    }
+                ),
+            );
+        }
+    }
+}
+
+impl CanopenDriveConfig {
+    fn validate(&self, key: &str, issues: &mut Issues) {
+        // Linux interface names hold at most 15 bytes (IFNAMSIZ - 1).
+        if self.interface.is_empty() || self.interface.len() > 15 {
+            issues.push(
+                format!("{key}.interface"),
+                format!(
+                    "must be a network interface name of 1..=15 bytes, got {:?}",
+                    self.interface
+                ),
+            );
+        }
+        issues.in_range(format!("{key}.node_id"), self.node_id, 1, 127);
+        issues.in_range(format!("{key}.heartbeat_ms"), self.heartbeat_ms, 1, 65_535);
+        issues.in_range(
+            format!("{key}.sdo_timeout_ms"),
+            self.sdo_timeout_ms,
+            1,
+            10_000,
+        );
+    }
+}

@@ -1,0 +1,370 @@
+//! `[[io]]`: I/O devices and their named channels.
+//!
+//! Every channel has a machine-wide unique name (`estop`, `coolant_flood`); the rest of the
+//! configuration (spindle, coolant, safety) refers to channels by name, and a channel's
+//! index on its device is its position in the device's list. `backend = "sim"` is the
+//! simulated I/O of `hytask-hal`; `backend = "modbus_tcp"` (not available in this build yet)
+//! is a Modbus TCP device at `address`, where `register` gives each channel's coil, discrete
+//! input or register number.
+
+use super::error::Issues;
+use hytask_hal::sim::SimIo;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::fmt;
+
+/// `[[io]]`: one I/O device.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct IoConfig {
+    /// Device name; unique among `[[io]]`.
+    pub name: String,
+    /// Which backend runs it.
+    pub backend: IoBackend,
+    /// Network address `host:port` (Modbus TCP); refused for `sim`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub address: Option<String>,
+    /// Modbus unit (slave) id; Modbus only, default 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit_id: Option<u8>,
+    /// Digital inputs, in channel order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub digital_inputs: Vec<DigitalPoint>,
+    /// Digital outputs, in channel order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub digital_outputs: Vec<DigitalPoint>,
+    /// Analog inputs, in channel order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub analog_inputs: Vec<AnalogPoint>,
+    /// Analog outputs, in channel order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub analog_outputs: Vec<AnalogPoint>,
+}
+
+/// I/O backends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum IoBackend {
+    /// Simulated I/O (inputs set through the control socket or tests).
+    Sim,
+    /// A Modbus TCP device. Not available in this build yet.
+    ModbusTcp,
+}
+
+impl IoBackend {
+    /// True when this build can run the backend.
+    pub fn is_available(self) -> bool {
+        match self {
+            IoBackend::Sim => true,
+            IoBackend::ModbusTcp => false,
+        }
+    }
+
+    /// The name used in the file.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            IoBackend::Sim => "sim",
+            IoBackend::ModbusTcp => "modbus_tcp",
+        }
+    }
+}
+
+/// A named digital channel.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DigitalPoint {
+    /// Machine-wide unique channel name.
+    pub name: String,
+    /// Invert the signal (for normally-closed contacts such as an e-stop chain: the
+    /// channel then reads "active" when the circuit opens). Applied by the machine when it
+    /// reads or writes the channel by name ([`DigitalPoint::active`]), not by the backend.
+    #[serde(default)]
+    pub invert: bool,
+    /// Modbus coil / discrete input number; Modbus only, default: the channel index.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub register: Option<u16>,
+}
+
+impl DigitalPoint {
+    /// The channel's logical state ("active") from the level the device reports.
+    pub fn active(&self, level: bool) -> bool {
+        level != self.invert
+    }
+
+    /// The level to write to the device for the logical state `active`.
+    pub fn level(&self, active: bool) -> bool {
+        active != self.invert
+    }
+}
+
+/// A named analog channel, in engineering units: `value = raw * scale + offset`.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct AnalogPoint {
+    /// Machine-wide unique channel name.
+    pub name: String,
+    /// Engineering units per raw unit; not 0.
+    #[serde(default = "default_scale")]
+    pub scale: f64,
+    /// Engineering value at raw 0.
+    #[serde(default)]
+    pub offset: f64,
+    /// Modbus register number; Modbus only, default: the channel index.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub register: Option<u16>,
+}
+
+fn default_scale() -> f64 {
+    1.0
+}
+
+/// The kinds of channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum IoKind {
+    /// A digital input.
+    DigitalInput,
+    /// A digital output.
+    DigitalOutput,
+    /// An analog input.
+    AnalogInput,
+    /// An analog output.
+    AnalogOutput,
+}
+
+impl IoKind {
+    /// The key of this kind's list in `[[io]]`.
+    pub fn list_key(self) -> &'static str {
+        match self {
+            IoKind::DigitalInput => "digital_inputs",
+            IoKind::DigitalOutput => "digital_outputs",
+            IoKind::AnalogInput => "analog_inputs",
+            IoKind::AnalogOutput => "analog_outputs",
+        }
+    }
+}
+
+impl fmt::Display for IoKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            IoKind::DigitalInput => "digital input",
+            IoKind::DigitalOutput => "digital output",
+            IoKind::AnalogInput => "analog input",
+            IoKind::AnalogOutput => "analog output",
+        })
+    }
+}
+
+/// Where a named channel lives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct IoRef {
+    /// Index of the `[[io]]` device.
+    pub device: usize,
+    /// Kind of channel.
+    pub kind: IoKind,
+    /// Channel index on the device.
+    pub channel: usize,
+}
+
+impl IoConfig {
+    /// The key prefix used in messages: `io[0] (panel)`.
+    pub fn key(index: usize, name: &str) -> String {
+        format!("io[{index}] ({name})")
+    }
+
+    /// The channel names of one kind, in channel order.
+    pub fn names(&self, kind: IoKind) -> Vec<&str> {
+        match kind {
+            IoKind::DigitalInput => self
+                .digital_inputs
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect(),
+            IoKind::DigitalOutput => self
+                .digital_outputs
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect(),
+            IoKind::AnalogInput => self.analog_inputs.iter().map(|p| p.name.as_str()).collect(),
+            IoKind::AnalogOutput => self
+                .analog_outputs
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect(),
+        }
+    }
+
+    /// A simulated device with this device's channel counts; `None` unless the backend is
+    /// `sim`. Inversion and scaling stay with the channel definitions
+    /// ([`DigitalPoint::active`], [`AnalogPoint::to_engineering`]): the simulator holds raw
+    /// values, like real hardware.
+    pub fn sim_io(&self) -> Option<SimIo> {
+        (self.backend == IoBackend::Sim).then(|| {
+            SimIo::new(
+                self.digital_inputs.len(),
+                self.digital_outputs.len(),
+                self.analog_inputs.len(),
+                self.analog_outputs.len(),
+            )
+        })
+    }
+
+    fn registers(&self, kind: IoKind) -> Vec<Option<u16>> {
+        match kind {
+            IoKind::DigitalInput => self.digital_inputs.iter().map(|p| p.register).collect(),
+            IoKind::DigitalOutput => self.digital_outputs.iter().map(|p| p.register).collect(),
+            IoKind::AnalogInput => self.analog_inputs.iter().map(|p| p.register).collect(),
+            IoKind::AnalogOutput => self.analog_outputs.iter().map(|p| p.register).collect(),
+        }
+    }
+
+    /// Checks the device's own values.
+    pub(super) fn validate(&self, key: &str, issues: &mut Issues) {
+        issues.name(format!("{key}.name"), &self.name);
+        match self.backend {
+            IoBackend::Sim => {
+                if self.address.is_some() {
+                    issues.push(format!("{key}.address"), "not used with backend = \"sim\"");
+                }
+                if self.unit_id.is_some() {
+                    issues.push(format!("{key}.unit_id"), "not used with backend = \"sim\"");
+                }
+            }
+            IoBackend::ModbusTcp => match &self.address {
+                None => issues.push(
+                    format!("{key}.address"),
+                    "required with backend = \"modbus_tcp\" (\"host:port\")",
+                ),
+                Some(a) if !valid_host_port(a) => issues.push(
+                    format!("{key}.address"),
+                    format!("must be \"host:port\" with a port in 1..=65535, got {a:?}"),
+                ),
+                Some(_) => {}
+            },
+        }
+        for kind in [
+            IoKind::DigitalInput,
+            IoKind::DigitalOutput,
+            IoKind::AnalogInput,
+            IoKind::AnalogOutput,
+        ] {
+            let list = kind.list_key();
+            let mut seen: HashMap<u16, usize> = HashMap::new();
+            for (i, (name, register)) in self
+                .names(kind)
+                .into_iter()
+                .zip(self.registers(kind))
+                .enumerate()
+            {
+                issues.name(format!("{key}.{list}[{i}].name"), name);
+                let Some(r) = register else { continue };
+                if self.backend == IoBackend::Sim {
+                    issues.push(
+                        format!("{key}.{list}[{i}] ({name}).register"),
+                        "not used with backend = \"sim\"",
+                    );
+                } else if let Some(first) = seen.insert(r, i) {
+                    issues.push(
+                        format!("{key}.{list}[{i}] ({name}).register"),
+                        format!("register {r} is already used by {list}[{first}]"),
+                    );
+                }
+            }
+        }
+        for (i, p) in self.analog_inputs.iter().enumerate() {
+            p.validate(&format!("{key}.analog_inputs[{i}] ({})", p.name), issues);
+        }
+        for (i, p) in self.analog_outputs.iter().enumerate() {
+            p.validate(&format!("{key}.analog_outputs[{i}] ({})", p.name), issues);
+        }
+    }
+}
+
+impl AnalogPoint {
+    /// Engineering value from the device's raw value.
+    pub fn to_engineering(&self, raw: f64) -> f64 {
+        raw * self.scale + self.offset
+    }
+
+    /// Raw device value for an engineering value (the inverse of
+    /// [`to_engineering`](AnalogPoint::to_engineering); `scale` is never 0 once validated).
+    pub fn to_raw(&self, value: f64) -> f64 {
+        (value - self.offset) / self.scale
+    }
+
+    fn validate(&self, key: &str, issues: &mut Issues) {
+        if self.scale == 0.0 || !self.scale.is_finite() {
+            issues.push(
+                format!("{key}.scale"),
+                format!("must be a non-zero finite number, got {}", self.scale),
+            );
+        }
+        issues.finite(format!("{key}.offset"), self.offset);
+    }
+}
+
+/// `host:port` with a non-empty host and a port in 1..=65535 (IPv6 hosts in brackets).
+fn valid_host_port(s: &str) -> bool {
+    match s.rsplit_once(':') {
+        Some((host, port)) => !host.is_empty() && port.parse::<u16>().is_ok_and(|p| p != 0),
+        None => false,
+    }
+}
+
+/// Indexes every channel name of all devices; records duplicates as issues.
+pub(super) fn index(devices: &[IoConfig], issues: &mut Issues) -> HashMap<String, IoRef> {
+    let mut by_name: HashMap<String, IoRef> = HashMap::new();
+    let mut device_names: HashMap<&str, usize> = HashMap::new();
+    for (d, dev) in devices.iter().enumerate() {
+        let key = IoConfig::key(d, &dev.name);
+        if let Some(first) = device_names.insert(&dev.name, d) {
+            issues.push(
+                format!("{key}.name"),
+                format!("duplicate of {}", IoConfig::key(first, &dev.name)),
+            );
+        }
+        for kind in [
+            IoKind::DigitalInput,
+            IoKind::DigitalOutput,
+            IoKind::AnalogInput,
+            IoKind::AnalogOutput,
+        ] {
+            for (channel, name) in dev.names(kind).into_iter().enumerate() {
+                let here = IoRef {
+                    device: d,
+                    kind,
+                    channel,
+                };
+                if let Some(first) = by_name.get(name) {
+                    issues.push(
+                        format!("{key}.{}[{channel}].name", kind.list_key()),
+                        format!(
+                            "{name:?} is already used by {}.{}[{}]: channel names are machine-wide",
+                            IoConfig::key(first.device, &devices[first.device].name),
+                            first.kind.list_key(),
+                            first.channel
+                        ),
+                    );
+                } else {
+                    by_name.insert(name.to_string(), here);
+                }
+            }
+        }
+    }
+    by_name
+}
+
+#[cfg(test)]
+mod tests {
+    use super::valid_host_port;
+
+    #[test]
+    fn host_port_addresses() {
+        assert!(valid_host_port("192.168.1.20:502"));
+        assert!(valid_host_port("plc.local:1502"));
+        assert!(valid_host_port("[::1]:502"));
+        assert!(!valid_host_port("192.168.1.20"));
+        assert!(!valid_host_port(":502"));
+        assert!(!valid_host_port("host:0"));
+        assert!(!valid_host_port("host:99999"));
+    }
+}

@@ -1,0 +1,249 @@
+//! The small sections: `[tool_table]`, `[control]`, `[logging]`, `[motion]`, `[safety]`.
+
+use super::error::Issues;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// `[tool_table]`: where tool lengths and diameters are kept.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToolTableConfig {
+    /// Tool table file (LinuxCNC `.tbl` format); a relative path is relative to the
+    /// configuration file's directory (resolved by [`load`](super::load)).
+    pub path: PathBuf,
+}
+
+/// `[control]`: the control socket (JSON lines over a Unix socket).
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControlConfig {
+    /// Path of the Unix socket.
+    #[serde(default = "default_socket_path")]
+    pub socket_path: PathBuf,
+    /// File mode of the socket, as an octal string (`"0660"`). Whoever can write the
+    /// socket can move the machine, so keep "other" bits off.
+    #[serde(default = "default_mode")]
+    pub mode: FileMode,
+    /// Group owning the socket (operators are members); the daemon's group if absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group: Option<String>,
+}
+
+fn default_socket_path() -> PathBuf {
+    PathBuf::from("/run/hytask/hytask.sock")
+}
+
+fn default_mode() -> FileMode {
+    FileMode(0o660)
+}
+
+/// A Unix file mode (permission bits only, at most `0o777`), written in the file as an
+/// octal string such as `"0660"` so that it reads the way `chmod` does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(try_from = "String", into = "String")]
+pub struct FileMode(pub u32);
+
+impl TryFrom<String> for FileMode {
+    type Error = String;
+
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        let digits = s.strip_prefix("0o").unwrap_or(&s);
+        match u32::from_str_radix(digits, 8) {
+            Ok(m) if m <= 0o777 && !digits.is_empty() => Ok(FileMode(m)),
+            _ => Err(format!(
+                "expected an octal file mode such as \"0660\" (at most 0777), got {s:?}"
+            )),
+        }
+    }
+}
+
+impl From<FileMode> for String {
+    fn from(m: FileMode) -> String {
+        format!("{:04o}", m.0)
+    }
+}
+
+impl Default for ControlConfig {
+    fn default() -> Self {
+        ControlConfig {
+            socket_path: default_socket_path(),
+            mode: default_mode(),
+            group: None,
+        }
+    }
+}
+
+/// `[logging]`.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoggingConfig {
+    /// Least severe level that is logged.
+    #[serde(default)]
+    pub level: LogLevel,
+}
+
+/// Log levels, least verbose first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+#[allow(missing_docs)] // The usual meanings.
+pub enum LogLevel {
+    Error,
+    Warn,
+    #[default]
+    Info,
+    Debug,
+    Trace,
+}
+
+impl LogLevel {
+    /// The level as a `tracing` filter directive.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LogLevel::Error => "error",
+            LogLevel::Warn => "warn",
+            LogLevel::Info => "info",
+            LogLevel::Debug => "debug",
+            LogLevel::Trace => "trace",
+        }
+    }
+}
+
+/// `[motion]`: planner and interpolator settings.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionConfig {
+    /// The `[[thread]]` the interpolator and drives run on: its period is the servo period
+    /// the planner samples segments for.
+    #[serde(default = "default_servo_thread")]
+    pub servo_thread: String,
+    /// How many moves the planner looks ahead (2 ..= 10000): more allows higher speed
+    /// through many short segments, at the cost of latency to a feed hold.
+    #[serde(default = "default_lookahead")]
+    pub lookahead: u32,
+    /// Default path blending tolerance in mm for `G64` without `P` (>= 0; 0 = exact stop).
+    #[serde(default = "default_g64_tolerance")]
+    pub g64_tolerance: f64,
+    /// Rapid (G0) speed as a fraction of the axes' maximum velocity (0 < x <= 1).
+    #[serde(default = "default_rapid_override")]
+    pub rapid_override: f64,
+    /// Highest feed override the operator may set (1 ..= 10).
+    #[serde(default = "default_max_feed_override")]
+    pub max_feed_override: f64,
+}
+
+fn default_servo_thread() -> String {
+    "servo".into()
+}
+fn default_lookahead() -> u32 {
+    200
+}
+fn default_g64_tolerance() -> f64 {
+    0.01
+}
+fn default_rapid_override() -> f64 {
+    1.0
+}
+fn default_max_feed_override() -> f64 {
+    1.5
+}
+
+impl Default for MotionConfig {
+    fn default() -> Self {
+        MotionConfig {
+            servo_thread: default_servo_thread(),
+            lookahead: default_lookahead(),
+            g64_tolerance: default_g64_tolerance(),
+            rapid_override: default_rapid_override(),
+            max_feed_override: default_max_feed_override(),
+        }
+    }
+}
+
+/// `[safety]`: what stops the machine.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SafetyConfig {
+    /// Name of the digital input of the e-stop chain (active = e-stop pressed; use
+    /// `invert` on the channel for a normally-closed chain). Required: a machine without
+    /// an e-stop does not start.
+    pub estop_input: String,
+    /// Overruns of a realtime thread within `overrun_window_cycles` that count as a storm
+    /// and trigger an e-stop (>= 1). A single overrun is logged, a storm means the timing
+    /// can no longer be trusted.
+    #[serde(default = "default_overrun_storm_count")]
+    pub overrun_storm_count: u32,
+    /// The window, in cycles of the thread, over which overruns are counted (>= the count).
+    #[serde(default = "default_overrun_window_cycles")]
+    pub overrun_window_cycles: u32,
+}
+
+fn default_overrun_storm_count() -> u32 {
+    3
+}
+fn default_overrun_window_cycles() -> u32 {
+    1000
+}
+
+impl ToolTableConfig {
+    pub(super) fn validate(&self, issues: &mut Issues) {
+        if self.path.as_os_str().is_empty() {
+            issues.push("tool_table.path", "must not be empty");
+        }
+    }
+}
+
+impl ControlConfig {
+    pub(super) fn validate(&self, issues: &mut Issues) {
+        if self.socket_path.as_os_str().is_empty() {
+            issues.push("control.socket_path", "must not be empty");
+        }
+        if self.mode.0 & 0o007 != 0 {
+            issues.push(
+                "control.mode",
+                format!(
+                    "{:04o} gives other users access to the machine; clear the last digit",
+                    self.mode.0
+                ),
+            );
+        }
+        if let Some(g) = &self.group {
+            issues.name("control.group", g);
+        }
+    }
+}
+
+impl MotionConfig {
+    pub(super) fn validate(&self, issues: &mut Issues) {
+        issues.in_range("motion.lookahead", self.lookahead, 2, 10_000);
+        issues.non_negative("motion.g64_tolerance", self.g64_tolerance);
+        if !(self.rapid_override > 0.0 && self.rapid_override <= 1.0) {
+            issues.push(
+                "motion.rapid_override",
+                format!("must be in (0, 1], got {}", self.rapid_override),
+            );
+        }
+        issues.in_range(
+            "motion.max_feed_override",
+            self.max_feed_override,
+            1.0,
+            10.0,
+        );
+    }
+}
+
+impl SafetyConfig {
+    pub(super) fn validate(&self, issues: &mut Issues) {
+        if self.overrun_storm_count == 0 {
+            issues.push("safety.overrun_storm_count", "must be >= 1, got 0");
+        }
+        if self.overrun_window_cycles < self.overrun_storm_count {
+            issues.push(
+                "safety.overrun_window_cycles",
+                format!(
+                    "must be >= overrun_storm_count ({}), got {}",
+                    self.overrun_storm_count, self.overrun_window_cycles
+                ),
+            );
+        }
+    }
+}
