@@ -18,8 +18,9 @@ pub struct ServeArgs {
 /// Runs the daemon.
 pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
     init_logging();
+    let config = crate::machine::load_config(args.config.as_deref())?;
+    let socket = crate::machine::socket_options(&config, args.socket);
     let machine = crate::machine::deploy_from(args.config.as_deref())?;
-    let socket = crate::machine::socket_options(args.config.as_deref(), args.socket)?;
     let listener = crate::control::server::bind(&socket)?;
     tracing::info!("control socket at {}", socket.path.display());
     crate::daemon::run(machine, listener, std::future::pending())?;

@@ -12,14 +12,24 @@ pub fn deploy_from(
     anyhow::bail!("machine deployment is not built yet")
 }
 
-/// Control socket options: from the config's `[control]` section, with an override path.
+/// Loads the machine description at `path`, or the built-in simulated mill.
+pub fn load_config(
+    path: Option<&std::path::Path>,
+) -> Result<crate::config::MachineConfig, crate::config::ConfigError> {
+    match path {
+        Some(p) => crate::config::load(p),
+        None => crate::config::builtin_sim(),
+    }
+}
+
+/// Control socket options from the config's `[control]` section, with an override path.
 pub fn socket_options(
-    _config: Option<&std::path::Path>,
+    config: &crate::config::MachineConfig,
     path: Option<std::path::PathBuf>,
-) -> anyhow::Result<crate::control::server::SocketOptions> {
-    Ok(crate::control::server::SocketOptions {
-        path: path.unwrap_or_else(|| crate::control::server::default_socket_path().into()),
-        mode: 0o660,
-        group: None,
-    })
+) -> crate::control::server::SocketOptions {
+    crate::control::server::SocketOptions {
+        path: path.unwrap_or_else(|| config.control.socket_path.clone()),
+        mode: config.control.mode.0,
+        group: config.control.group.clone(),
+    }
 }
