@@ -77,11 +77,14 @@ pub enum FeedMode {
 }
 
 /// Path control mode (G61/G61.1/G64).
+///
+/// LinuxCNC maps G61 to `CANON_EXACT_PATH` and G61.1 to `CANON_EXACT_STOP` (and canned
+/// cycles switch to exact path around their moves); the interpreter follows it exactly.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum MotionControl {
-    /// G61: stop exactly at every corner.
+    /// G61.1: stop exactly at every corner.
     ExactStop,
-    /// G61.1: exact path, slow down at corners but do not stop unless needed.
+    /// G61: exact path, slow down at corners but do not stop unless needed.
     ExactPath,
     /// G64 [P tolerance]: blend, deviating at most `tolerance` (program units, 0 = as fast as possible).
     Continuous {
@@ -262,9 +265,12 @@ pub enum CanonCmd {
         /// Enabled or not.
         on: bool,
     },
-    /// `MESSAGE("…")` from `(MSG,…)`; `(DEBUG,…)` and `(PRINT,…)` also arrive here with
-    /// their parameters substituted.
+    /// `MESSAGE("…")` from `(MSG,…)`; `(DEBUG,…)` also arrives here with its parameters
+    /// substituted.
     Message(String),
+    /// `(PRINT,…)` with parameters substituted: operator log output, not shown as a message.
+    /// rs274 writes it to stdout as a bare line without a sequence number.
+    Print(String),
     /// `COMMENT("…")`.
     Comment(String),
     /// `PROGRAM_STOP()` (M0).
@@ -273,6 +279,45 @@ pub enum CanonCmd {
     OptionalProgramStop,
     /// `PROGRAM_END()` (M2/M30).
     ProgramEnd,
+    /// `PALLET_SHUTTLE()` (M60, and before `PROGRAM_END` for M30).
+    PalletShuttle,
+    /// `ON_RESET()`: the interpreter was (re)initialised; emitted at start-up and after the
+    /// program ends, as LinuxCNC does. Consumers may reset per-program state here.
+    OnReset,
+    /// `SET_FEED_REFERENCE(CANON_XYZ)`: feed rates refer to the XYZ tool path (start-up).
+    SetFeedReference,
+    /// `SET_SPINDLE_MODE(spindle css_max)`: G97 (`css_max_rpm` = 0, constant RPM) or G96 D
+    /// (constant surface speed limited to `css_max_rpm`).
+    SetSpindleMode {
+        /// 0 for G97 (RPM mode), else the G96 D speed limit in RPM.
+        css_max_rpm: f64,
+    },
+    /// `TURN_PROBE_ON()`/`TURN_PROBE_OFF()` around a G38.x `StraightProbe`.
+    Probe {
+        /// True when probing starts.
+        on: bool,
+    },
+    /// `SET_TOOL_TABLE_ENTRY(pocket, tool, offsets, diameter, frontangle, backangle,
+    /// orientation)` from G10 L1/L10/L11: the tool table changed. Values are in machine
+    /// (tool table) units, not program units, as LinuxCNC hands them to canon.
+    SetToolTableEntry {
+        /// Pocket (table index; 0 = the spindle's copy).
+        pocket: u32,
+        /// Tool number.
+        tool: u32,
+        /// Tool offsets X Y Z A B C U V W.
+        offset: Pose,
+        /// Diameter.
+        diameter: f64,
+        /// Lathe front angle.
+        front_angle: f64,
+        /// Lathe back angle.
+        back_angle: f64,
+        /// Lathe orientation.
+        orientation: i32,
+    },
+    /// `FINISH()`: the program ended at its closing `%` rather than with M2/M30.
+    Finish,
     /// M100–M199 user command with its P and Q words.
     UserMcode {
         /// 100..=199.

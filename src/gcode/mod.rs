@@ -1,27 +1,102 @@
 //! RS274/NGC (LinuxCNC dialect) front end: text in, canonical commands out. No threads, no
 //! planner, no socket: the interpreter is a pure function of its input files and options.
+//!
+//! Pipeline: [`lexer`] (characters, blanks, case) → [`parser`] (a line to words,
+//! assignments, comments or an O-word statement) → [`expr`] (values) → [`modal`] (a
+//! checked [`modal::Block`]) → `interp` (modal state, execution order, O-word flow) →
+//! [`canon`] commands. [`canon_fmt`] prints them in `rs274 -g` layout for differential
+//! testing against LinuxCNC.
 
 pub mod canon;
+pub mod canon_fmt;
+pub mod expr;
+mod interp;
+pub mod lexer;
+pub mod modal;
+pub mod params;
+pub mod parser;
+pub mod tooltable;
 
-pub use canon::{Canon, CanonCmd, Pose, SourceLoc, NUM_AXES};
+pub use canon::{Canon, CanonCmd, LengthUnits, Pose, SourceLoc, NUM_AXES};
 
 use std::path::{Path, PathBuf};
 
+/// Resource limits. Each one turns a hostile or broken program into a clear error instead of
+/// a hang or an out-of-memory kill.
+#[derive(Debug, Clone)]
+pub struct Limits {
+    /// Largest program or subroutine file, bytes.
+    pub max_file_bytes: usize,
+    /// Most lines in one file.
+    pub max_lines: usize,
+    /// Longest line, bytes.
+    pub max_line_len: usize,
+    /// Deepest expression nesting (brackets, functions, parameter indirection).
+    pub max_expr_depth: usize,
+    /// Deepest subroutine call nesting.
+    pub max_call_depth: usize,
+    /// Most iterations of one loop (while, do, repeat) per entry.
+    pub max_loop_iterations: u64,
+    /// Most blocks executed in one run (all loops and calls together).
+    pub max_blocks: u64,
+    /// Most canonical commands produced.
+    pub max_canon: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_file_bytes: 512 << 20,
+            max_lines: 20_000_000,
+            max_line_len: 4096,
+            max_expr_depth: 64,
+            max_call_depth: 64,
+            max_loop_iterations: 10_000_000,
+            max_blocks: 200_000_000,
+            max_canon: 50_000_000,
+        }
+    }
+}
+
 /// Options of one interpreter run.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct InterpOptions {
     /// Tool table file (LinuxCNC `.tbl` format) for M6/G43.
     pub tool_table: Option<PathBuf>,
-    /// Directories searched for `o<name> call` subroutine files.
+    /// Directories searched for `o<name> call` subroutine files (`name.ngc`).
     pub subroutine_path: Vec<PathBuf>,
+    /// Directory of the main program, searched after `subroutine_path` (set by `load_file`).
+    pub program_dir: Option<PathBuf>,
     /// `/` block delete switch.
     pub block_delete: bool,
+    /// Units of the tool table (LinuxCNC's machine units). rs274 without an INI file uses
+    /// inches; a real machine configuration usually uses millimetres.
+    pub machine_units: LengthUnits,
+    /// Program units at start (before any G20/G21).
+    pub initial_units: LengthUnits,
+    /// Resource limits.
+    pub limits: Limits,
+}
+
+impl Default for InterpOptions {
+    fn default() -> Self {
+        InterpOptions {
+            tool_table: None,
+            subroutine_path: Vec::new(),
+            program_dir: None,
+            block_delete: false,
+            machine_units: LengthUnits::Millimeters,
+            initial_units: LengthUnits::Millimeters,
+            limits: Limits::default(),
+        }
+    }
 }
 
 /// A whole interpreted program: validated as a unit before any motion starts.
 #[derive(Debug, Clone, Default)]
 pub struct Program {
-    /// The canonical commands, in execution order.
+    /// The canonical commands, in execution order. The start-up calls (units, offsets,
+    /// `ON_RESET`) carry line 0.
     pub canon: Vec<Canon>,
 }
 
@@ -39,22 +114,25 @@ pub struct GcodeError {
     pub message: String,
 }
 
-/// Interprets a program file.
-pub fn load_file(path: &Path, _opts: &InterpOptions) -> Result<Program, GcodeError> {
-    Err(GcodeError {
+/// Interprets a program file. Subroutine files are also searched in the program's directory.
+pub fn load_file(path: &Path, opts: &InterpOptions) -> Result<Program, GcodeError> {
+    let text = std::fs::read(path).map_err(|e| GcodeError {
         file: path.display().to_string(),
         line: 1,
         col: 1,
-        message: "G-code interpreter not built yet".into(),
-    })
+        message: format!("Unable to open file: {e}"),
+    })?;
+    let text = String::from_utf8_lossy(&text).into_owned();
+    let mut o = opts.clone();
+    if o.program_dir.is_none() {
+        o.program_dir = path.parent().map(Path::to_path_buf);
+    }
+    let canon = interp::interpret(&path.display().to_string(), text, &o)?;
+    Ok(Program { canon })
 }
 
 /// Interprets program text; `name` is used as the file name in locations and errors.
-pub fn load_str(name: &str, _text: &str, _opts: &InterpOptions) -> Result<Program, GcodeError> {
-    Err(GcodeError {
-        file: name.into(),
-        line: 1,
-        col: 1,
-        message: "G-code interpreter not built yet".into(),
-    })
+pub fn load_str(name: &str, text: &str, opts: &InterpOptions) -> Result<Program, GcodeError> {
+    let canon = interp::interpret(name, text.to_string(), opts)?;
+    Ok(Program { canon })
 }

@@ -1,0 +1,185 @@
+//! Canned cycles in the XY plane: G73, G81, G82, G83, G85, G86, G89 with G98/G99 retract,
+//! sticky R/Z/Q/P values, L repeats and incremental mode, generated exactly as LinuxCNC's
+//! `convert_cycle_xy` does (including its switch to exact-path mode around the cycle).
+
+use super::motion::pose6;
+use super::Interp;
+use crate::gcode::canon::{CanonCmd, MotionControl, Plane};
+use crate::gcode::modal::Block;
+use crate::gcode::GcodeError;
+
+impl Interp<'_> {
+    fn cycle_move(&mut self, feed: bool, x: f64, y: f64, z: f64) -> Result<(), GcodeError> {
+        let mut p = self.s.pos;
+        p[0] = x;
+        p[1] = y;
+        p[2] = z;
+        self.s.pos = p;
+        let pose = pose6(&p);
+        self.emit(if feed {
+            CanonCmd::StraightFeed(pose)
+        } else {
+            CanonCmd::StraightTraverse(pose)
+        })
+    }
+
+    pub(super) fn cycle(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+        let col = self.loc.col;
+        if self.s.plane != Plane::Xy {
+            return Err(self.err(
+                col,
+                "Canned cycles are supported in the XY plane (G17) only by hytask",
+            ));
+        }
+        if b.has(b'a') || b.has(b'b') || b.has(b'c') {
+            return Err(self.err(col, "Cannot put an A, B, or C in a canned cycle"));
+        }
+        let same = self.s.motion == m;
+        let z = match b.get(b'z') {
+            Some(z) => z,
+            None if same => self.s.cycle_z,
+            None => return Err(self.err(col, "Z value unspecified in canned cycle")),
+        };
+        let r_word = match b.get(b'r') {
+            Some(r) => r,
+            None if same => self.s.cycle_r,
+            None => return Err(self.err(col, "R clearance plane unspecified in cycle")),
+        };
+        let l = match b.get(b'l') {
+            Some(l) => {
+                if l.fract() != 0.0 || l < 1.0 {
+                    return Err(self.err(b.col_of(b'l'), "Cannot do zero repeats of cycle"));
+                }
+                l as u64
+            }
+            None => 1,
+        };
+        let q = match b.get(b'q') {
+            Some(q) => q,
+            None => self.s.cycle_q,
+        };
+        if matches!(m, 730 | 830) && q <= 0.0 {
+            return Err(self.err(col, "Q word missing or not positive with G73 or G83"));
+        }
+        let p = b.get(b'p').unwrap_or(self.s.cycle_p);
+        if p < 0.0 {
+            return Err(self.err(b.col_of(b'p'), "Negative dwell time with canned cycle"));
+        }
+        if self.s.feed_rate == 0.0 {
+            return Err(self.err(col, "Cannot feed with zero feed rate in a canned cycle"));
+        }
+        if m == 860 && self.s.spindle == 0 {
+            return Err(self.err(col, "Spindle not turning in G86"));
+        }
+        let mut old_z = self.s.pos[2];
+        let (mut x, mut y, dx, dy, r, bottom) = if self.s.absolute {
+            (
+                b.get(b'x').unwrap_or(self.s.pos[0]),
+                b.get(b'y').unwrap_or(self.s.pos[1]),
+                0.0,
+                0.0,
+                r_word,
+                z,
+            )
+        } else {
+            let r = r_word + old_z;
+            (
+                self.s.pos[0],
+                self.s.pos[1],
+                b.get(b'x').unwrap_or(0.0),
+                b.get(b'y').unwrap_or(0.0),
+                r,
+                r + z,
+            )
+        };
+        if r < bottom {
+            return Err(self.err(col, "R less than Z in cycle in XY plane"));
+        }
+        if old_z < r {
+            old_z = r;
+        }
+        let (cx, cy) = (self.s.pos[0], self.s.pos[1]);
+        self.cycle_move(false, cx, cy, old_z)?;
+        let clear = if self.s.retract_old_z { old_z } else { r };
+        let saved = self.s.control;
+        if saved != MotionControl::ExactPath {
+            self.emit(CanonCmd::SetMotionControl(MotionControl::ExactPath))?;
+        }
+        let delta = if self.s.units == crate::gcode::canon::LengthUnits::Inches {
+            0.010
+        } else {
+            0.254
+        };
+        for _ in 0..l {
+            x += dx;
+            y += dy;
+            self.cycle_move(false, x, y, old_z)?;
+            if old_z != r {
+                self.cycle_move(false, x, y, r)?;
+            }
+            match m {
+                810 => {
+                    self.cycle_move(true, x, y, bottom)?;
+                    self.cycle_move(false, x, y, clear)?;
+                }
+                820 => {
+                    self.cycle_move(true, x, y, bottom)?;
+                    self.emit(CanonCmd::Dwell(p))?;
+                    self.cycle_move(false, x, y, clear)?;
+                }
+                830 | 730 => {
+                    let mut depth = r - q;
+                    while depth > bottom {
+                        self.cycle_move(true, x, y, depth)?;
+                        if m == 830 {
+                            self.cycle_move(false, x, y, r)?;
+                        }
+                        self.cycle_move(false, x, y, depth + delta)?;
+                        depth -= q;
+                    }
+                    self.cycle_move(true, x, y, bottom)?;
+                    self.cycle_move(false, x, y, clear)?;
+                }
+                850 | 890 => {
+                    self.cycle_move(true, x, y, bottom)?;
+                    if m == 890 {
+                        self.emit(CanonCmd::Dwell(p))?;
+                    }
+                    self.cycle_move(true, x, y, r)?;
+                    if clear != r {
+                        self.cycle_move(false, x, y, clear)?;
+                    }
+                }
+                _ => {
+                    // G86
+                    self.cycle_move(true, x, y, bottom)?;
+                    self.emit(CanonCmd::Dwell(p))?;
+                    self.emit(CanonCmd::StopSpindle)?;
+                    self.cycle_move(false, x, y, clear)?;
+                    let dir = if self.s.spindle > 0 {
+                        crate::gcode::canon::SpindleDir::Clockwise
+                    } else {
+                        crate::gcode::canon::SpindleDir::CounterClockwise
+                    };
+                    self.emit(CanonCmd::StartSpindle(dir))?;
+                }
+            }
+            old_z = clear;
+        }
+        self.s.pos[0] = x;
+        self.s.pos[1] = y;
+        self.s.pos[2] = clear;
+        self.s.cycle_z = z;
+        self.s.cycle_r = r_word;
+        self.s.cycle_q = q;
+        self.s.cycle_p = p;
+        self.s.motion = m;
+        if saved != MotionControl::ExactPath {
+            self.emit(CanonCmd::SetMotionControl(saved))?;
+            if matches!(saved, MotionControl::Continuous { .. }) {
+                self.emit(CanonCmd::SetNaivecamTolerance(self.s.naive_tol))?;
+            }
+        }
+        Ok(())
+    }
+}

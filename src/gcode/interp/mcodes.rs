@@ -1,0 +1,500 @@
+//! M codes and the T word: tool selection and change (M6, M61), spindle (M3–M5), coolant
+//! (M7–M9), overrides (M48–M53), I/O (M62–M68), modal state (M70–M73), user commands
+//! (M100–M199) and program stops (M0, M1, M2, M30, M60).
+
+use super::motion::pose6;
+use super::Interp;
+use crate::gcode::canon::{
+    CanonCmd, FeedMode, InputKind, OverrideKind, Plane, SpindleDir, WaitKind,
+};
+use crate::gcode::modal::Block;
+use crate::gcode::params::{self, g5x_base};
+use crate::gcode::GcodeError;
+
+fn int_word(v: f64) -> Option<u32> {
+    if v >= 0.0 && v.fract() == 0.0 && v < 1e9 {
+        Some(v as u32)
+    } else {
+        None
+    }
+}
+
+impl Interp<'_> {
+    /// T word.
+    pub(super) fn select_tool(&mut self, t: f64) -> Result<(), GcodeError> {
+        let col = self.loc.col;
+        let Some(n) = int_word(t) else {
+            return Err(self.err(col, "Negative or non-integer tool number used"));
+        };
+        let slot = if n == 0 {
+            0
+        } else {
+            self.tools.slot_of(n).ok_or_else(|| {
+                self.err(
+                    col,
+                    format!("Requested tool {n} not found in the tool table"),
+                )
+            })?
+        };
+        self.s.selected = Some((n, slot));
+        self.emit(CanonCmd::SelectTool(n))
+    }
+
+    fn load_tool_params(&mut self) {
+        self.p.numbered[params::TOOL_NUMBER] = f64::from(self.s.tool);
+        let k = self.s.machine_units.mm_per_unit() / self.s.units.mm_per_unit();
+        let t = self.tools.at_slot(self.s.tool_slot).cloned();
+        for i in 0..9 {
+            self.p.numbered[params::TOOL_BASE + i] =
+                t.as_ref().map(|t| t.offset[i] * k).unwrap_or(0.0);
+        }
+        self.p.numbered[params::TOOL_BASE + 9] = t.as_ref().map(|t| t.diameter * k).unwrap_or(0.0);
+    }
+
+    pub(super) fn exec_mcodes_before_motion(&mut self, b: &Block) -> Result<(), GcodeError> {
+        // I/O
+        if let Some((m, col)) = b.m[5] {
+            self.loc.col = col;
+            self.io(m, b)?;
+        }
+        // tool change
+        if let Some((m, col)) = b.m[6] {
+            self.loc.col = col;
+            if m == 6 {
+                let Some((n, slot)) = self.s.selected else {
+                    return Err(self.err(col, "M6 with no tool prepared (no T word before it)"));
+                };
+                self.emit(CanonCmd::StartChange)?;
+                self.emit(CanonCmd::StopSpindle)?;
+                self.s.spindle = 0;
+                self.emit(CanonCmd::ChangeTool(
+                    u32::try_from(slot).unwrap_or(u32::MAX),
+                ))?;
+                self.s.tool = n;
+                self.s.tool_slot = slot;
+                self.load_tool_params();
+            } else {
+                let q = b
+                    .get(b'q')
+                    .ok_or_else(|| self.err(col, "Q word missing with M61"))?;
+                let Some(n) = int_word(q) else {
+                    return Err(self.err(b.col_of(b'q'), "Invalid tool number in M61 Q word"));
+                };
+                let slot = if n == 0 {
+                    0
+                } else {
+                    self.tools.slot_of(n).ok_or_else(|| {
+                        self.err(col, format!("M61 tool {n} not found in the tool table"))
+                    })?
+                };
+                self.emit(CanonCmd::ChangeToolNumber(
+                    u32::try_from(slot).unwrap_or(u32::MAX),
+                ))?;
+                self.s.tool = n;
+                self.s.tool_slot = slot;
+                self.load_tool_params();
+            }
+        }
+        // spindle
+        if let Some((m, col)) = b.m[7] {
+            self.loc.col = col;
+            match m {
+                3 => {
+                    self.s.spindle = 1;
+                    self.emit(CanonCmd::StartSpindle(SpindleDir::Clockwise))?;
+                }
+                4 => {
+                    self.s.spindle = -1;
+                    self.emit(CanonCmd::StartSpindle(SpindleDir::CounterClockwise))?;
+                }
+                _ => {
+                    self.s.spindle = 0;
+                    self.emit(CanonCmd::StopSpindle)?;
+                }
+            }
+        }
+        // modal state save/restore
+        if let Some((m, col)) = b.m[11] {
+            self.loc.col = col;
+            self.modal_state(m)?;
+        }
+        // coolant
+        if let Some((m, col)) = b.m[8] {
+            self.loc.col = col;
+            match m {
+                7 => {
+                    self.s.mist = true;
+                    self.emit(CanonCmd::MistOn)?;
+                }
+                8 => {
+                    self.s.flood = true;
+                    self.emit(CanonCmd::FloodOn)?;
+                }
+                _ => {
+                    self.s.mist = false;
+                    self.s.flood = false;
+                    self.emit(CanonCmd::MistOff)?;
+                    self.emit(CanonCmd::FloodOff)?;
+                }
+            }
+        }
+        // overrides
+        if let Some((m, col)) = b.m[9] {
+            self.loc.col = col;
+            let on = b.get(b'p').map(|p| p != 0.0).unwrap_or(true);
+            let ov = |which, on| CanonCmd::OverrideEnable { which, on };
+            match m {
+                48 | 49 => {
+                    let on = m == 48;
+                    self.s.feed_override = on;
+                    self.s.speed_override = on;
+                    self.emit(ov(OverrideKind::Feed, on))?;
+                    self.emit(ov(OverrideKind::Spindle, on))?;
+                }
+                50 => {
+                    self.s.feed_override = on;
+                    self.emit(ov(OverrideKind::Feed, on))?;
+                }
+                51 => {
+                    self.s.speed_override = on;
+                    self.emit(ov(OverrideKind::Spindle, on))?;
+                }
+                52 => {
+                    let on = b.get(b'p').map(|p| p > 0.0).unwrap_or(false);
+                    self.s.adaptive_feed = on;
+                    self.emit(ov(OverrideKind::AdaptiveFeed, on))?;
+                }
+                _ => {
+                    self.s.feed_hold = on;
+                    self.emit(ov(OverrideKind::FeedHold, on))?;
+                }
+            }
+        }
+        // user M codes
+        if let Some((m, col)) = b.m[10] {
+            self.loc.col = col;
+            self.emit(CanonCmd::UserMcode {
+                code: u32::from(m),
+                p: b.get(b'p').unwrap_or(0.0),
+                q: b.get(b'q').unwrap_or(0.0),
+            })?;
+        }
+        Ok(())
+    }
+
+    fn io(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+        let col = self.loc.col;
+        match m {
+            62..=65 => {
+                let p = b
+                    .get(b'p')
+                    .and_then(int_word)
+                    .ok_or_else(|| self.err(col, "Invalid or missing P word with M62 to M65"))?;
+                self.emit(CanonCmd::DigitalOutput {
+                    index: p,
+                    on: m == 62 || m == 64,
+                    synced: m <= 63,
+                })
+            }
+            66 => {
+                let (index, input) = match (b.get(b'p'), b.get(b'e')) {
+                    (Some(_), Some(_)) => {
+                        return Err(self.err(col, "Both digital and analog input selected with M66"))
+                    }
+                    (Some(p), None) => (p, InputKind::Digital),
+                    (None, Some(e)) => (e, InputKind::Analog),
+                    (None, None) => return Err(self.err(col, "Missing P or E word with M66")),
+                };
+                let index = int_word(index)
+                    .ok_or_else(|| self.err(col, "Invalid input number with M66"))?;
+                let l = b.get(b'l').unwrap_or(0.0);
+                let kind = match l as i64 {
+                    0 => WaitKind::Immediate,
+                    1 => WaitKind::Rise,
+                    2 => WaitKind::Fall,
+                    3 => WaitKind::High,
+                    4 => WaitKind::Low,
+                    _ => {
+                        return Err(self.err(b.col_of(b'l'), "Invalid wait type (L word) with M66"))
+                    }
+                };
+                if input == InputKind::Analog && kind != WaitKind::Immediate {
+                    return Err(self.err(
+                        col,
+                        "Can't select analog input with wait type != immediate return",
+                    ));
+                }
+                let q = b.get(b'q').unwrap_or(0.0);
+                if kind != WaitKind::Immediate && q <= 0.0 {
+                    return Err(self.err(
+                        col,
+                        "Q word (timeout) must be positive with M66 wait type other than L0",
+                    ));
+                }
+                self.emit(CanonCmd::Wait {
+                    index,
+                    input,
+                    kind,
+                    timeout_s: q,
+                })
+            }
+            _ => {
+                let e = b
+                    .get(b'e')
+                    .and_then(int_word)
+                    .ok_or_else(|| self.err(col, "Invalid or missing E word with M67/M68"))?;
+                let q = b
+                    .get(b'q')
+                    .ok_or_else(|| self.err(col, "Q word missing with M67/M68"))?;
+                self.emit(CanonCmd::AnalogOutput {
+                    index: e,
+                    value: q,
+                    synced: m == 67,
+                })
+            }
+        }
+    }
+
+    fn modal_state(&mut self, m: u16) -> Result<(), GcodeError> {
+        let level = self.call_level();
+        match m {
+            70 | 73 => {
+                let mut snap = self.s.clone();
+                snap.saved = Vec::new();
+                if let Some(slot) = self.s.saved.get_mut(level) {
+                    *slot = Some(Box::new(snap));
+                }
+                Ok(())
+            }
+            71 => {
+                if let Some(slot) = self.s.saved.get_mut(level) {
+                    *slot = None;
+                }
+                Ok(())
+            }
+            _ => {
+                let snap = self.s.saved.get(level).cloned().flatten();
+                match snap {
+                    Some(s) => self.restore_modal(&s),
+                    None => Err(self.err(
+                        self.loc.col,
+                        "Cannot restore context from invalid stack frame - missing M70/M73?",
+                    )),
+                }
+            }
+        }
+    }
+
+    /// Restores the modal state saved by M70/M73, reporting each change to canon.
+    pub(super) fn restore_modal(&mut self, s: &super::Settings) -> Result<(), GcodeError> {
+        if s.units != self.s.units {
+            self.set_units(if s.units == crate::gcode::canon::LengthUnits::Inches {
+                200
+            } else {
+                210
+            })?;
+        }
+        if s.plane != self.s.plane {
+            self.s.plane = s.plane;
+            self.emit(CanonCmd::SelectPlane(s.plane))?;
+        }
+        self.s.absolute = s.absolute;
+        self.s.ijk_absolute = s.ijk_absolute;
+        self.s.retract_old_z = s.retract_old_z;
+        if s.feed_mode != self.s.feed_mode {
+            self.s.feed_mode = s.feed_mode;
+            self.emit(CanonCmd::SetFeedMode(s.feed_mode))?;
+        }
+        if s.feed_rate != self.s.feed_rate {
+            self.s.feed_rate = s.feed_rate;
+            self.emit(CanonCmd::SetFeedRate(s.feed_rate))?;
+        }
+        if s.speed != self.s.speed {
+            self.s.speed = s.speed;
+            self.emit(CanonCmd::SetSpindleSpeed(s.speed))?;
+        }
+        if s.spindle != self.s.spindle {
+            self.s.spindle = s.spindle;
+            self.emit(match s.spindle {
+                1 => CanonCmd::StartSpindle(SpindleDir::Clockwise),
+                -1 => CanonCmd::StartSpindle(SpindleDir::CounterClockwise),
+                _ => CanonCmd::StopSpindle,
+            })?;
+        }
+        if s.mist != self.s.mist || s.flood != self.s.flood {
+            self.s.mist = s.mist;
+            self.s.flood = s.flood;
+            self.emit(if s.mist {
+                CanonCmd::MistOn
+            } else {
+                CanonCmd::MistOff
+            })?;
+            self.emit(if s.flood {
+                CanonCmd::FloodOn
+            } else {
+                CanonCmd::FloodOff
+            })?;
+        }
+        if s.control != self.s.control || s.naive_tol != self.s.naive_tol {
+            self.s.control = s.control;
+            self.s.naive_tol = s.naive_tol;
+            self.emit(CanonCmd::SetMotionControl(s.control))?;
+            if matches!(
+                s.control,
+                crate::gcode::canon::MotionControl::Continuous { .. }
+            ) {
+                self.emit(CanonCmd::SetNaivecamTolerance(s.naive_tol))?;
+            }
+        }
+        if s.origin_index != self.s.origin_index {
+            self.select_coord_system(s.origin_index)?;
+        }
+        Ok(())
+    }
+
+    /// M0, M1, M2, M30, M60.
+    pub(super) fn stop(&mut self, m: u16) -> Result<(), GcodeError> {
+        match m {
+            0 => self.emit(CanonCmd::ProgramStop),
+            1 => self.emit(CanonCmd::OptionalProgramStop),
+            60 => {
+                self.emit(CanonCmd::PalletShuttle)?;
+                self.emit(CanonCmd::ProgramStop)
+            }
+            _ => {
+                // LinuxCNC's reset on program end.
+                let base = g5x_base(1);
+                let mut o = [0.0; 6];
+                o.copy_from_slice(&self.p.numbered[base..base + 6]);
+                for (i, v) in o.iter().enumerate() {
+                    self.s.pos[i] += self.s.g5x[i] - v;
+                }
+                self.s.g5x = o;
+                self.s.origin_index = 1;
+                self.s.rotation = self.p.numbered[base + 9];
+                self.p.numbered[params::COORD_INDEX] = 1.0;
+                self.emit(CanonCmd::SetG5xOffset {
+                    index: 1,
+                    offset: pose6(&o),
+                })?;
+                self.emit(CanonCmd::SetXyRotation(self.s.rotation))?;
+                if self.s.plane != Plane::Xy {
+                    self.s.plane = Plane::Xy;
+                    self.emit(CanonCmd::SelectPlane(Plane::Xy))?;
+                }
+                self.s.absolute = true;
+                self.s.feed_mode = FeedMode::UnitsPerMinute;
+                self.emit(CanonCmd::SetFeedMode(FeedMode::UnitsPerMinute))?;
+                self.s.feed_rate = 0.0;
+                self.emit(CanonCmd::SetFeedRate(0.0))?;
+                if !self.s.feed_override {
+                    self.s.feed_override = true;
+                    self.emit(CanonCmd::OverrideEnable {
+                        which: OverrideKind::Feed,
+                        on: true,
+                    })?;
+                }
+                self.s.speed_override = true;
+                self.s.spindle = 0;
+                self.emit(CanonCmd::StopSpindle)?;
+                self.s.css = false;
+                self.s.css_max = 0.0;
+                self.emit(CanonCmd::SetSpindleMode { css_max_rpm: 0.0 })?;
+                self.s.motion = 10;
+                if self.s.mist {
+                    self.s.mist = false;
+                    self.emit(CanonCmd::MistOff)?;
+                }
+                if self.s.flood {
+                    self.s.flood = false;
+                    self.emit(CanonCmd::FloodOff)?;
+                }
+                if m == 30 {
+                    self.emit(CanonCmd::PalletShuttle)?;
+                }
+                self.emit(CanonCmd::ProgramEnd)?;
+                if self.percent_unclosed() {
+                    self.emit(CanonCmd::Comment(
+                        "interpreter: percent sign missing from end of file".into(),
+                    ))?;
+                }
+                self.emit(CanonCmd::OnReset)?;
+                self.emit(CanonCmd::OnReset)?;
+                self.end_program();
+                Ok(())
+            }
+        }
+    }
+}
+
+impl Interp<'_> {
+    /// G10 L1/L10/L11: edits the tool table (kept in machine units).
+    pub(super) fn g10_tool(&mut self, l: i64, p: f64, b: &Block) -> Result<(), GcodeError> {
+        let col = self.loc.col;
+        let Some(n) = int_word(p) else {
+            return Err(self.err(
+                b.col_of(b'p'),
+                "Invalid tool number (P word) with G10 L1/L10/L11",
+            ));
+        };
+        let slot = self.tools.slot_of(n).ok_or_else(|| {
+            self.err(
+                col,
+                format!("Tool {n} not found in the tool table (G10 L{l})"),
+            )
+        })?;
+        let k = self.s.units.mm_per_unit() / self.s.machine_units.mm_per_unit();
+        const AX: &[u8; 6] = b"xyzabc";
+        let spindle_tool = self.s.tool == n;
+        let Some(t) = self.tools.tools.get_mut(slot - 1) else {
+            return Err(self.err(col, "Tool table slot out of range"));
+        };
+        for (i, &c) in AX.iter().enumerate() {
+            if let Some(v) = b.get(c) {
+                let lin = i < 3;
+                let kk = if lin { k } else { 1.0 };
+                t.offset[i] = match l {
+                    1 => v * kk,
+                    _ => {
+                        // L10/L11: offset such that the current position becomes v.
+                        let cur_machine =
+                            self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i];
+                        let base = if l == 10 {
+                            cur_machine - self.s.g5x[i] - self.s.g92[i]
+                        } else {
+                            cur_machine
+                        };
+                        (base - v) * kk
+                    }
+                };
+            }
+        }
+        if let Some(r) = b.get(b'r') {
+            t.diameter = 2.0 * r * k;
+        }
+        if let Some(i) = b.get(b'i') {
+            t.front_angle = i;
+        }
+        if let Some(j) = b.get(b'j') {
+            t.back_angle = j;
+        }
+        if let Some(q) = b.get(b'q') {
+            t.orientation = q as i32;
+        }
+        let t = t.clone();
+        let entry = |pocket: u32| CanonCmd::SetToolTableEntry {
+            pocket,
+            tool: t.number,
+            offset: t.offset,
+            diameter: t.diameter,
+            front_angle: t.front_angle,
+            back_angle: t.back_angle,
+            orientation: t.orientation,
+        };
+        self.emit(entry(u32::try_from(slot).unwrap_or(u32::MAX)))?;
+        if spindle_tool {
+            self.emit(entry(0))?;
+        }
+        Ok(())
+    }
+}

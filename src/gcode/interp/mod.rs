@@ -1,0 +1,450 @@
+//! The interpreter proper: modal state, the execution of one block in LinuxCNC's order, and
+//! the program loop over files, subroutines and loops.
+//!
+//! A program is run to its end before anything is returned, and the first error aborts the
+//! whole run: the caller gets either a complete program or an error, never a prefix. That is
+//! what lets the planner validate a job as a unit before any motion starts.
+
+mod arcs;
+mod block;
+mod cycles;
+mod mcodes;
+mod motion;
+mod ocode;
+mod state;
+
+use super::canon::{Canon, CanonCmd, SourceLoc};
+use super::expr::{self, ParamSource};
+use super::modal::Block;
+use super::params::{self, Params};
+use super::parser::{self, Line, OKind, OStmt, Target};
+use super::tooltable::ToolTable;
+use super::{GcodeError, InterpOptions};
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+pub(crate) use state::Settings;
+
+/// One loaded source file, split into lines, with its O-word lines indexed.
+#[derive(Debug)]
+pub(crate) struct Source {
+    /// Display name (path or the name given to `load_str`).
+    pub name: Arc<str>,
+    text: String,
+    /// Byte ranges of the lines.
+    lines: Vec<(usize, usize)>,
+    /// First line after the program (a closing `%`, or the end of the file).
+    end: usize,
+    /// The program is delimited by `%` lines.
+    percent: bool,
+    /// The closing `%` was found.
+    closed: bool,
+    /// O-word statements by line.
+    olines: HashMap<usize, OStmt>,
+    /// Lines of each O label, in file order.
+    by_label: HashMap<Box<str>, Vec<usize>>,
+}
+
+impl Source {
+    fn new(name: Arc<str>, text: String, opts: &InterpOptions) -> Result<Source, GcodeError> {
+        let mkerr = |line: usize, col: u32, message: String| GcodeError {
+            file: name.to_string(),
+            line: u32::try_from(line + 1).unwrap_or(u32::MAX),
+            col,
+            message,
+        };
+        if text.len() > opts.limits.max_file_bytes {
+            return Err(mkerr(
+                0,
+                1,
+                format!(
+                    "Program too large: {} bytes (limit {})",
+                    text.len(),
+                    opts.limits.max_file_bytes
+                ),
+            ));
+        }
+        let mut lines = Vec::new();
+        let mut start = 0;
+        let bytes = text.as_bytes();
+        for (i, &b) in bytes.iter().enumerate() {
+            if b == b'\n' {
+                lines.push((start, i));
+                start = i + 1;
+            }
+        }
+        if start < text.len() {
+            lines.push((start, text.len()));
+        }
+        if lines.len() > opts.limits.max_lines {
+            return Err(mkerr(
+                0,
+                1,
+                format!(
+                    "Program too long: {} lines (limit {})",
+                    lines.len(),
+                    opts.limits.max_lines
+                ),
+            ));
+        }
+        let mut src = Source {
+            name: name.clone(),
+            text,
+            lines,
+            end: 0,
+            percent: false,
+            closed: false,
+            olines: HashMap::new(),
+            by_label: HashMap::new(),
+        };
+        src.end = src.lines.len();
+        // `%` handling: a first non-blank line of `%` opens the program, the next closes it.
+        let first = (0..src.lines.len()).find(|&i| !src.line(i).trim().is_empty());
+        if let Some(f) = first {
+            if src.line(f).trim() == "%" {
+                src.percent = true;
+                if let Some(c) = (f + 1..src.lines.len()).find(|&i| src.line(i).trim() == "%") {
+                    src.end = c;
+                    src.closed = true;
+                }
+            }
+        }
+        for i in 0..src.end {
+            let t = src.line(i);
+            if t.len() > opts.limits.max_line_len {
+                return Err(mkerr(
+                    i,
+                    1,
+                    format!(
+                        "Line too long: {} characters (limit {})",
+                        t.len(),
+                        opts.limits.max_line_len
+                    ),
+                ));
+            }
+            if parser::starts_with_o(t) {
+                let l = parser::parse_line(t, opts.limits.max_expr_depth)
+                    .map_err(|(c, m)| mkerr(i, c, m))?;
+                if let Some(o) = l.o {
+                    src.by_label.entry(o.label.clone()).or_default().push(i);
+                    src.olines.insert(i, o);
+                }
+            }
+        }
+        Ok(src)
+    }
+
+    fn line(&self, i: usize) -> &str {
+        let (a, b) = self.lines[i];
+        &self.text[a..b]
+    }
+
+    fn line_text(&self, i: usize) -> &str {
+        if i < self.lines.len() {
+            self.line(i)
+        } else {
+            ""
+        }
+    }
+}
+
+/// A subroutine call in progress.
+#[derive(Debug)]
+pub(crate) struct Frame {
+    /// Where to continue after the return.
+    ret: (usize, usize),
+    /// The caller's `#1`–`#30`.
+    saved: [f64; 30],
+    /// Label of the subroutine (for endsub/return checks).
+    label: Box<str>,
+}
+
+/// The interpreter.
+pub(crate) struct Interp<'a> {
+    pub(crate) opts: &'a InterpOptions,
+    pub(crate) out: Vec<Canon>,
+    pub(crate) loc: SourceLoc,
+    pub(crate) p: Params,
+    pub(crate) s: Settings,
+    pub(crate) tools: ToolTable,
+    files: Vec<Source>,
+    subs: HashMap<Box<str>, (usize, usize)>,
+    frames: Vec<Frame>,
+    /// Repeat counters, keyed by (file, line of the `repeat`, call depth).
+    repeats: HashMap<(usize, usize, usize), u64>,
+    /// Loop iterations, keyed like `repeats`, for the iteration limit.
+    loop_iters: HashMap<(usize, usize, usize), u64>,
+    pc: (usize, usize),
+    ended: bool,
+    steps: u64,
+}
+
+impl<'a> Interp<'a> {
+    pub(crate) fn new(opts: &'a InterpOptions) -> Result<Self, GcodeError> {
+        let tools = match &opts.tool_table {
+            Some(p) => ToolTable::load(p).map_err(|(line, message)| GcodeError {
+                file: p.display().to_string(),
+                line: line.max(1),
+                col: 1,
+                message,
+            })?,
+            None => ToolTable::default(),
+        };
+        let mut s = Settings::new(opts);
+        s.units = opts.initial_units;
+        Ok(Interp {
+            opts,
+            out: Vec::new(),
+            loc: SourceLoc {
+                file: Arc::from(""),
+                line: 0,
+                col: 1,
+            },
+            p: Params::default(),
+            s,
+            tools,
+            files: Vec::new(),
+            subs: HashMap::new(),
+            frames: Vec::new(),
+            repeats: HashMap::new(),
+            loop_iters: HashMap::new(),
+            pc: (0, 0),
+            ended: false,
+            steps: 0,
+        })
+    }
+
+    /// Emits one canonical command at the current location.
+    pub(crate) fn emit(&mut self, cmd: CanonCmd) -> Result<(), GcodeError> {
+        if self.out.len() >= self.opts.limits.max_canon {
+            return Err(self.err(
+                1,
+                format!(
+                    "Program produces too many canonical commands (limit {})",
+                    self.opts.limits.max_canon
+                ),
+            ));
+        }
+        self.out.push(Canon {
+            loc: self.loc.clone(),
+            cmd,
+        });
+        Ok(())
+    }
+
+    /// An error at column `col` of the current line.
+    pub(crate) fn err(&self, col: u32, message: impl Into<String>) -> GcodeError {
+        GcodeError {
+            file: self.loc.file.to_string(),
+            line: self.loc.line.max(1),
+            col,
+            message: message.into(),
+        }
+    }
+
+    /// Runs the program in `text`.
+    pub(crate) fn run(&mut self, name: &str, text: String) -> Result<(), GcodeError> {
+        let name: Arc<str> = Arc::from(name);
+        let src = Source::new(name.clone(), text, self.opts)?;
+        self.files.push(src);
+        self.loc = SourceLoc {
+            file: name,
+            line: 0,
+            col: 1,
+        };
+        self.preamble()?;
+        self.pc = (0, 0);
+        while !self.ended {
+            let (f, l) = self.pc;
+            self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
+            self.loc.col = 1;
+            if l >= self.files[f].end {
+                if f == 0 && self.files[0].closed && self.frames.is_empty() {
+                    self.emit(CanonCmd::Finish)?;
+                    self.emit(CanonCmd::OnReset)?;
+                    self.emit(CanonCmd::OnReset)?;
+                    return Ok(());
+                }
+                let last = self.files[f].end.max(1);
+                self.loc.line = u32::try_from(last).unwrap_or(u32::MAX);
+                self.loc.file = self.files[f].name.clone();
+                return Err(self.err(1, "File ended with no percent sign or program end"));
+            }
+            self.steps += 1;
+            if self.steps > self.opts.limits.max_blocks {
+                return Err(self.err(
+                    1,
+                    format!(
+                        "Program executes too many blocks (limit {}); endless loop?",
+                        self.opts.limits.max_blocks
+                    ),
+                ));
+            }
+            self.step(f, l)?;
+        }
+        Ok(())
+    }
+
+    fn preamble(&mut self) -> Result<(), GcodeError> {
+        let u = self.s.units;
+        self.emit(CanonCmd::UseLengthUnits(u))?;
+        self.emit(CanonCmd::SetG5xOffset {
+            index: 1,
+            offset: [0.0; 9],
+        })?;
+        self.emit(CanonCmd::SetG92Offset([0.0; 9]))?;
+        self.emit(CanonCmd::SetXyRotation(0.0))?;
+        self.emit(CanonCmd::SetFeedReference)?;
+        self.emit(CanonCmd::OnReset)?;
+        Ok(())
+    }
+
+    /// Executes the line at (f, l) and advances the program counter.
+    fn step(&mut self, f: usize, l: usize) -> Result<(), GcodeError> {
+        if self.files[f].percent && l == 0 || self.files[f].line_text(l).trim() == "%" {
+            self.pc = (f, l + 1);
+            return Ok(());
+        }
+        if let Some(o) = self.files[f].olines.get(&l).cloned() {
+            let text = self.files[f].line_text(l).to_string();
+            let line = parser::parse_line(&text, self.opts.limits.max_expr_depth)
+                .map_err(|(c, m)| self.err(c, m))?;
+            if line.block_delete && self.opts.block_delete {
+                self.pc = (f, l + 1);
+                return Ok(());
+            }
+            self.pc = (f, l + 1);
+            return self.exec_o(f, l, &o, &line);
+        }
+        let line = {
+            let text = self.files[f].line_text(l);
+            parser::parse_line(text, self.opts.limits.max_expr_depth)
+        }
+        .map_err(|(c, m)| self.err(c, m))?;
+        self.pc = (f, l + 1);
+        if line.block_delete && self.opts.block_delete {
+            return Ok(());
+        }
+        self.exec_line(&line)
+    }
+
+    fn exec_line(&mut self, line: &Line) -> Result<(), GcodeError> {
+        if line.words.is_empty() && line.assigns.is_empty() && line.comments.is_empty() {
+            return Ok(());
+        }
+        let mut b = Block::default();
+        for w in &line.words {
+            self.loc.col = w.col;
+            let v = expr::eval(&w.value, &*self).map_err(|m| self.err(w.col, m))?;
+            b.add(w.letter, v, w.col).map_err(|(c, m)| self.err(c, m))?;
+        }
+        let mut sets: Vec<(Result<usize, Box<str>>, f64)> = Vec::with_capacity(line.assigns.len());
+        for a in &line.assigns {
+            let t = match &a.target {
+                Target::Numbered(e) => {
+                    let i = expr::eval(e, &*self).map_err(|m| self.err(a.col, m))?;
+                    let idx = Params::index(i).map_err(|m| self.err(a.col, m))?;
+                    if idx == 0 {
+                        return Err(self.err(a.col, "Parameter #0 is read-only"));
+                    }
+                    Ok(idx)
+                }
+                Target::Named(n) => {
+                    if self.predefined(n).is_some() {
+                        return Err(
+                            self.err(a.col, format!("Cannot set read-only parameter #<{n}>"))
+                        );
+                    }
+                    Err(n.clone())
+                }
+            };
+            let v = expr::eval(&a.value, &*self).map_err(|m| self.err(a.col, m))?;
+            sets.push((t, v));
+        }
+        for (t, v) in sets {
+            match t {
+                Ok(i) => self.p.numbered[i] = v,
+                Err(n) => self.p.set_named(&n, v),
+            }
+        }
+        self.loc.col = 1;
+        self.exec_block(&b, line)
+    }
+
+    /// Loads (once) the file that defines subroutine `label` from the search path.
+    fn load_sub_file(&mut self, label: &str) -> Result<Option<(usize, usize)>, GcodeError> {
+        let mut dirs: Vec<PathBuf> = self.opts.subroutine_path.clone();
+        if let Some(d) = &self.opts.program_dir {
+            dirs.push(d.clone());
+        }
+        for d in dirs {
+            for cand in [
+                format!("{label}.ngc"),
+                format!("{}.ngc", label.to_uppercase()),
+            ] {
+                let path = d.join(&cand);
+                if !path.is_file() {
+                    continue;
+                }
+                let text = std::fs::read_to_string(&path).map_err(|e| {
+                    self.err(1, format!("Unable to open file {}: {e}", path.display()))
+                })?;
+                let name: Arc<str> = Arc::from(path.display().to_string());
+                let src = Source::new(name, text, self.opts)?;
+                let lines = src.by_label.get(label).cloned().unwrap_or_default();
+                let def = lines
+                    .iter()
+                    .copied()
+                    .find(|l| src.olines.get(l).map(|o| o.kind) == Some(OKind::Sub));
+                self.files.push(src);
+                let fi = self.files.len() - 1;
+                return match def {
+                    Some(l) => {
+                        self.subs.insert(label.into(), (fi, l));
+                        Ok(Some((fi, l)))
+                    }
+                    None => Err(self.err(
+                        1,
+                        format!("File {} does not define o<{label}> sub", path.display()),
+                    )),
+                };
+            }
+        }
+        Ok(None)
+    }
+
+    /// Value of a predefined (read-only) named parameter.
+    fn predefined(&self, name: &str) -> Option<f64> {
+        state::predefined(self, name)
+    }
+}
+
+impl ParamSource for Interp<'_> {
+    fn numbered(&self, index: f64) -> Result<f64, String> {
+        let i = Params::index(index)?;
+        if (params::POS_BASE..params::POS_BASE + 9).contains(&i) {
+            let k = i - params::POS_BASE;
+            return Ok(if k < 6 { self.s.pos[k] } else { 0.0 });
+        }
+        Ok(self.p.numbered[i])
+    }
+
+    fn named(&self, name: &str) -> Option<f64> {
+        if let Some(v) = self.p.named(name) {
+            return Some(v);
+        }
+        self.predefined(name)
+    }
+}
+
+/// Runs a whole program; the entry point behind `load_str`/`load_file`.
+pub(crate) fn interpret(
+    name: &str,
+    text: String,
+    opts: &InterpOptions,
+) -> Result<Vec<Canon>, GcodeError> {
+    let mut it = Interp::new(opts)?;
+    it.run(name, text)?;
+    Ok(it.out)
+}

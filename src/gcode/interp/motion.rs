@@ -1,0 +1,431 @@
+//! Straight motion and the state that shapes it: end points (G90/G91/G53), G0/G1, G38.x
+//! probing, units (G20/G21), tool length offsets (G43/G43.1/G49), coordinate systems
+//! (G54–G59.3, G10 L2/L20) and axis offsets (G92 family), G28/G30 homes.
+
+use super::Interp;
+use crate::gcode::canon::{CanonCmd, FeedMode, LengthUnits, Pose, ProbeKind};
+use crate::gcode::modal::Block;
+use crate::gcode::params::{self, g5x_base};
+use crate::gcode::GcodeError;
+
+const AXES: &[u8; 6] = b"xyzabc";
+
+/// Full 9-axis pose from six values (U V W stay 0: hytask interprets XYZABC, as rs274).
+pub(crate) fn pose6(v: &[f64; 6]) -> Pose {
+    let mut p = [0.0; 9];
+    p[..6].copy_from_slice(v);
+    p
+}
+
+impl Interp<'_> {
+    /// End point of a move from the axis words (LinuxCNC `find_ends`).
+    pub(crate) fn find_ends(&self, b: &Block) -> [f64; 6] {
+        let mut end = self.s.pos;
+        let g53 = b.gcode(0) == Some(530);
+        for (i, &c) in AXES.iter().enumerate() {
+            if let Some(v) = b.get(c) {
+                end[i] = if g53 {
+                    v - self.s.g5x[i] - self.s.g92[i] - self.s.tool_offset[i]
+                } else if self.s.absolute {
+                    v
+                } else {
+                    self.s.pos[i] + v
+                };
+            }
+        }
+        end
+    }
+
+    /// Performs the motion of group 1 (explicit or modal), if the block calls for one.
+    pub(super) fn motion(&mut self, b: &Block) -> Result<(), GcodeError> {
+        let explicit = b.g[1];
+        let g0_axes = matches!(b.gcode(0), Some(100 | 280 | 300 | 920)) || b.gcode(8) == Some(431);
+        let (m, col) = match explicit {
+            Some((m, col)) => (m, col),
+            None => {
+                if !b.has_axis() || g0_axes {
+                    return Ok(());
+                }
+                (self.s.motion, 1)
+            }
+        };
+        self.loc.col = col;
+        match m {
+            0 | 10 => self.straight(m, b),
+            20 | 30 => self.arc(m, b),
+            382..=385 => self.probe(m, b),
+            800 => {
+                self.s.motion = 800;
+                self.emit(CanonCmd::Comment(
+                    "interpreter: motion mode set to none".into(),
+                ))
+            }
+            730 | 810 | 820 | 830 | 850 | 860 | 890 => self.cycle(m, b),
+            _ => Err(self.err(col, format!("G{} is not supported by hytask", fmt_g(m)))),
+        }
+    }
+
+    fn straight(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+        if m == 10 {
+            match self.s.feed_mode {
+                FeedMode::UnitsPerMinute | FeedMode::UnitsPerRevolution => {
+                    if self.s.feed_rate == 0.0 {
+                        return Err(self.err(self.loc.col, "Cannot do g1 with zero feed rate"));
+                    }
+                }
+                FeedMode::InverseTime => {
+                    if !b.has(b'f') {
+                        return Err(
+                            self.err(self.loc.col, "F word missing with inverse time g1 move")
+                        );
+                    }
+                }
+            }
+        }
+        self.s.motion = m;
+        let end = self.find_ends(b);
+        if m == 0 {
+            self.emit(CanonCmd::StraightTraverse(pose6(&end)))?;
+        } else {
+            if self.s.feed_mode == FeedMode::InverseTime {
+                self.inverse_time_straight(&end, b.get(b'f').unwrap_or(0.0))?;
+            }
+            self.emit(CanonCmd::StraightFeed(pose6(&end)))?;
+        }
+        self.s.pos = end;
+        Ok(())
+    }
+
+    fn inverse_time_straight(&mut self, end: &[f64; 6], f: f64) -> Result<(), GcodeError> {
+        let p = &self.s.pos;
+        let mut len =
+            ((end[0] - p[0]).powi(2) + (end[1] - p[1]).powi(2) + (end[2] - p[2]).powi(2)).sqrt();
+        if len == 0.0 {
+            len = ((end[3] - p[3]).powi(2) + (end[4] - p[4]).powi(2) + (end[5] - p[5]).powi(2))
+                .sqrt();
+        }
+        let rate = (len * f).max(0.1);
+        self.s.feed_rate = rate;
+        self.emit(CanonCmd::SetFeedRate(rate))
+    }
+
+    fn probe(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+        if !b.has_axis() {
+            return Err(self.err(
+                self.loc.col,
+                "X, Y, Z, A, B, and C words all missing with G38.2",
+            ));
+        }
+        if self.s.feed_mode == FeedMode::InverseTime {
+            return Err(self.err(self.loc.col, "Cannot probe in inverse time feed mode"));
+        }
+        if self.s.feed_rate == 0.0 {
+            return Err(self.err(self.loc.col, "Cannot probe with zero feed rate"));
+        }
+        let end = self.find_ends(b);
+        if (3..6).any(|i| end[i] != self.s.pos[i]) {
+            return Err(self.err(self.loc.col, "Cannot move rotary axes during probing"));
+        }
+        let d = ((end[0] - self.s.pos[0]).powi(2)
+            + (end[1] - self.s.pos[1]).powi(2)
+            + (end[2] - self.s.pos[2]).powi(2))
+        .sqrt();
+        let min = 0.01 * self.s.units_per_inch();
+        if d < min {
+            return Err(self.err(
+                self.loc.col,
+                "Start of probe move is within 0.01 inch of target",
+            ));
+        }
+        let kind = match m {
+            382 => ProbeKind::TowardErr,
+            383 => ProbeKind::Toward,
+            384 => ProbeKind::AwayErr,
+            _ => ProbeKind::Away,
+        };
+        self.s.motion = m;
+        self.emit(CanonCmd::Probe { on: true })?;
+        self.emit(CanonCmd::StraightProbe {
+            end: pose6(&end),
+            kind,
+        })?;
+        self.emit(CanonCmd::Probe { on: false })?;
+        // Without a machine the probe "trips" at the programmed end, as in rs274.
+        for (i, v) in end.iter().enumerate() {
+            self.p.numbered[5061 + i] = *v;
+        }
+        self.p.numbered[5070] = 1.0;
+        self.s.pos = end;
+        Ok(())
+    }
+
+    /// G20/G21: converts every stored length to the new units, as LinuxCNC does.
+    pub(super) fn set_units(&mut self, g: u16) -> Result<(), GcodeError> {
+        let new = if g == 200 {
+            LengthUnits::Inches
+        } else {
+            LengthUnits::Millimeters
+        };
+        self.emit(CanonCmd::UseLengthUnits(new))?;
+        if new == self.s.units {
+            return Ok(());
+        }
+        let k = self.s.units.mm_per_unit() / new.mm_per_unit();
+        self.s.units = new;
+        for i in 0..3 {
+            self.s.pos[i] *= k;
+            self.s.g5x[i] *= k;
+            self.s.g92[i] *= k;
+        }
+        for v in self.s.tool_offset.iter_mut() {
+            *v *= k;
+        }
+        // Stored offsets: G28, G30, G92 and all nine coordinate systems (linear axes).
+        let mut bases = vec![params::G28_BASE, params::G30_BASE, params::G92_BASE];
+        bases.extend((1..=9).map(g5x_base));
+        for base in bases {
+            for i in 0..3 {
+                self.p.numbered[base + i] *= k;
+            }
+        }
+        Ok(())
+    }
+
+    /// G43 / G43.1 / G49.
+    pub(super) fn tool_length(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {
+        let mut off: Pose = [0.0; 9];
+        match g {
+            430 => {
+                let tool = match b.get(b'h') {
+                    Some(h) => {
+                        if h < 0.0 || h.fract() != 0.0 {
+                            return Err(self.err(
+                                b.col_of(b'h'),
+                                "Negative H word tool length offset index used",
+                            ));
+                        }
+                        h as u32
+                    }
+                    None => self.s.tool,
+                };
+                if tool != 0 {
+                    let Some(slot) = self.tools.slot_of(tool) else {
+                        return Err(self.err(
+                            self.loc.col,
+                            format!("Invalid tool number {tool} in G43 (not in the tool table)"),
+                        ));
+                    };
+                    let k = self.s.machine_units.mm_per_unit() / self.s.units.mm_per_unit();
+                    if let Some(t) = self.tools.at_slot(slot) {
+                        for (o, v) in off.iter_mut().zip(t.offset.iter()) {
+                            *o = v * k;
+                        }
+                    }
+                }
+            }
+            431 => {
+                for (i, &c) in AXES.iter().enumerate() {
+                    if let Some(v) = b.get(c) {
+                        off[i] = v;
+                    }
+                }
+            }
+            432 => return Err(self.err(self.loc.col, "G43.2 is not supported by hytask")),
+            _ => {}
+        }
+        for (i, p) in self.s.pos.iter_mut().enumerate() {
+            *p += self.s.tool_offset[i] - off[i];
+        }
+        self.s.tool_offset = off;
+        self.emit(CanonCmd::UseToolLengthOffset(off))
+    }
+
+    fn load_g5x(&self, index: u8) -> ([f64; 6], f64) {
+        let base = g5x_base(index);
+        let mut o = [0.0; 6];
+        o.copy_from_slice(&self.p.numbered[base..base + 6]);
+        (o, self.p.numbered[base + 9])
+    }
+
+    /// Makes `index`'s stored offset the active one and reports it to canon.
+    fn activate_g5x(&mut self, index: u8) -> Result<(), GcodeError> {
+        let (o, rot) = self.load_g5x(index);
+        for (i, v) in o.iter().enumerate() {
+            self.s.pos[i] += self.s.g5x[i] - v;
+        }
+        self.s.g5x = o;
+        self.s.rotation = rot;
+        self.s.origin_index = index;
+        self.p.numbered[params::COORD_INDEX] = f64::from(index);
+        self.emit(CanonCmd::SetG5xOffset {
+            index,
+            offset: pose6(&o),
+        })
+    }
+
+    /// G54…G59.3.
+    pub(super) fn select_coord_system(&mut self, index: u8) -> Result<(), GcodeError> {
+        if index == self.s.origin_index {
+            return self.emit(CanonCmd::Comment(
+                "interpreter: continuing to use same coordinate system".into(),
+            ));
+        }
+        self.activate_g5x(index)?;
+        self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))?;
+        self.emit(CanonCmd::SetXyRotation(self.s.rotation))
+    }
+
+    /// Group 0 codes other than G4 and G53.
+    pub(super) fn non_modal(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {
+        match g {
+            100 => self.g10(b),
+            280 | 300 => self.go_home(g, b),
+            281 | 301 => {
+                let base = if g == 281 {
+                    params::G28_BASE
+                } else {
+                    params::G30_BASE
+                };
+                for i in 0..6 {
+                    self.p.numbered[base + i] =
+                        self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i];
+                }
+                Ok(())
+            }
+            920 => {
+                if !b.has_axis() {
+                    return Err(self.err(self.loc.col, "All axes missing with G92"));
+                }
+                for (i, &c) in AXES.iter().enumerate() {
+                    if let Some(v) = b.get(c) {
+                        let new = self.s.pos[i] + self.s.g92[i] - v;
+                        self.s.pos[i] = v;
+                        self.s.g92[i] = new;
+                    }
+                }
+                for i in 0..6 {
+                    self.p.numbered[params::G92_BASE + i] = self.s.g92[i];
+                }
+                self.p.numbered[params::G92_ENABLED] = 1.0;
+                self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
+            }
+            921 | 922 => {
+                for i in 0..6 {
+                    self.s.pos[i] += self.s.g92[i];
+                    self.s.g92[i] = 0.0;
+                    if g == 921 {
+                        self.p.numbered[params::G92_BASE + i] = 0.0;
+                    }
+                }
+                self.p.numbered[params::G92_ENABLED] = 0.0;
+                self.emit(CanonCmd::SetG92Offset([0.0; 9]))
+            }
+            923 => {
+                for i in 0..6 {
+                    let v = self.p.numbered[params::G92_BASE + i];
+                    self.s.pos[i] += self.s.g92[i] - v;
+                    self.s.g92[i] = v;
+                }
+                self.p.numbered[params::G92_ENABLED] = 1.0;
+                self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    fn go_home(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {
+        let base = if g == 280 {
+            params::G28_BASE
+        } else {
+            params::G30_BASE
+        };
+        let mid = self.find_ends(b);
+        self.emit(CanonCmd::StraightTraverse(pose6(&mid)))?;
+        self.s.pos = mid;
+        let any = b.has_axis();
+        let mut end = mid;
+        for (i, &c) in AXES.iter().enumerate() {
+            if !any || b.has(c) {
+                end[i] = self.p.numbered[base + i]
+                    - self.s.g5x[i]
+                    - self.s.g92[i]
+                    - self.s.tool_offset[i];
+            }
+        }
+        self.emit(CanonCmd::StraightTraverse(pose6(&end)))?;
+        self.s.pos = end;
+        Ok(())
+    }
+
+    fn g10(&mut self, b: &Block) -> Result<(), GcodeError> {
+        let l = b.get(b'l').ok_or_else(|| {
+            self.err(
+                self.loc.col,
+                "Line with G10 does not have L1, L10, L11, L2, or L20",
+            )
+        })?;
+        let l = l.round() as i64;
+        let p = b.get(b'p').ok_or_else(|| {
+            self.err(
+                self.loc.col,
+                "P word (coordinate system or tool) missing with G10",
+            )
+        })?;
+        if p.fract() != 0.0 {
+            return Err(self.err(b.col_of(b'p'), "P value not an integer with G10"));
+        }
+        match l {
+            2 | 20 => {
+                if !(0.0..=9.0).contains(&p) {
+                    return Err(self.err(b.col_of(b'p'), "P value out of range with G10 L2"));
+                }
+                let index = if p == 0.0 {
+                    self.s.origin_index
+                } else {
+                    p as u8
+                };
+                let base = g5x_base(index);
+                for (i, &c) in AXES.iter().enumerate() {
+                    if let Some(v) = b.get(c) {
+                        self.p.numbered[base + i] = if l == 2 {
+                            v
+                        } else {
+                            self.s.pos[i] + self.s.g5x[i] - v
+                        };
+                    }
+                }
+                if let Some(r) = b.get(b'r') {
+                    self.p.numbered[base + 9] = r;
+                }
+                if index == self.s.origin_index {
+                    self.activate_g5x(index)?;
+                    self.emit(CanonCmd::SetXyRotation(self.s.rotation))
+                } else {
+                    self.emit(CanonCmd::Comment(
+                        "interpreter: setting coordinate system origin".into(),
+                    ))
+                }
+            }
+            1 | 10 | 11 => self.g10_tool(l, p, b),
+            _ => Err(self.err(
+                b.col_of(b'l'),
+                "Line with G10 does not have L1, L10, L11, L2, or L20",
+            )),
+        }
+    }
+}
+
+fn fmt_g(m: u16) -> String {
+    if m % 10 == 0 {
+        format!("{}", m / 10)
+    } else {
+        format!("{}.{}", m / 10, m % 10)
+    }
+}
+
+impl super::Settings {
+    /// Current units per inch (for LinuxCNC's inch-denominated tolerances).
+    pub(crate) fn units_per_inch(&self) -> f64 {
+        25.4 / self.units.mm_per_unit()
+    }
+}

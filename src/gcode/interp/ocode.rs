@@ -1,0 +1,344 @@
+//! O-word control flow: subroutines (sub/endsub/call/return, with arguments in #1–#30 and
+//! per-call local named parameters, also from files on the subroutine path), if/elseif/
+//! else/endif, while/endwhile, do/while, repeat/endrepeat, break and continue.
+//!
+//! Statements are matched by label, as LinuxCNC does: the file's O-lines are indexed by
+//! label when the file is loaded, so a jump is a search in a short list.
+
+use super::{Frame, Interp};
+use crate::gcode::expr;
+use crate::gcode::parser::{Line, OKind, OStmt};
+use crate::gcode::GcodeError;
+use std::collections::HashMap;
+
+impl Interp<'_> {
+    /// Depth of subroutine calls (0 in the main program).
+    pub(crate) fn call_level(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// True when the main file opened with `%` but has no closing `%`.
+    pub(super) fn percent_unclosed(&self) -> bool {
+        self.files.first().is_some_and(|f| f.percent && !f.closed)
+    }
+
+    /// Stops the program loop (M2/M30).
+    pub(super) fn end_program(&mut self) {
+        self.ended = true;
+    }
+
+    /// Same-label statement lines of file `f`.
+    fn label_lines(&self, f: usize, label: &str) -> Vec<usize> {
+        self.files[f]
+            .by_label
+            .get(label)
+            .cloned()
+            .unwrap_or_default()
+    }
+
+    fn kind_at(&self, f: usize, l: usize) -> Option<OKind> {
+        self.files[f].olines.get(&l).map(|o| o.kind)
+    }
+
+    /// Next same-label line after `l` whose kind is in `kinds`.
+    fn find_next(&self, f: usize, l: usize, label: &str, kinds: &[OKind]) -> Option<usize> {
+        self.label_lines(f, label)
+            .into_iter()
+            .find(|&x| x > l && self.kind_at(f, x).is_some_and(|k| kinds.contains(&k)))
+    }
+
+    /// Previous same-label line before `l` whose kind is in `kinds`.
+    fn find_prev(&self, f: usize, l: usize, label: &str, kinds: &[OKind]) -> Option<usize> {
+        self.label_lines(f, label)
+            .into_iter()
+            .rev()
+            .find(|&x| x < l && self.kind_at(f, x).is_some_and(|k| kinds.contains(&k)))
+    }
+
+    /// A `while` is the tail of a `do` loop when the nearest earlier loop statement with its
+    /// label is a `do`.
+    fn is_do_tail(&self, f: usize, l: usize, label: &str) -> bool {
+        self.find_prev(f, l, label, &[OKind::Do, OKind::While, OKind::EndWhile])
+            .is_some_and(|x| self.kind_at(f, x) == Some(OKind::Do))
+    }
+
+    fn cond(&self, o: &OStmt) -> Result<f64, GcodeError> {
+        let e = o.args.first().ok_or_else(|| {
+            self.err(
+                o.col,
+                format!("Missing [condition] after o<{}> {:?}", o.label, o.kind).to_lowercase(),
+            )
+        })?;
+        expr::eval(e, self).map_err(|m| self.err(o.col, m))
+    }
+
+    fn count_iteration(&mut self, f: usize, l: usize, o: &OStmt) -> Result<(), GcodeError> {
+        let key = (f, l, self.frames.len());
+        let n = self.loop_iters.entry(key).or_insert(0);
+        *n += 1;
+        if *n > self.opts.limits.max_loop_iterations {
+            return Err(self.err(
+                o.col,
+                format!(
+                    "Loop o<{}> exceeded {} iterations",
+                    o.label, self.opts.limits.max_loop_iterations
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn leave_loop(&mut self, f: usize, head: usize) {
+        let key = (f, head, self.frames.len());
+        self.loop_iters.remove(&key);
+        self.repeats.remove(&key);
+    }
+
+    pub(super) fn exec_o(
+        &mut self,
+        f: usize,
+        l: usize,
+        o: &OStmt,
+        line: &Line,
+    ) -> Result<(), GcodeError> {
+        self.loc.col = o.col;
+        if let Some(c) = line.comments.last() {
+            // A comment on an O line is a comment like any other.
+            let text = c.text.to_string();
+            if !text.is_empty() {
+                self.emit(crate::gcode::canon::CanonCmd::Comment(text))?;
+            }
+        }
+        let label = o.label.clone();
+        let missing = |me: &Self, what: &str| me.err(o.col, format!("o<{label}> {what}"));
+        match o.kind {
+            OKind::Sub => {
+                self.subs.insert(label.clone(), (f, l));
+                let end = self
+                    .find_next(f, l, &label, &[OKind::EndSub])
+                    .ok_or_else(|| missing(self, "sub has no matching endsub"))?;
+                self.pc = (f, end + 1);
+                Ok(())
+            }
+            OKind::EndSub | OKind::Return => {
+                let Some(top) = self.frames.last() else {
+                    return Err(missing(self, "endsub/return outside of a subroutine call"));
+                };
+                if top.label != label {
+                    return Err(missing(
+                        self,
+                        "return/endsub does not match the subroutine being executed",
+                    ));
+                }
+                match o.args.first() {
+                    Some(e) => {
+                        let v = expr::eval(e, self).map_err(|m| self.err(o.col, m))?;
+                        self.s.value = v;
+                        self.s.value_returned = 1.0;
+                    }
+                    None => self.s.value_returned = 0.0,
+                }
+                let Some(frame) = self.frames.pop() else {
+                    return Ok(());
+                };
+                self.p.numbered[1..31].copy_from_slice(&frame.saved);
+                self.p.locals.pop();
+                self.s.saved.pop();
+                let level = self.frames.len();
+                self.loop_iters.retain(|k, _| k.2 <= level);
+                self.repeats.retain(|k, _| k.2 <= level);
+                self.pc = frame.ret;
+                Ok(())
+            }
+            OKind::Call => {
+                let mut args = Vec::with_capacity(o.args.len());
+                for e in &o.args {
+                    args.push(expr::eval(e, self).map_err(|m| self.err(o.col, m))?);
+                }
+                if args.len() > 30 {
+                    return Err(missing(self, "call has more than 30 arguments"));
+                }
+                if self.frames.len() >= self.opts.limits.max_call_depth {
+                    return Err(self.err(
+                        o.col,
+                        format!(
+                            "Subroutine calls nested too deeply (limit {})",
+                            self.opts.limits.max_call_depth
+                        ),
+                    ));
+                }
+                let target = match self.subs.get(&label).copied() {
+                    Some(t) => t,
+                    None => {
+                        // A definition later in a loaded file, else a file on the path.
+                        let mut found = None;
+                        for (fi, src) in self.files.iter().enumerate() {
+                            if let Some(lines) = src.by_label.get(&label) {
+                                if let Some(&dl) = lines
+                                    .iter()
+                                    .find(|x| src.olines.get(x).map(|o| o.kind) == Some(OKind::Sub))
+                                {
+                                    found = Some((fi, dl));
+                                    break;
+                                }
+                            }
+                        }
+                        match found {
+                            Some(t) => t,
+                            None => self.load_sub_file(&label)?.ok_or_else(|| {
+                                self.err(o.col, format!("Unable to find subroutine o<{label}>: not defined and no file {label}.ngc on the subroutine path"))
+                            })?,
+                        }
+                    }
+                };
+                let mut saved = [0.0; 30];
+                saved.copy_from_slice(&self.p.numbered[1..31]);
+                for (i, v) in args.iter().enumerate() {
+                    self.p.numbered[1 + i] = *v;
+                }
+                self.frames.push(Frame {
+                    ret: self.pc,
+                    saved,
+                    label: label.clone(),
+                });
+                self.p.locals.push(HashMap::new());
+                self.s.saved.push(None);
+                self.pc = (target.0, target.1 + 1);
+                Ok(())
+            }
+            OKind::If => {
+                let mut at = l;
+                let mut c = self.cond(o)?;
+                loop {
+                    if c != 0.0 {
+                        self.pc = (f, at + 1);
+                        return Ok(());
+                    }
+                    let next = self
+                        .find_next(f, at, &label, &[OKind::ElseIf, OKind::Else, OKind::EndIf])
+                        .ok_or_else(|| missing(self, "if has no matching endif"))?;
+                    match self.kind_at(f, next) {
+                        Some(OKind::ElseIf) => {
+                            at = next;
+                            let stmt = self.files[f].olines.get(&next).cloned();
+                            self.loc.line = u32::try_from(next + 1).unwrap_or(u32::MAX);
+                            c = match stmt {
+                                Some(s) => self.cond(&s)?,
+                                None => 0.0,
+                            };
+                        }
+                        _ => {
+                            self.pc = (f, next + 1);
+                            return Ok(());
+                        }
+                    }
+                }
+            }
+            OKind::ElseIf | OKind::Else => {
+                // Reached by falling out of a taken branch: skip to endif.
+                let end = self
+                    .find_next(f, l, &label, &[OKind::EndIf])
+                    .ok_or_else(|| missing(self, "else/elseif has no matching endif"))?;
+                self.pc = (f, end + 1);
+                Ok(())
+            }
+            OKind::EndIf | OKind::Do => Ok(()),
+            OKind::While => {
+                let c = self.cond(o)?;
+                if self.is_do_tail(f, l, &label) {
+                    let head = self
+                        .find_prev(f, l, &label, &[OKind::Do])
+                        .ok_or_else(|| missing(self, "while has no do"))?;
+                    if c != 0.0 {
+                        self.count_iteration(f, head, o)?;
+                        self.pc = (f, head + 1);
+                    } else {
+                        self.leave_loop(f, head);
+                    }
+                    return Ok(());
+                }
+                if c != 0.0 {
+                    self.count_iteration(f, l, o)?;
+                } else {
+                    let end = self
+                        .find_next(f, l, &label, &[OKind::EndWhile])
+                        .ok_or_else(|| missing(self, "while has no matching endwhile"))?;
+                    self.leave_loop(f, l);
+                    self.pc = (f, end + 1);
+                }
+                Ok(())
+            }
+            OKind::EndWhile => {
+                let head = self
+                    .find_prev(f, l, &label, &[OKind::While])
+                    .ok_or_else(|| missing(self, "endwhile has no matching while"))?;
+                self.pc = (f, head);
+                Ok(())
+            }
+            OKind::Repeat => {
+                let key = (f, l, self.frames.len());
+                let left = match self.repeats.get(&key) {
+                    Some(&n) => n,
+                    None => {
+                        let n = self.cond(o)?;
+                        if n <= 0.0 {
+                            0
+                        } else {
+                            n.round() as u64
+                        }
+                    }
+                };
+                if left == 0 {
+                    let end = self
+                        .find_next(f, l, &label, &[OKind::EndRepeat])
+                        .ok_or_else(|| missing(self, "repeat has no matching endrepeat"))?;
+                    self.leave_loop(f, l);
+                    self.pc = (f, end + 1);
+                } else {
+                    self.count_iteration(f, l, o)?;
+                    self.repeats.insert(key, left - 1);
+                }
+                Ok(())
+            }
+            OKind::EndRepeat => {
+                let head = self
+                    .find_prev(f, l, &label, &[OKind::Repeat])
+                    .ok_or_else(|| missing(self, "endrepeat has no matching repeat"))?;
+                self.pc = (f, head);
+                Ok(())
+            }
+            OKind::Break => {
+                let end = self
+                    .find_next(
+                        f,
+                        l,
+                        &label,
+                        &[OKind::EndWhile, OKind::EndRepeat, OKind::While],
+                    )
+                    .ok_or_else(|| missing(self, "break outside of a loop"))?;
+                if let Some(head) =
+                    self.find_prev(f, l, &label, &[OKind::While, OKind::Do, OKind::Repeat])
+                {
+                    self.leave_loop(f, head);
+                }
+                self.pc = (f, end + 1);
+                Ok(())
+            }
+            OKind::Continue => {
+                let head = self
+                    .find_prev(f, l, &label, &[OKind::While, OKind::Do, OKind::Repeat])
+                    .ok_or_else(|| missing(self, "continue outside of a loop"))?;
+                match self.kind_at(f, head) {
+                    Some(OKind::Do) => {
+                        let tail = self
+                            .find_next(f, l, &label, &[OKind::While])
+                            .ok_or_else(|| missing(self, "do has no while"))?;
+                        self.pc = (f, tail);
+                    }
+                    _ => self.pc = (f, head),
+                }
+                Ok(())
+            }
+        }
+    }
+}
