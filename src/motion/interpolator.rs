@@ -271,7 +271,6 @@ impl Interpolator {
     /// One servo period.
     pub fn step(&mut self, src: &mut impl SegmentSource) -> &InterpOutput {
         let mut budget = MAX_ITEMS_PER_STEP;
-        self.out.aux = self.pop_aux();
         self.out.fault = None;
         if self.abort && self.seg.is_none() {
             self.finish_abort(src, &mut budget);
@@ -332,6 +331,7 @@ impl Interpolator {
             Ok(j) => self.out.joints = j,
             Err(e) => self.out.fault = Some(e),
         }
+        self.out.aux = self.pop_aux();
         self.out.scale = self.k;
         self.out.state = if self.waiting {
             InterpState::Waiting
