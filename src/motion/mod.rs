@@ -1,2 +1,160 @@
 //! Motion: canonical commands to machine-frame moves, lookahead planning, kinematics and the
 //! realtime interpolator that turns the segment queue into axis setpoints.
+//!
+//! Pipeline: [`from_canon::fold`] (units, offsets, rotation, feed modes, arcs → chords,
+//! non-motion commands → [`AuxItem`]s) → [`lookahead`] (merging within G64 Q, junction
+//! blends within G64 P, backward/forward passes over a window, S-curve segments) → a
+//! [`Plan`] of `Copy` [`Item`]s → the [`Interpolator`] on the servo thread.
+//!
+//! Every segment is one S-curve velocity transition between two velocity *vectors* (see
+//! [`profile`]); corners are blends of that same shape. That is what makes the limits
+//! provable: each axis' velocity, acceleration and jerk inside a segment is known in closed
+//! form and planned within the limits, and the interpolator's time scaling (overrides, hold,
+//! abort) uses a reserved share of acceleration and jerk.
+//!
+//! ```
+//! use hytask::gcode::{Canon, CanonCmd, SourceLoc};
+//! use hytask::motion::{plan, Interpolator, InterpState, MotionConfig, SliceSource};
+//!
+//! let loc = |line| SourceLoc { file: "demo.ngc".into(), line, col: 1 };
+//! let mut p = [0.0; 9];
+//! p[0] = 10.0;
+//! let canon = vec![
+//!     Canon { loc: loc(1), cmd: CanonCmd::SetFeedRate(1200.0) },
+//!     Canon { loc: loc(2), cmd: CanonCmd::StraightFeed(p) },
+//! ];
+//! let cfg = MotionConfig::default();
+//! let planned = plan(&canon, &cfg).expect("plannable");
+//! assert!(planned.duration_s > 0.5); // 10 mm at 20 mm/s, plus S-curves
+//!
+//! let mut interp = Interpolator::new(&cfg, planned.start_mm);
+//! let mut queue = SliceSource::new(&planned.items);
+//! interp.set_feed_override(0.5);
+//! loop {
+//!     let out = interp.step(&mut queue); // once per servo period
+//!     if out.state == InterpState::Done {
+//!         assert_eq!(out.pose_mm[0], 10.0);
+//!         break;
+//!     }
+//! }
+//! ```
+
+// Index loops over several parallel per-axis arrays read better than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
+pub mod arcs;
+pub mod blend;
+pub mod config;
+mod error;
+pub mod from_canon;
+pub mod interpolator;
+pub mod kinematics;
+pub mod limits;
+pub mod lookahead;
+pub mod merge;
+pub mod moves;
+pub mod profile;
+pub mod segment;
+pub mod trace;
+
+pub use config::{AxisLimits, KinematicsConfig, MotionConfig, ScaraConfig};
+pub use error::{KinematicsError, PlanError};
+pub use interpolator::{InterpOutput, InterpState, Interpolator, SegmentSource, SliceSource};
+pub use segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
+
+use crate::gcode::{Canon, NUM_AXES};
+use kinematics::Kinematics;
+
+/// Axis letters in pose order.
+pub const AXIS_NAMES: [char; NUM_AXES] = ['X', 'Y', 'Z', 'A', 'B', 'C', 'U', 'V', 'W'];
+
+/// A planned program: the segment queue plus what an operator wants to know before running.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// The queue, in execution order.
+    pub items: Vec<Item>,
+    /// Texts of message items (`AuxKind::Message::id` indexes here).
+    pub messages: Vec<String>,
+    /// Machine pose at the start, mm.
+    pub start_mm: [f64; NUM_AXES],
+    /// Machine pose at the end, mm.
+    pub end_mm: [f64; NUM_AXES],
+    /// Planned motion time at 100% override (dwells included, waits for the machine not), s.
+    pub duration_s: f64,
+    /// Planned path length, mm (rotary-only moves count their degrees).
+    pub distance_mm: f64,
+    /// Number of distinct source lines that produced queue items.
+    pub line_count: usize,
+    /// Number of motion segments in the queue.
+    pub segment_count: usize,
+}
+
+/// Plans a canonical stream starting at machine zero. See [`plan_from`].
+pub fn plan(canon: &[Canon], cfg: &MotionConfig) -> Result<Plan, PlanError> {
+    plan_from(canon, cfg, [0.0; NUM_AXES])
+}
+
+/// Plans a canonical stream starting at machine pose `start_mm`. The whole program is
+/// checked (soft limits, kinematics) before anything is returned, so a refused program
+/// never starts moving.
+pub fn plan_from(
+    canon: &[Canon],
+    cfg: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+) -> Result<Plan, PlanError> {
+    cfg.validate()?;
+    let folded = from_canon::fold(canon, cfg, start_mm)?;
+    let kin = kinematics::Machine::new(&cfg.kinematics);
+    for step in &folded.steps {
+        if let moves::Step::Move(m) = step {
+            limits::check_soft_limits(&m.end_mm, m.line, cfg)?;
+            kin.inverse(&m.end_mm)
+                .map_err(|source| PlanError::Kinematics {
+                    line: m.line,
+                    source,
+                })?;
+        }
+    }
+    let lim = limits::Limits::new(cfg);
+    let mut items = lookahead::plan_steps(folded.steps, &lim, cfg.lookahead_moves);
+    limits::propagate_override_caps(&mut items, cfg);
+    let mut duration_s = 0.0;
+    let mut distance_mm = 0.0;
+    let mut segment_count = 0;
+    let mut lines = std::collections::BTreeSet::new();
+    for it in &items {
+        match it {
+            Item::Segment(s) => {
+                duration_s += s.duration_s;
+                distance_mm += s.length_mm;
+                segment_count += 1;
+                lines.insert(s.line);
+                if s.kind != SegmentKind::Dwell
+                    && !matches!(cfg.kinematics, KinematicsConfig::Identity)
+                {
+                    // Joint limits and reach along the way (blends and arcs leave the chords).
+                    for f in [0.5, 1.0] {
+                        kin.inverse(&s.pose_at(f * s.duration_s))
+                            .map_err(|source| PlanError::Kinematics {
+                                line: s.line,
+                                source,
+                            })?;
+                    }
+                }
+            }
+            Item::Aux(a) => {
+                lines.insert(a.line);
+            }
+        }
+    }
+    Ok(Plan {
+        items,
+        messages: folded.messages,
+        start_mm,
+        end_mm: folded.end_mm,
+        duration_s,
+        distance_mm,
+        line_count: lines.len(),
+        segment_count,
+    })
+}

@@ -1,0 +1,91 @@
+//! Corner blends: at a junction the velocity vector moves from `V·u_a` to `V·u_b` along a
+//! straight line in velocity space with the S-curve shape (see [`super::profile`]). The
+//! blend starts `V·T/2` before the corner on the first move and ends `V·T/2` after it on the
+//! second, exactly; its farthest point from the corner is `V·|u_b - u_a|·F(T/2)`, which is
+//! kept within the path tolerance. Per-axis acceleration and jerk are those of the shape, so
+//! no blend can overshoot the limits, however small (cf. LinuxCNC issue #3773).
+
+use super::limits::Limits;
+use super::profile::Shape;
+use crate::gcode::NUM_AXES;
+
+/// Geometry of one junction, independent of speed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Corner {
+    /// `u_b - u_a`.
+    pub du: [f64; NUM_AXES],
+    /// |du|.
+    pub du_norm: f64,
+    /// Acceleration coefficient of `du` (see `Limits::change_coefficients`).
+    pub alpha: f64,
+    /// Jerk coefficient.
+    pub beta: f64,
+}
+
+impl Corner {
+    /// Corner between directions `u_a` and `u_b`.
+    pub fn new(u_a: &[f64; NUM_AXES], u_b: &[f64; NUM_AXES], lim: &Limits) -> Self {
+        let mut du = [0.0; NUM_AXES];
+        for i in 0..NUM_AXES {
+            du[i] = u_b[i] - u_a[i];
+        }
+        let du_norm = du.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let (alpha, beta) = lim.change_coefficients(&du);
+        Corner {
+            du,
+            du_norm,
+            alpha,
+            beta,
+        }
+    }
+
+    /// True when the directions agree (no blend needed).
+    pub fn is_straight(&self) -> bool {
+        self.du_norm < 1e-9
+    }
+
+    /// Shape of the blend at speed `v`.
+    pub fn shape(&self, v_mm_s: f64) -> Shape {
+        Shape::for_bounds(v_mm_s * self.alpha, v_mm_s * self.beta)
+    }
+
+    /// Length of each adjacent move the blend at speed `v` uses, mm.
+    pub fn half_length_mm(&self, v_mm_s: f64) -> f64 {
+        if self.is_straight() {
+            return 0.0;
+        }
+        0.5 * v_mm_s * self.shape(v_mm_s).duration_s
+    }
+
+    /// Farthest distance of the blend from the corner, mm.
+    pub fn deviation_mm(&self, v_mm_s: f64) -> f64 {
+        let s = self.shape(v_mm_s);
+        v_mm_s * self.du_norm * s.eval(0.5 * s.duration_s).1
+    }
+
+    /// Highest junction speed ≤ `cap` whose blend fits in half of each adjacent move and
+    /// stays within `tolerance_mm`.
+    pub fn max_speed(&self, cap_mm_s: f64, len_a_mm: f64, len_b_mm: f64, tolerance_mm: f64) -> f64 {
+        if self.is_straight() {
+            return cap_mm_s;
+        }
+        let room = 0.5 * len_a_mm.min(len_b_mm);
+        let ok = |v: f64| self.half_length_mm(v) <= room && self.deviation_mm(v) <= tolerance_mm;
+        if ok(cap_mm_s) {
+            return cap_mm_s;
+        }
+        let (mut lo, mut hi) = (0.0, cap_mm_s);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if ok(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if hi - lo <= 1e-9 * hi.max(1.0) {
+                break;
+            }
+        }
+        lo
+    }
+}

@@ -1,0 +1,364 @@
+//! Folds canonical commands (program frame, current units, offsets as separate commands)
+//! into machine-frame moves in mm, dwells and auxiliary items, each with its source line.
+//!
+//! Transform, as LinuxCNC's canon applies it: `machine = rotate(program·units + G92) + G5x +
+//! tool offset`, where the rotation is the G10 L2 R rotation about the work origin. Offsets
+//! are converted to mm with the units active when they were set.
+
+use super::arcs::Arc;
+use super::config::MotionConfig;
+use super::moves::{Junction, Move, MoveKind, Step};
+use super::segment::{AuxItem, AuxKind};
+use super::PlanError;
+use crate::gcode::canon::{CanonCmd, FeedMode, LengthUnits, MotionControl};
+use crate::gcode::{Canon, NUM_AXES};
+
+/// Indices of the linear axes (scaled by the length units).
+const LINEAR: [usize; 6] = [0, 1, 2, 6, 7, 8];
+
+/// The folded program.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Folded {
+    /// Moves, dwells and auxiliary items in execution order.
+    pub steps: Vec<Step>,
+    /// Texts of `(MSG, …)` items, indexed by `AuxKind::Message::id`.
+    pub messages: Vec<String>,
+    /// Machine pose after the last move.
+    pub end_mm: [f64; NUM_AXES],
+}
+
+struct State {
+    units: LengthUnits,
+    g5x_mm: [f64; NUM_AXES],
+    g92_mm: [f64; NUM_AXES],
+    tool_mm: [f64; NUM_AXES],
+    rotation_deg: f64,
+    feed: f64,
+    feed_mode: FeedMode,
+    control: MotionControl,
+    naivecam_tol: f64,
+    spindle_rpm: f64,
+    pos_mm: [f64; NUM_AXES],
+    arc_id: u32,
+}
+
+impl State {
+    fn scale(&self) -> f64 {
+        self.units.mm_per_unit()
+    }
+
+    fn to_mm(&self, p: &[f64; NUM_AXES]) -> [f64; NUM_AXES] {
+        let mut q = *p;
+        for i in LINEAR {
+            q[i] *= self.scale();
+        }
+        q
+    }
+
+    /// Program pose (current units) → machine pose (mm).
+    fn to_machine(&self, p: &[f64; NUM_AXES]) -> [f64; NUM_AXES] {
+        let mut q = self.to_mm(p);
+        for i in 0..NUM_AXES {
+            q[i] += self.g92_mm[i];
+        }
+        let (s, c) = self.rotation_deg.to_radians().sin_cos();
+        let (x, y) = (q[0], q[1]);
+        q[0] = c * x - s * y;
+        q[1] = s * x + c * y;
+        for i in 0..NUM_AXES {
+            q[i] += self.g5x_mm[i] + self.tool_mm[i];
+        }
+        q
+    }
+
+    /// Machine pose (mm) → program pose (current units).
+    fn to_program(&self, m: &[f64; NUM_AXES]) -> [f64; NUM_AXES] {
+        let mut q = *m;
+        for i in 0..NUM_AXES {
+            q[i] -= self.g5x_mm[i] + self.tool_mm[i];
+        }
+        let (s, c) = (-self.rotation_deg.to_radians()).sin_cos();
+        let (x, y) = (q[0], q[1]);
+        q[0] = c * x - s * y;
+        q[1] = s * x + c * y;
+        for i in 0..NUM_AXES {
+            q[i] -= self.g92_mm[i];
+        }
+        for i in LINEAR {
+            q[i] /= self.scale();
+        }
+        q
+    }
+
+    fn blend_tolerance_mm(&self, cfg: &MotionConfig) -> f64 {
+        match self.control {
+            MotionControl::Continuous { tolerance } if tolerance > 0.0 => tolerance * self.scale(),
+            MotionControl::Continuous { .. } => cfg.default_tolerance_mm,
+            MotionControl::ExactPath | MotionControl::ExactStop => cfg.exact_path_tolerance_mm,
+        }
+    }
+
+    /// Junction rule and merge tolerance of a move issued now.
+    fn junction(&self, cfg: &MotionConfig) -> (Junction, f64) {
+        match self.control {
+            MotionControl::ExactStop => (Junction::ExactStop, 0.0),
+            MotionControl::ExactPath => (
+                Junction::Blend {
+                    tolerance_mm: cfg.exact_path_tolerance_mm,
+                },
+                0.0,
+            ),
+            MotionControl::Continuous { .. } => {
+                let p = self.blend_tolerance_mm(cfg);
+                if self.naivecam_tol > 0.0 {
+                    (
+                        Junction::Blend { tolerance_mm: p },
+                        self.naivecam_tol * self.scale(),
+                    )
+                } else {
+                    let m = p * cfg.merge_fraction;
+                    (
+                        Junction::Blend {
+                            tolerance_mm: p - m,
+                        },
+                        m,
+                    )
+                }
+            }
+        }
+    }
+
+    /// Path speed of a feed move of `len_mm`, mm/s.
+    fn feed_mm_s(&self, len_mm: f64, line: u32) -> Result<f64, PlanError> {
+        let invalid = |what: &str| {
+            Err(PlanError::Invalid {
+                line,
+                what: what.into(),
+            })
+        };
+        if !(self.feed.is_finite() && self.feed > 0.0) {
+            return invalid("feed move with zero or invalid feed rate (F)");
+        }
+        match self.feed_mode {
+            FeedMode::UnitsPerMinute => Ok(self.feed * self.scale() / 60.0),
+            FeedMode::InverseTime => Ok(len_mm * self.feed / 60.0),
+            FeedMode::UnitsPerRevolution => {
+                if self.spindle_rpm > 0.0 {
+                    Ok(self.feed * self.scale() * self.spindle_rpm / 60.0)
+                } else {
+                    Err(PlanError::Unsupported {
+                        line,
+                        what: "G95 feed per revolution needs a spindle speed (S) or \
+                               nominal_spindle_rpm in the motion config"
+                            .into(),
+                    })
+                }
+            }
+        }
+    }
+}
+
+fn check_finite(p: &[f64; NUM_AXES], line: u32) -> Result<(), PlanError> {
+    if p.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(PlanError::Invalid {
+            line,
+            what: "non-finite coordinate".into(),
+        })
+    }
+}
+
+/// Folds a canonical stream starting at machine pose `start_mm`.
+pub fn fold(
+    canon: &[Canon],
+    cfg: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+) -> Result<Folded, PlanError> {
+    let mut st = State {
+        units: LengthUnits::Millimeters,
+        g5x_mm: [0.0; NUM_AXES],
+        g92_mm: [0.0; NUM_AXES],
+        tool_mm: [0.0; NUM_AXES],
+        rotation_deg: 0.0,
+        feed: 0.0,
+        feed_mode: FeedMode::UnitsPerMinute,
+        control: MotionControl::Continuous { tolerance: 0.0 },
+        naivecam_tol: 0.0,
+        spindle_rpm: cfg.nominal_spindle_rpm,
+        pos_mm: start_mm,
+        arc_id: 0,
+    };
+    let mut out = Folded::default();
+    for c in canon {
+        let line = c.loc.line;
+        let aux = |kind: AuxKind| Step::Aux(AuxItem { kind, line });
+        match &c.cmd {
+            CanonCmd::UseLengthUnits(u) => st.units = *u,
+            CanonCmd::SetG5xOffset { offset, .. } => st.g5x_mm = st.to_mm(offset),
+            CanonCmd::SetG92Offset(o) => st.g92_mm = st.to_mm(o),
+            CanonCmd::SetXyRotation(r) => st.rotation_deg = *r,
+            CanonCmd::UseToolLengthOffset(o) => st.tool_mm = st.to_mm(o),
+            CanonCmd::SelectPlane(_) | CanonCmd::Comment(_) => {}
+            CanonCmd::SetFeedRate(f) => st.feed = *f,
+            CanonCmd::SetFeedMode(m) => st.feed_mode = *m,
+            CanonCmd::SetMotionControl(m) => st.control = *m,
+            CanonCmd::SetNaivecamTolerance(q) => st.naivecam_tol = q.max(0.0),
+            CanonCmd::StraightTraverse(p) | CanonCmd::StraightFeed(p) => {
+                check_finite(p, line)?;
+                let end = st.to_machine(p);
+                let rapid = matches!(c.cmd, CanonCmd::StraightTraverse(_));
+                push_line(&mut out, &st, cfg, end, rapid, 0, 0.0, line)?;
+                st.pos_mm = end;
+            }
+            CanonCmd::ArcFeed { first_end, second_end, first_center, second_center, rotation, axis_end, plane, end } => {
+                check_finite(end, line)?;
+                let (i1, i2, ia) = super::arcs::plane_axes(*plane);
+                let mut e = *end;
+                e[i1] = *first_end;
+                e[i2] = *second_end;
+                e[ia] = *axis_end;
+                let arc = Arc {
+                    start: st.to_program(&st.pos_mm),
+                    end: e,
+                    center_first: *first_center,
+                    center_second: *second_center,
+                    rotation: *rotation,
+                    plane: *plane,
+                };
+                let tol_mm = cfg.arc_chord_tolerance_mm.min(st.blend_tolerance_mm(cfg));
+                let pts = arc.chord_points(tol_mm / st.scale());
+                // Total arc length for inverse time: the whole arc takes 60/F.
+                let mut total_mm = 0.0;
+                let mut prev = st.pos_mm;
+                let machine: Vec<[f64; NUM_AXES]> = pts.iter().map(|p| st.to_machine(p)).collect();
+                for m in &machine {
+                    total_mm += Move { start_mm: prev, end_mm: *m, ..blank() }.feed_length_mm();
+                    prev = *m;
+                }
+                st.arc_id += 1;
+                let feed = st.feed_mm_s(total_mm, line)?;
+                for m in machine {
+                    push_line(&mut out, &st, cfg, m, false, st.arc_id, feed, line)?;
+                    st.pos_mm = m;
+                }
+            }
+            CanonCmd::Dwell(s) => {
+                if !(s.is_finite() && *s >= 0.0) {
+                    return Err(PlanError::Invalid { line, what: "negative dwell".into() });
+                }
+                out.steps.push(Step::Dwell { seconds: *s, line });
+            }
+            CanonCmd::SetSpindleSpeed(rpm) => {
+                st.spindle_rpm = if *rpm > 0.0 { *rpm } else { cfg.nominal_spindle_rpm };
+                out.steps.push(aux(AuxKind::SpindleSpeed { rpm: *rpm }));
+            }
+            CanonCmd::StartSpindle(d) => out.steps.push(aux(AuxKind::SpindleStart(*d))),
+            CanonCmd::StopSpindle => out.steps.push(aux(AuxKind::SpindleStop)),
+            CanonCmd::MistOn => out.steps.push(aux(AuxKind::Mist(true))),
+            CanonCmd::MistOff => out.steps.push(aux(AuxKind::Mist(false))),
+            CanonCmd::FloodOn => out.steps.push(aux(AuxKind::Flood(true))),
+            CanonCmd::FloodOff => out.steps.push(aux(AuxKind::Flood(false))),
+            CanonCmd::SelectTool(t) => out.steps.push(aux(AuxKind::SelectTool(*t))),
+            CanonCmd::StartChange => out.steps.push(aux(AuxKind::StartToolChange)),
+            CanonCmd::ChangeTool(t) => out.steps.push(aux(AuxKind::ChangeTool(*t))),
+            CanonCmd::ChangeToolNumber(t) => out.steps.push(aux(AuxKind::ChangeToolNumber(*t))),
+            CanonCmd::DigitalOutput { index, on, synced } => {
+                out.steps.push(aux(AuxKind::DigitalOutput { index: *index, on: *on, synced: *synced }))
+            }
+            CanonCmd::AnalogOutput { index, value, synced } => {
+                out.steps.push(aux(AuxKind::AnalogOutput { index: *index, value: *value, synced: *synced }))
+            }
+            CanonCmd::Wait { index, input, kind, timeout_s } => out.steps.push(aux(AuxKind::Wait {
+                index: *index,
+                input: *input,
+                kind: *kind,
+                timeout_s: *timeout_s,
+            })),
+            CanonCmd::StraightProbe { .. } => {
+                return Err(PlanError::Unsupported {
+                    line,
+                    what: "probing (G38.x) needs the probe input in the realtime loop; not supported by the planner yet".into(),
+                })
+            }
+            CanonCmd::OverrideEnable { which, on } => {
+                out.steps.push(aux(AuxKind::OverrideEnable { which: *which, on: *on }))
+            }
+            CanonCmd::Message(m) => {
+                let id = out.messages.len() as u32;
+                out.messages.push(m.clone());
+                out.steps.push(aux(AuxKind::Message { id }));
+            }
+            CanonCmd::ProgramStop => out.steps.push(aux(AuxKind::ProgramStop)),
+            CanonCmd::OptionalProgramStop => out.steps.push(aux(AuxKind::OptionalProgramStop)),
+            CanonCmd::ProgramEnd => out.steps.push(aux(AuxKind::ProgramEnd)),
+            CanonCmd::UserMcode { code, p, q } => {
+                out.steps.push(aux(AuxKind::UserMcode { code: *code, p: *p, q: *q }))
+            }
+        }
+    }
+    out.end_mm = st.pos_mm;
+    Ok(out)
+}
+
+fn blank() -> Move {
+    Move {
+        start_mm: [0.0; NUM_AXES],
+        end_mm: [0.0; NUM_AXES],
+        kind: MoveKind::Feed,
+        feed_mm_s: 0.0,
+        junction: Junction::ExactStop,
+        merge_tol_mm: 0.0,
+        arc_id: 0,
+        chord_tol_mm: 0.0,
+        line: 0,
+    }
+}
+
+/// Appends a straight move from the current position to `end` (skipping zero-length ones).
+/// `arc_feed_mm_s` > 0 gives the feed of an arc chord (computed over the whole arc).
+#[allow(clippy::too_many_arguments)]
+fn push_line(
+    out: &mut Folded,
+    st: &State,
+    cfg: &MotionConfig,
+    end: [f64; NUM_AXES],
+    rapid: bool,
+    arc_id: u32,
+    arc_feed_mm_s: f64,
+    line: u32,
+) -> Result<(), PlanError> {
+    let (junction, merge_tol_mm) = st.junction(cfg);
+    let mut mv = Move {
+        start_mm: st.pos_mm,
+        end_mm: end,
+        kind: if rapid {
+            MoveKind::Rapid
+        } else {
+            MoveKind::Feed
+        },
+        feed_mm_s: f64::INFINITY,
+        junction,
+        merge_tol_mm: if rapid { 0.0 } else { merge_tol_mm },
+        arc_id,
+        chord_tol_mm: 0.0,
+        line,
+    };
+    let len = mv.feed_length_mm();
+    if len <= 1e-9 {
+        return Ok(());
+    }
+    if !rapid {
+        mv.feed_mm_s = if arc_feed_mm_s > 0.0 {
+            arc_feed_mm_s
+        } else {
+            st.feed_mm_s(len, line)?
+        };
+    }
+    if arc_id != 0 {
+        // Chords of one arc blend into each other within the chord tolerance.
+        mv.chord_tol_mm = cfg.arc_chord_tolerance_mm.min(st.blend_tolerance_mm(cfg));
+    }
+    out.steps.push(Step::Move(mv));
+    Ok(())
+}

@@ -1,0 +1,369 @@
+//! The realtime interpolator: each servo period it advances along the segment queue and
+//! produces axis setpoints. No allocation, no lock, bounded work per cycle (at most
+//! [`MAX_ITEMS_PER_STEP`] queue items are consumed per call).
+//!
+//! Overrides, feed hold and abort are applied by *time scaling*: the planned trajectory
+//! `p(σ)` is followed with `dσ/dt = k`, where `k` follows its target (override, 0 for hold)
+//! with bounded `k̇` and `k̈`. The axis velocity is `p'k`, the acceleration `p''k² + p'k̇`,
+//! the jerk `p'''k³ + 3p''k·k̇ + p'k̈`. The planner kept a reserve of acceleration and jerk
+//! for the `k̇`/`k̈` terms and capped `k` per segment ([`Segment::override_cap`]), so no
+//! override change, hold or abort can exceed a limit, and the tool never leaves the path.
+
+use super::config::MotionConfig;
+use super::kinematics::{Kinematics, Machine};
+use super::limits::override_rates;
+use super::segment::{AuxItem, Item, Segment, SegmentKind};
+use super::KinematicsError;
+use crate::gcode::NUM_AXES;
+
+/// Most queue items consumed in one servo period (bounds the work of a cycle).
+pub const MAX_ITEMS_PER_STEP: usize = 256;
+/// Auxiliary items that can wait to be reported (one is reported per cycle).
+const AUX_RING: usize = 32;
+
+/// Where the interpolator takes its segments from: a `Vec` in tests, the realtime core's
+/// lock-free ring buffer in the daemon.
+pub trait SegmentSource {
+    /// Next item, or `None` if the queue is (for now) empty.
+    fn pop(&mut self) -> Option<Item>;
+}
+
+/// A queue in a plain slice (tests, tools, simulation).
+#[derive(Debug, Clone)]
+pub struct SliceSource<'a> {
+    items: &'a [Item],
+    next: usize,
+}
+
+impl<'a> SliceSource<'a> {
+    /// Pops from `items` in order.
+    pub fn new(items: &'a [Item]) -> Self {
+        SliceSource { items, next: 0 }
+    }
+}
+
+impl SegmentSource for SliceSource<'_> {
+    fn pop(&mut self) -> Option<Item> {
+        let it = self.items.get(self.next).copied();
+        self.next += usize::from(it.is_some());
+        it
+    }
+}
+
+impl SegmentSource for std::collections::VecDeque<Item> {
+    fn pop(&mut self) -> Option<Item> {
+        self.pop_front()
+    }
+}
+
+/// What the interpolator is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InterpState {
+    /// Nothing queued, nothing run since start or the last abort.
+    Idle,
+    /// Moving (or dwelling).
+    Running,
+    /// Stopped on the path by a feed hold; `resume` continues.
+    Holding,
+    /// Stopped at a command that needs motion stopped (M0, M6, M66, ...): the machine runs
+    /// it and calls `aux_done`.
+    Waiting,
+    /// The queue ran dry after motion (program finished, or the planner is behind).
+    Done,
+}
+
+/// Output of one servo period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InterpOutput {
+    /// Cartesian setpoint, machine frame, mm (deg for A B C).
+    pub pose_mm: [f64; NUM_AXES],
+    /// Joint setpoints (equal to `pose_mm` for identity kinematics).
+    pub joints: [f64; NUM_AXES],
+    /// Source line being executed.
+    pub line: u32,
+    /// State after this period.
+    pub state: InterpState,
+    /// Path length left in the current move, mm.
+    pub distance_to_go_mm: f64,
+    /// An auxiliary item reached this period (at most one per period, in queue order).
+    pub aux: Option<AuxItem>,
+    /// Current time scale (1 = as planned).
+    pub scale: f64,
+    /// Kinematics failure of this period (joints then hold their last value).
+    pub fault: Option<KinematicsError>,
+}
+
+/// The servo-thread interpolator.
+#[derive(Debug, Clone)]
+pub struct Interpolator {
+    dt_s: f64,
+    k1: f64,
+    k2: f64,
+    max_override: f64,
+    kin: Machine,
+    seg: Option<Segment>,
+    t_s: f64,
+    k: f64,
+    kd: f64,
+    feed_override: f64,
+    rapid_override: f64,
+    hold: bool,
+    abort: bool,
+    waiting: bool,
+    moved: bool,
+    aux_ring: [Option<AuxItem>; AUX_RING],
+    aux_head: usize,
+    aux_len: usize,
+    out: InterpOutput,
+}
+
+impl Interpolator {
+    /// An idle interpolator at `start_mm` (the plan's start pose).
+    pub fn new(cfg: &MotionConfig, start_mm: [f64; NUM_AXES]) -> Self {
+        let (k1, k2) = override_rates(cfg);
+        let kin = Machine::new(&cfg.kinematics);
+        let joints = kin.inverse(&start_mm);
+        Interpolator {
+            dt_s: cfg.servo_period_s,
+            k1,
+            k2,
+            max_override: cfg.max_feed_override,
+            kin,
+            seg: None,
+            t_s: 0.0,
+            k: 1.0,
+            kd: 0.0,
+            feed_override: 1.0,
+            rapid_override: 1.0,
+            hold: false,
+            abort: false,
+            waiting: false,
+            moved: false,
+            aux_ring: [None; AUX_RING],
+            aux_head: 0,
+            aux_len: 0,
+            out: InterpOutput {
+                pose_mm: start_mm,
+                joints: joints.unwrap_or(start_mm),
+                line: 0,
+                state: InterpState::Idle,
+                distance_to_go_mm: 0.0,
+                aux: None,
+                scale: 1.0,
+                fault: joints.err(),
+            },
+        }
+    }
+
+    /// Feed override factor, clamped to `[0, max_feed_override]`; applied smoothly.
+    pub fn set_feed_override(&mut self, factor: f64) {
+        self.feed_override = if factor.is_finite() {
+            factor.clamp(0.0, self.max_override)
+        } else {
+            1.0
+        };
+    }
+
+    /// Rapid override factor, clamped to `[0, 1]`; applied smoothly.
+    pub fn set_rapid_override(&mut self, factor: f64) {
+        self.rapid_override = if factor.is_finite() {
+            factor.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+    }
+
+    /// Feed hold: decelerate to a stop on the path.
+    pub fn hold(&mut self) {
+        self.hold = true;
+    }
+
+    /// Resume after a hold.
+    pub fn resume(&mut self) {
+        self.hold = false;
+    }
+
+    /// Stop within limits, then drop every queued item.
+    pub fn abort(&mut self) {
+        self.abort = true;
+    }
+
+    /// The machine finished the command the interpolator is waiting for.
+    pub fn aux_done(&mut self) {
+        self.waiting = false;
+    }
+
+    /// The last output.
+    pub fn output(&self) -> &InterpOutput {
+        &self.out
+    }
+
+    fn push_aux(&mut self, a: AuxItem) {
+        if self.aux_len < AUX_RING {
+            self.aux_ring[(self.aux_head + self.aux_len) % AUX_RING] = Some(a);
+            self.aux_len += 1;
+        }
+    }
+
+    fn pop_aux(&mut self) -> Option<AuxItem> {
+        if self.aux_len == 0 {
+            return None;
+        }
+        let a = self.aux_ring[self.aux_head].take();
+        self.aux_head = (self.aux_head + 1) % AUX_RING;
+        self.aux_len -= 1;
+        a
+    }
+
+    /// Pulls items until a segment is current, a barrier is hit, the ring is full or the
+    /// source is empty. Returns the number of items consumed.
+    fn fetch(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
+        self.seg = None;
+        while *budget > 0 && !self.waiting && self.aux_len < AUX_RING {
+            *budget -= 1;
+            match src.pop() {
+                Some(Item::Segment(s)) => {
+                    if s.v0_mm_s.iter().all(|v| *v == 0.0) && s.kind != SegmentKind::Dwell {
+                        // Starting from rest (zero velocity and acceleration): the scale can
+                        // jump to its target without any velocity or acceleration step.
+                        self.k = self.target_scale(&s);
+                        self.kd = 0.0;
+                    }
+                    self.seg = Some(s);
+                    self.moved = true;
+                    return;
+                }
+                Some(Item::Aux(a)) => {
+                    self.push_aux(a);
+                    self.out.line = a.line;
+                    if a.kind.is_barrier() {
+                        self.waiting = true;
+                    }
+                }
+                None => return,
+            }
+        }
+    }
+
+    fn target_scale(&self, s: &Segment) -> f64 {
+        if self.hold || self.abort {
+            return 0.0;
+        }
+        let ramp = self.k1 * (s.duration_s - self.t_s).max(0.0) / self.max_override;
+        let cap = s.override_cap.min(s.end_override_cap + ramp);
+        match s.kind {
+            SegmentKind::Feed => self.feed_override.min(cap),
+            SegmentKind::Rapid => self.rapid_override.min(cap),
+            SegmentKind::Dwell => self.k,
+        }
+    }
+
+    /// Second derivative of the scale for this period: drive `k` to `target` with |k̇| ≤ k1,
+    /// |k̈| ≤ k2, braking early enough in discrete time not to overshoot.
+    fn scale_jerk(&self, target: f64) -> f64 {
+        let e = target - self.k;
+        let (k2, dt) = (self.k2, self.dt_s);
+        let brake = ((k2 * dt / 2.0).powi(2) + 2.0 * k2 * e.abs()).sqrt() - k2 * dt / 2.0;
+        let vd = e.signum() * self.k1.min(brake);
+        ((vd - self.kd) / dt).clamp(-k2, k2)
+    }
+
+    /// One servo period.
+    pub fn step(&mut self, src: &mut impl SegmentSource) -> &InterpOutput {
+        let mut budget = MAX_ITEMS_PER_STEP;
+        self.out.fault = None;
+        if self.abort && self.seg.is_none() {
+            self.finish_abort(src, &mut budget);
+        }
+        if self.seg.is_none() && !self.waiting {
+            self.fetch(src, &mut budget);
+        }
+        if let Some(mut s) = self.seg {
+            let dt = self.dt_s;
+            let advance = if s.kind == SegmentKind::Dwell {
+                if self.hold || self.abort {
+                    0.0
+                } else {
+                    dt
+                }
+            } else {
+                let kdd = self.scale_jerk(self.target_scale(&s));
+                let a = self.k * dt + self.kd * dt * dt / 2.0 + kdd * dt * dt * dt / 6.0;
+                self.k += self.kd * dt + kdd * dt * dt / 2.0;
+                self.kd += kdd * dt;
+                if self.k < 0.0 {
+                    self.k = 0.0;
+                    self.kd = self.kd.max(0.0);
+                }
+                a.max(0.0)
+            };
+            self.t_s += advance;
+            while self.t_s >= s.duration_s {
+                let rest = self.t_s - s.duration_s;
+                self.out.pose_mm = s.end_mm;
+                self.fetch(src, &mut budget);
+                match self.seg {
+                    Some(n) => {
+                        s = n;
+                        self.t_s = rest;
+                    }
+                    None => {
+                        self.t_s = 0.0;
+                        break;
+                    }
+                }
+            }
+            if let Some(s) = self.seg {
+                self.out.pose_mm = s.pose_at(self.t_s);
+                self.out.line = s.line;
+                self.out.distance_to_go_mm =
+                    (s.length_mm - s.travelled_mm(self.t_s)).max(0.0) + s.move_rest_mm;
+            } else {
+                self.out.distance_to_go_mm = 0.0;
+            }
+            if self.abort && self.k == 0.0 && self.kd.abs() <= self.k2 * dt {
+                self.kd = 0.0;
+                self.seg = None;
+                self.finish_abort(src, &mut budget);
+            }
+        }
+        match self.kin.inverse(&self.out.pose_mm) {
+            Ok(j) => self.out.joints = j,
+            Err(e) => self.out.fault = Some(e),
+        }
+        self.out.aux = self.pop_aux();
+        self.out.scale = self.k;
+        self.out.state = if self.waiting {
+            InterpState::Waiting
+        } else if self.seg.is_some() {
+            if self.hold && self.k == 0.0 {
+                InterpState::Holding
+            } else {
+                InterpState::Running
+            }
+        } else if self.moved {
+            InterpState::Done
+        } else {
+            InterpState::Idle
+        };
+        &self.out
+    }
+
+    /// Drops what is left of the queue (bounded per period), then goes idle.
+    fn finish_abort(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
+        while *budget > 0 {
+            *budget -= 1;
+            if src.pop().is_none() {
+                self.abort = false;
+                self.waiting = false;
+                self.moved = false;
+                self.aux_len = 0;
+                // At rest: the next job starts at the planned speed.
+                self.k = 1.0;
+                self.kd = 0.0;
+                self.out.distance_to_go_mm = 0.0;
+                return;
+            }
+        }
+    }
+}

@@ -1,0 +1,148 @@
+//! Per-axis limits as the planner uses them: velocity caps of a direction, tangential
+//! acceleration/jerk along a move, the S-curve shape of any velocity change, the override
+//! headroom of a segment, and soft limits.
+
+use super::config::MotionConfig;
+use super::profile::{Shape, Tangential};
+use super::segment::{Item, Segment, SegmentKind};
+use super::{PlanError, AXIS_NAMES};
+use crate::gcode::NUM_AXES;
+
+/// Planning limits: velocity in full, acceleration and jerk reduced by the override reserve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    /// Velocity, mm/s.
+    pub vel: [f64; NUM_AXES],
+    /// Planning acceleration, (1 - reserve)·max, mm/s².
+    pub acc: [f64; NUM_AXES],
+    /// Planning jerk, (1 - reserve)·max, mm/s³.
+    pub jerk: [f64; NUM_AXES],
+    /// Largest feed override.
+    pub max_override: f64,
+}
+
+impl Limits {
+    /// From the configuration.
+    pub fn new(cfg: &MotionConfig) -> Self {
+        let keep = 1.0 - cfg.override_reserve;
+        Limits {
+            vel: cfg.axes.map(|a| a.max_vel_mm_s),
+            acc: cfg.axes.map(|a| a.max_acc_mm_s2 * keep),
+            jerk: cfg.axes.map(|a| a.max_jerk_mm_s3 * keep),
+            max_override: cfg.max_feed_override,
+        }
+    }
+
+    /// Highest path speed along direction `u` (per unit feed length) within axis velocities.
+    pub fn vcap(&self, u: &[f64; NUM_AXES]) -> f64 {
+        let mut v = f64::INFINITY;
+        for i in 0..NUM_AXES {
+            if u[i] != 0.0 {
+                v = v.min(self.vel[i] / u[i].abs());
+            }
+        }
+        v
+    }
+
+    /// Tangential acceleration and jerk along `u`.
+    pub fn tangential(&self, u: &[f64; NUM_AXES]) -> Tangential {
+        let (mut a, mut j) = (0.0f64, 0.0f64);
+        for i in 0..NUM_AXES {
+            a = a.max(u[i].abs() / self.acc[i]);
+            j = j.max(u[i].abs() / self.jerk[i]);
+        }
+        Tangential {
+            acc_mm_s2: 1.0 / a,
+            jerk_mm_s3: 1.0 / j,
+        }
+    }
+
+    /// `(alpha, beta)` per unit of a velocity change `dv`: the shape of a change `s·dv` is
+    /// `Shape::for_bounds(s·alpha, s·beta)`.
+    pub fn change_coefficients(&self, dv: &[f64; NUM_AXES]) -> (f64, f64) {
+        let (mut a, mut j) = (0.0f64, 0.0f64);
+        for i in 0..NUM_AXES {
+            a = a.max(dv[i].abs() / self.acc[i]);
+            j = j.max(dv[i].abs() / self.jerk[i]);
+        }
+        (a, j)
+    }
+
+    /// Fastest S-curve for a velocity change `dv`.
+    pub fn shape(&self, dv: &[f64; NUM_AXES]) -> Shape {
+        let (a, j) = self.change_coefficients(dv);
+        Shape::for_bounds(a, j)
+    }
+
+    /// Largest time scale of `seg` within all limits, at least 1, at most `max_override`.
+    pub fn override_cap(&self, seg: &Segment) -> f64 {
+        if seg.kind == SegmentKind::Dwell {
+            return self.max_override;
+        }
+        let mut k = self.max_override;
+        for (i, [v, a, j]) in seg.peaks().into_iter().enumerate() {
+            if v > 0.0 {
+                k = k.min(self.vel[i] / v);
+            }
+            if a > 0.0 {
+                k = k.min((self.acc[i] / a).sqrt());
+            }
+            if j > 0.0 {
+                k = k.min((self.jerk[i] / j).cbrt());
+            }
+        }
+        k.max(1.0)
+    }
+}
+
+/// Rate limits of the override scale in the interpolator: `(k̇ max, k̈ max)`, from the reserve.
+pub fn override_rates(cfg: &MotionConfig) -> (f64, f64) {
+    let e = cfg.override_reserve;
+    let (mut k1, mut k2) = (f64::INFINITY, f64::INFINITY);
+    for a in &cfg.axes {
+        // accel = p''k² + p'k̇: reserve e·A for p'k̇.
+        k1 = k1.min(e * a.max_acc_mm_s2 / a.max_vel_mm_s);
+        // jerk = p'''k³ + 3p''k·k̇ + p'k̈: half of e·J to each of the last two terms.
+        k1 = k1.min(e * a.max_jerk_mm_s3 / (6.0 * (1.0 - e) * a.max_acc_mm_s2));
+        k2 = k2.min(e * a.max_jerk_mm_s3 / (2.0 * a.max_vel_mm_s));
+    }
+    (k1, k2)
+}
+
+/// Lowers the override caps so that a scale above 1 can always be brought down in time
+/// (at rate `k1` per second, real time ≥ planned time / max override) before a segment
+/// that tolerates less; a margin covers the ramp's reversal lag.
+pub fn propagate_override_caps(items: &mut [Item], cfg: &MotionConfig) {
+    let (k1, k2) = override_rates(cfg);
+    let kmax = cfg.max_feed_override;
+    let margin = 2.5 * k1 * k1 / k2;
+    let mut line = f64::INFINITY; // cap allowed at the start of the next segment
+    for it in items.iter_mut().rev() {
+        if let Item::Segment(s) = it {
+            let own = s.override_cap - margin.min(s.override_cap - 1.0);
+            s.override_cap = own;
+            s.end_override_cap = line.min(kmax);
+            line = own.min(line + k1 * s.duration_s / kmax);
+        }
+    }
+}
+
+/// Refuses a pose outside the soft limits, naming the line.
+pub fn check_soft_limits(
+    p: &[f64; NUM_AXES],
+    line: u32,
+    cfg: &MotionConfig,
+) -> Result<(), PlanError> {
+    for (i, a) in cfg.axes.iter().enumerate() {
+        if p[i] < a.min_mm - 1e-9 || p[i] > a.max_mm + 1e-9 {
+            return Err(PlanError::SoftLimit {
+                line,
+                axis: AXIS_NAMES[i],
+                value_mm: p[i],
+                min_mm: a.min_mm,
+                max_mm: a.max_mm,
+            });
+        }
+    }
+    Ok(())
+}

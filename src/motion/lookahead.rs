@@ -1,0 +1,355 @@
+//! Lookahead: junction speeds from blend geometry, then backward and forward passes over a
+//! window of moves (Klipper `toolhead.py` style), then emission of the time-parameterised
+//! segments: per move an S-curve speed-up, a cruise and a slow-down, and a blend segment at
+//! each junction that does not stop.
+//!
+//! Runs of moves are separated by barriers (dwell, or a command that needs motion stopped);
+//! a spindle speed change, synchronised I/O or coolant is *not* a barrier: it rides in the
+//! queue between the segments of the run and never flushes the lookahead.
+
+use super::blend::Corner;
+use super::limits::Limits;
+use super::merge::merge;
+use super::moves::{Junction, Move, MoveKind, Step};
+use super::profile::Tangential;
+use super::segment::{AuxItem, Item, Segment, SegmentKind};
+use crate::gcode::NUM_AXES;
+
+/// A move with its derived data.
+struct Prepared {
+    mv: Move,
+    u: [f64; NUM_AXES],
+    len_mm: f64,
+    vcap_mm_s: f64,
+    tang: Tangential,
+    aux_after: Vec<AuxItem>,
+}
+
+/// Plans a folded program into segment-queue items.
+pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
+    let mut out = Vec::with_capacity(steps.len() * 3);
+    let mut run: Vec<Move> = Vec::new();
+    let mut run_aux: Vec<Vec<AuxItem>> = Vec::new();
+    for step in steps {
+        match step {
+            Step::Move(m) => {
+                run.push(m);
+                run_aux.push(Vec::new());
+            }
+            Step::Aux(a) if !a.kind.is_barrier() => match run_aux.last_mut() {
+                Some(v) => v.push(a),
+                None => out.push(Item::Aux(a)),
+            },
+            Step::Aux(a) => {
+                plan_run(
+                    std::mem::take(&mut run),
+                    std::mem::take(&mut run_aux),
+                    lim,
+                    window,
+                    &mut out,
+                );
+                out.push(Item::Aux(a));
+            }
+            Step::Dwell { seconds, line } => {
+                plan_run(
+                    std::mem::take(&mut run),
+                    std::mem::take(&mut run_aux),
+                    lim,
+                    window,
+                    &mut out,
+                );
+                let pos = last_pose(&out);
+                out.push(Item::Segment(Segment {
+                    start_mm: pos,
+                    end_mm: pos,
+                    v0_mm_s: [0.0; NUM_AXES],
+                    v1_mm_s: [0.0; NUM_AXES],
+                    duration_s: seconds,
+                    jerk_s: 0.0,
+                    kind: SegmentKind::Dwell,
+                    line,
+                    length_mm: 0.0,
+                    move_rest_mm: 0.0,
+                    override_cap: lim.max_override,
+                    end_override_cap: lim.max_override,
+                }));
+            }
+        }
+    }
+    plan_run(run, run_aux, lim, window, &mut out);
+    out
+}
+
+fn last_pose(out: &[Item]) -> [f64; NUM_AXES] {
+    out.iter()
+        .rev()
+        .find_map(|it| match it {
+            Item::Segment(s) => Some(s.end_mm),
+            Item::Aux(_) => None,
+        })
+        .unwrap_or([0.0; NUM_AXES])
+}
+
+fn prepare(moves: Vec<Move>, aux: Vec<Vec<AuxItem>>, lim: &Limits) -> Vec<Prepared> {
+    let joinable: Vec<bool> = aux.iter().map(|a| a.is_empty()).collect();
+    let (merged, last_index) = merge(moves, &joinable);
+    let mut aux: Vec<Option<Vec<AuxItem>>> = aux.into_iter().map(Some).collect();
+    merged
+        .into_iter()
+        .zip(last_index)
+        .map(|(mv, j)| {
+            let len_mm = mv.feed_length_mm();
+            let mut u = [0.0; NUM_AXES];
+            for i in 0..NUM_AXES {
+                u[i] = (mv.end_mm[i] - mv.start_mm[i]) / len_mm;
+            }
+            let vcap = lim.vcap(&u).min(mv.feed_mm_s);
+            Prepared {
+                mv,
+                u,
+                len_mm,
+                vcap_mm_s: vcap,
+                tang: lim.tangential(&u),
+                aux_after: aux.get_mut(j).and_then(Option::take).unwrap_or_default(),
+            }
+        })
+        .collect()
+}
+
+fn plan_run(
+    moves: Vec<Move>,
+    aux: Vec<Vec<AuxItem>>,
+    lim: &Limits,
+    window: usize,
+    out: &mut Vec<Item>,
+) {
+    if moves.is_empty() {
+        return;
+    }
+    let p = prepare(moves, aux, lim);
+    let n = p.len();
+    // Junction k joins move k to move k + 1; the last junction is a stop.
+    let corners: Vec<Option<Corner>> = (0..n)
+        .map(|k| (k + 1 < n).then(|| Corner::new(&p[k].u, &p[k + 1].u, lim)))
+        .collect();
+    let jmax: Vec<f64> = (0..n)
+        .map(|k| {
+            let Some(c) = &corners[k] else { return 0.0 };
+            let (a, b) = (&p[k], &p[k + 1]);
+            let tol = if a.mv.arc_id != 0 && a.mv.arc_id == b.mv.arc_id {
+                a.mv.chord_tol_mm
+            } else {
+                match a.mv.junction {
+                    Junction::ExactStop => return 0.0,
+                    Junction::Blend { tolerance_mm } => tolerance_mm,
+                }
+            };
+            c.max_speed(a.vcap_mm_s.min(b.vcap_mm_s), a.len_mm, b.len_mm, tol)
+        })
+        .collect();
+    let dmax: Vec<f64> = (0..n)
+        .map(|k| corners[k].map_or(0.0, |c| c.half_length_mm(jmax[k])))
+        .collect();
+    let mmin: Vec<f64> = (0..n)
+        .map(|k| (p[k].len_mm - dmax[k] - if k > 0 { dmax[k - 1] } else { 0.0 }).max(0.0))
+        .collect();
+
+    let mut vj = jmax.clone();
+    let mut base = 0;
+    let mut v_start = 0.0;
+    while base < n {
+        let end = (base + window).min(n);
+        // Backward pass from a stop at the end of the window.
+        vj[end - 1] = if end == n {
+            0.0
+        } else {
+            0.0f64.min(jmax[end - 1])
+        };
+        for k in (base..end - 1).rev() {
+            vj[k] = jmax[k].min(p[k + 1].tang.reach_mm_s(
+                vj[k + 1],
+                mmin[k + 1],
+                p[k + 1].vcap_mm_s,
+            ));
+        }
+        // Forward pass.
+        let mut prev = v_start;
+        for k in base..end {
+            vj[k] = vj[k].min(p[k].tang.reach_mm_s(prev, mmin[k], p[k].vcap_mm_s));
+            prev = vj[k];
+        }
+        let commit = if end == n {
+            end - base
+        } else {
+            ((end - base) / 2).max(1)
+        };
+        for k in base..base + commit {
+            let v_in = if k > 0 { vj[k - 1] } else { 0.0 };
+            emit_move(&p, &corners, k, v_in, vj[k], lim, out);
+        }
+        v_start = vj[base + commit - 1];
+        base += commit;
+    }
+}
+
+fn kind_of(m: &Move) -> SegmentKind {
+    match m.kind {
+        MoveKind::Rapid => SegmentKind::Rapid,
+        MoveKind::Feed => SegmentKind::Feed,
+    }
+}
+
+fn push(out: &mut Vec<Item>, lim: &Limits, mut s: Segment) {
+    if s.duration_s <= 0.0 {
+        return;
+    }
+    s.override_cap = lim.override_cap(&s);
+    out.push(Item::Segment(s));
+}
+
+/// Emits move `k` (S-curve up, cruise, S-curve down) and the blend at its end.
+fn emit_move(
+    p: &[Prepared],
+    corners: &[Option<Corner>],
+    k: usize,
+    v_in: f64,
+    v_out: f64,
+    lim: &Limits,
+    out: &mut Vec<Item>,
+) {
+    let m = &p[k];
+    let e = if k > 0 {
+        corners[k - 1].map_or(0.0, |c| c.half_length_mm(v_in))
+    } else {
+        0.0
+    };
+    let x = corners[k].map_or(0.0, |c| c.half_length_mm(v_out));
+    let mid = (m.len_mm - e - x).max(0.0);
+    let kind = kind_of(&m.mv);
+    let t = &m.tang;
+    // Peak speed of the middle part.
+    let fits = |vp: f64| t.distance_mm(v_in, vp) + t.distance_mm(vp, v_out) <= mid;
+    let lo0 = v_in.max(v_out);
+    let vp = if fits(m.vcap_mm_s) {
+        m.vcap_mm_s
+    } else if !fits(lo0) {
+        lo0
+    } else {
+        let (mut lo, mut hi) = (lo0, m.vcap_mm_s);
+        for _ in 0..60 {
+            let c = 0.5 * (lo + hi);
+            if fits(c) {
+                lo = c;
+            } else {
+                hi = c;
+            }
+            if hi - lo <= 1e-9 * hi.max(1.0) {
+                break;
+            }
+        }
+        lo
+    };
+    let d_up = t.distance_mm(v_in, vp);
+    let d_down = t.distance_mm(vp, v_out);
+    let cruise = (mid - d_up - d_down).max(0.0);
+    let mut pos = m.mv.start_mm;
+    for i in 0..NUM_AXES {
+        pos[i] += m.u[i] * e;
+    }
+    let mut done = e;
+    let line = m.mv.line;
+    let first_piece = out.len();
+    let mut piece = |s0: f64,
+                     s1: f64,
+                     dur: f64,
+                     jerk: f64,
+                     len: f64,
+                     pos: &mut [f64; NUM_AXES],
+                     done: &mut f64| {
+        *done += len;
+        let mut end = *pos;
+        for i in 0..NUM_AXES {
+            end[i] += m.u[i] * len;
+        }
+        let seg = Segment {
+            start_mm: *pos,
+            end_mm: end,
+            v0_mm_s: m.u.map(|c| c * s0),
+            v1_mm_s: m.u.map(|c| c * s1),
+            duration_s: dur,
+            jerk_s: jerk,
+            kind,
+            line,
+            length_mm: len,
+            move_rest_mm: (m.len_mm - *done).max(0.0),
+            override_cap: 1.0,
+            end_override_cap: 1.0,
+        };
+        *pos = end;
+        push(out, lim, seg);
+    };
+    let up = t.shape(v_in, vp);
+    piece(
+        v_in,
+        vp,
+        up.duration_s,
+        up.jerk_s,
+        d_up,
+        &mut pos,
+        &mut done,
+    );
+    if cruise > 0.0 && vp > 0.0 {
+        piece(vp, vp, cruise / vp, 0.0, cruise, &mut pos, &mut done);
+    }
+    let down = t.shape(vp, v_out);
+    piece(
+        vp,
+        v_out,
+        down.duration_s,
+        down.jerk_s,
+        d_down,
+        &mut pos,
+        &mut done,
+    );
+    // The blend starts from exact geometry, so rounding never accumulates.
+    let mut corner_start = m.mv.end_mm;
+    for i in 0..NUM_AXES {
+        corner_start[i] -= m.u[i] * x;
+    }
+    // The last piece ends exactly where the blend (or the next move) starts.
+    if out.len() > first_piece {
+        if let Some(Item::Segment(last)) = out.last_mut() {
+            last.end_mm = corner_start;
+        }
+    }
+    out.extend(m.aux_after.iter().map(|a| Item::Aux(*a)));
+    if let Some(c) = corners[k] {
+        if v_out > 0.0 && !c.is_straight() {
+            let nb = &p[k + 1];
+            let sh = c.shape(v_out);
+            let mut blend_end = nb.mv.start_mm;
+            for i in 0..NUM_AXES {
+                blend_end[i] += nb.u[i] * x;
+            }
+            let seg = Segment {
+                start_mm: corner_start,
+                end_mm: blend_end,
+                v0_mm_s: m.u.map(|c| c * v_out),
+                v1_mm_s: nb.u.map(|c| c * v_out),
+                duration_s: sh.duration_s,
+                jerk_s: sh.jerk_s,
+                kind: if m.mv.kind == MoveKind::Rapid && nb.mv.kind == MoveKind::Rapid {
+                    SegmentKind::Rapid
+                } else {
+                    SegmentKind::Feed
+                },
+                line: nb.mv.line,
+                length_mm: v_out * sh.duration_s,
+                move_rest_mm: (nb.len_mm - x).max(0.0),
+                override_cap: 1.0,
+                end_override_cap: 1.0,
+            };
+            push(out, lim, seg);
+        }
+    }
+}

@@ -1,0 +1,245 @@
+//! The time-parameterised segment queue: the only link between the planner (ordinary thread)
+//! and the interpolator (servo thread). Every item is `Copy` and fixed-size, with no heap
+//! pointer inside, so it can travel through a lock-free ring buffer.
+
+use super::profile::Shape;
+use crate::gcode::canon::{InputKind, OverrideKind, SpindleDir, WaitKind};
+use crate::gcode::NUM_AXES;
+
+/// What a segment does, for overrides and display.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SegmentKind {
+    /// A feed move (G1/G2/G3 or a blend into one): scaled by the feed override.
+    Feed,
+    /// A rapid move (G0): scaled by the rapid override.
+    Rapid,
+    /// A dwell (G4): no motion, runs in real time.
+    Dwell,
+}
+
+/// One velocity transition of the tool (see [`super::profile`]): starts at `start_mm` with
+/// velocity `v0_mm_s`, ends with `v1_mm_s` after `duration_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Segment {
+    /// Machine-frame pose at the start, mm (deg for A B C).
+    pub start_mm: [f64; NUM_AXES],
+    /// Pose at the end, exact (the next segment starts here), mm.
+    pub end_mm: [f64; NUM_AXES],
+    /// Velocity at the start, mm/s.
+    pub v0_mm_s: [f64; NUM_AXES],
+    /// Velocity at the end, mm/s.
+    pub v1_mm_s: [f64; NUM_AXES],
+    /// Duration at 100% override, s.
+    pub duration_s: f64,
+    /// Jerk-phase length of the S-curve, s.
+    pub jerk_s: f64,
+    /// Feed, rapid or dwell.
+    pub kind: SegmentKind,
+    /// Source line of the move this segment belongs to.
+    pub line: u32,
+    /// Path length of this segment, mm.
+    pub length_mm: f64,
+    /// Length of the move left after this segment ends, mm (for distance-to-go).
+    pub move_rest_mm: f64,
+    /// Largest time-scaling factor this segment tolerates within all limits (≥ 1): the
+    /// cap on the feed override here.
+    pub override_cap: f64,
+    /// Largest time scale allowed when this segment ends (what the segments after it
+    /// tolerate, ramped back at the interpolator's scale rate): the interpolator brings the
+    /// scale down in time for it.
+    pub end_override_cap: f64,
+}
+
+impl Segment {
+    /// The S-curve shape.
+    pub fn shape(&self) -> Shape {
+        Shape {
+            duration_s: self.duration_s,
+            jerk_s: self.jerk_s,
+        }
+    }
+
+    /// Pose at time `t_s` (clamped to the segment; exactly `end_mm` at the end).
+    pub fn pose_at(&self, t_s: f64) -> [f64; NUM_AXES] {
+        if t_s >= self.duration_s {
+            return self.end_mm;
+        }
+        let t = t_s.max(0.0);
+        let (_, cap_f) = self.shape().eval(t);
+        let mut p = self.start_mm;
+        for (i, p) in p.iter_mut().enumerate() {
+            *p += self.v0_mm_s[i] * t + (self.v1_mm_s[i] - self.v0_mm_s[i]) * cap_f;
+        }
+        p
+    }
+
+    /// End pose computed from the motion (equal to `end_mm` up to rounding).
+    pub fn integrated_end_mm(&self) -> [f64; NUM_AXES] {
+        let mut p = self.start_mm;
+        let h = 0.5 * self.duration_s;
+        for (i, p) in p.iter_mut().enumerate() {
+            *p += (self.v0_mm_s[i] + self.v1_mm_s[i]) * h;
+        }
+        p
+    }
+
+    /// Path length covered after `t_s`, mm (exact for straight segments, the speed-weighted
+    /// approximation for blends).
+    pub fn travelled_mm(&self, t_s: f64) -> f64 {
+        if self.duration_s <= 0.0 {
+            return self.length_mm;
+        }
+        let t = t_s.clamp(0.0, self.duration_s);
+        let (_, cap_f) = self.shape().eval(t);
+        let s0 = norm(&self.v0_mm_s);
+        let s1 = norm(&self.v1_mm_s);
+        let raw = s0 * t + (s1 - s0) * cap_f;
+        let full = 0.5 * (s0 + s1) * self.duration_s;
+        if full > 0.0 {
+            raw / full * self.length_mm
+        } else {
+            0.0
+        }
+    }
+
+    /// Per-axis peaks of velocity, acceleration and jerk at 100% override.
+    pub fn peaks(&self) -> [[f64; 3]; NUM_AXES] {
+        let s = self.shape();
+        let (r, j) = (s.peak_rate(), s.peak_jerk());
+        let mut out = [[0.0; 3]; NUM_AXES];
+        for (i, o) in out.iter_mut().enumerate() {
+            let dv = (self.v1_mm_s[i] - self.v0_mm_s[i]).abs();
+            *o = [
+                self.v0_mm_s[i].abs().max(self.v1_mm_s[i].abs()),
+                dv * r,
+                dv * j,
+            ];
+        }
+        out
+    }
+}
+
+pub(crate) fn norm(v: &[f64; NUM_AXES]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// A non-motion command, ordered with motion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AuxKind {
+    /// S word: new spindle speed. Does not stop motion (LinuxCNC issue #1813).
+    SpindleSpeed {
+        /// Revolutions per minute.
+        rpm: f64,
+    },
+    /// M3/M4.
+    SpindleStart(SpindleDir),
+    /// M5.
+    SpindleStop,
+    /// M7 (true) / M9 (false).
+    Mist(bool),
+    /// M8 (true) / M9 (false).
+    Flood(bool),
+    /// T word: prepare a tool.
+    SelectTool(u32),
+    /// M6 begins.
+    StartToolChange,
+    /// M6: swap in the prepared tool (pocket/slot).
+    ChangeTool(u32),
+    /// M61 Q.
+    ChangeToolNumber(u32),
+    /// M62–M65.
+    DigitalOutput {
+        /// Output index.
+        index: u32,
+        /// New state.
+        on: bool,
+        /// True for M62/M63 (with motion), false for M64/M65 (immediate: motion stops).
+        synced: bool,
+    },
+    /// M67/M68.
+    AnalogOutput {
+        /// Output index.
+        index: u32,
+        /// New value.
+        value: f64,
+        /// True for M67 (with motion), false for M68.
+        synced: bool,
+    },
+    /// M66.
+    Wait {
+        /// Input index.
+        index: u32,
+        /// Digital or analog.
+        input: InputKind,
+        /// Edge or level.
+        kind: WaitKind,
+        /// Timeout, s.
+        timeout_s: f64,
+    },
+    /// `(MSG, …)`: the text is `Plan::messages[id]` (items stay heap-free).
+    Message {
+        /// Index into `Plan::messages`.
+        id: u32,
+    },
+    /// M48–M53.
+    OverrideEnable {
+        /// Which override.
+        which: OverrideKind,
+        /// On or off.
+        on: bool,
+    },
+    /// M0.
+    ProgramStop,
+    /// M1.
+    OptionalProgramStop,
+    /// M2/M30.
+    ProgramEnd,
+    /// M100–M199.
+    UserMcode {
+        /// 100..=199.
+        code: u32,
+        /// P word.
+        p: f64,
+        /// Q word.
+        q: f64,
+    },
+}
+
+impl AuxKind {
+    /// True when motion must be stopped before the command runs and stay stopped until the
+    /// machine reports it done (`Interpolator::aux_done`). False for commands that ride
+    /// along with motion: S changes, synchronised I/O, coolant, messages, tool preparation.
+    pub fn is_barrier(&self) -> bool {
+        !matches!(
+            self,
+            AuxKind::SpindleSpeed { .. }
+                | AuxKind::Mist(_)
+                | AuxKind::Flood(_)
+                | AuxKind::SelectTool(_)
+                | AuxKind::DigitalOutput { synced: true, .. }
+                | AuxKind::AnalogOutput { synced: true, .. }
+                | AuxKind::Message { .. }
+                | AuxKind::OverrideEnable { .. }
+        )
+    }
+}
+
+/// A non-motion command and its source line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AuxItem {
+    /// The command.
+    pub kind: AuxKind,
+    /// Source line.
+    pub line: u32,
+}
+
+/// One entry of the segment queue. Deliberately unboxed: items are fixed-size so they can
+/// be copied through a lock-free ring without allocation.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Item {
+    /// Motion (or a dwell).
+    Segment(Segment),
+    /// A non-motion command, reached when every item before it has been executed.
+    Aux(AuxItem),
+}

@@ -1,0 +1,139 @@
+//! Runs a plan through the [`Interpolator`] at the servo period, as the servo thread would,
+//! and measures the sampled trace: per-axis peak velocity, acceleration and jerk by finite
+//! differences (which never exceed the true peaks of a C² trajectory), and path deviation.
+//! Used by `hytask plan`, the tests and the benchmarks.
+
+use super::config::MotionConfig;
+use super::interpolator::{InterpState, Interpolator, SliceSource};
+use super::segment::AuxItem;
+use super::Plan;
+use crate::gcode::NUM_AXES;
+
+/// The sampled trajectory.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trace {
+    /// Servo period, s.
+    pub dt_s: f64,
+    /// Cartesian setpoint of every period.
+    pub poses_mm: Vec<[f64; NUM_AXES]>,
+    /// Source line of every period.
+    pub lines: Vec<u32>,
+    /// Auxiliary items and the period they were reported in.
+    pub aux: Vec<(usize, AuxItem)>,
+    /// State of every period.
+    pub states: Vec<InterpState>,
+}
+
+impl Trace {
+    /// Time from the first period to the end of motion, s.
+    pub fn duration_s(&self) -> f64 {
+        self.poses_mm.len().saturating_sub(1) as f64 * self.dt_s
+    }
+
+    /// Per-axis peak |velocity|, |acceleration|, |jerk| by finite differences.
+    pub fn peaks(&self) -> Peaks {
+        let p = &self.poses_mm;
+        let dt = self.dt_s;
+        let mut pk = Peaks::default();
+        for i in 0..p.len() {
+            for a in 0..NUM_AXES {
+                if i + 1 < p.len() {
+                    pk.vel[a] = pk.vel[a].max(((p[i + 1][a] - p[i][a]) / dt).abs());
+                }
+                if i + 2 < p.len() {
+                    let d2 = p[i + 2][a] - 2.0 * p[i + 1][a] + p[i][a];
+                    pk.acc[a] = pk.acc[a].max((d2 / (dt * dt)).abs());
+                }
+                if i + 3 < p.len() {
+                    let d3 = p[i + 3][a] - 3.0 * p[i + 2][a] + 3.0 * p[i + 1][a] - p[i][a];
+                    pk.jerk[a] = pk.jerk[a].max((d3 / (dt * dt * dt)).abs());
+                }
+            }
+        }
+        pk
+    }
+}
+
+/// Per-axis peaks of a trace.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Peaks {
+    /// mm/s.
+    pub vel: [f64; NUM_AXES],
+    /// mm/s².
+    pub acc: [f64; NUM_AXES],
+    /// mm/s³.
+    pub jerk: [f64; NUM_AXES],
+}
+
+impl Peaks {
+    /// Largest ratio peak/limit over all axes and the three quantities (≤ 1 means within).
+    pub fn worst_ratio(&self, cfg: &MotionConfig) -> f64 {
+        let mut r = 0.0f64;
+        for (a, l) in cfg.axes.iter().enumerate() {
+            r = r.max(self.vel[a] / l.max_vel_mm_s);
+            r = r.max(self.acc[a] / l.max_acc_mm_s2);
+            r = r.max(self.jerk[a] / l.max_jerk_mm_s3);
+        }
+        r
+    }
+}
+
+/// Runs `plan` to completion; `control(period, interp)` is called before every period (to
+/// change overrides, hold, resume, abort). Commands that need the machine are acknowledged
+/// at once. Stops when the interpolator is done or idle after motion, or after `max_periods`.
+pub fn run(
+    plan: &Plan,
+    cfg: &MotionConfig,
+    max_periods: usize,
+    mut control: impl FnMut(usize, &mut Interpolator),
+) -> Trace {
+    let mut interp = Interpolator::new(cfg, plan.start_mm);
+    let mut src = SliceSource::new(&plan.items);
+    let mut tr = Trace {
+        dt_s: cfg.servo_period_s,
+        ..Trace::default()
+    };
+    tr.poses_mm.push(plan.start_mm);
+    tr.lines.push(0);
+    tr.states.push(InterpState::Idle);
+    for n in 0..max_periods {
+        control(n, &mut interp);
+        let out = *interp.step(&mut src);
+        tr.poses_mm.push(out.pose_mm);
+        tr.lines.push(out.line);
+        tr.states.push(out.state);
+        if let Some(a) = out.aux {
+            tr.aux.push((n + 1, a));
+        }
+        match out.state {
+            InterpState::Waiting => interp.aux_done(),
+            InterpState::Done | InterpState::Idle if n > 0 && out.aux.is_none() => break,
+            _ => {}
+        }
+    }
+    tr
+}
+
+/// Distance from `p` to the polyline `path` (XYZ), mm.
+pub fn distance_to_polyline_mm(p: &[f64; NUM_AXES], path: &[[f64; NUM_AXES]]) -> f64 {
+    let mut best = f64::INFINITY;
+    for w in path.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        let mut ab2 = 0.0;
+        let mut t = 0.0;
+        for i in 0..3 {
+            ab2 += (b[i] - a[i]) * (b[i] - a[i]);
+            t += (p[i] - a[i]) * (b[i] - a[i]);
+        }
+        let t = if ab2 > 0.0 {
+            (t / ab2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d2: f64 = (0..3)
+            .map(|i| (p[i] - (a[i] + t * (b[i] - a[i]))).powi(2))
+            .sum();
+        best = best.min(d2.sqrt());
+    }
+    best
+}

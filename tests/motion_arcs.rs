@@ -1,0 +1,154 @@
+//! Arcs (ARC_FEED with helix and turns), small-arc blends and dense polylines on curves:
+//! limits on the interpolated trace, chord/blend tolerance, exact ends.
+#![allow(clippy::unwrap_used)]
+
+mod motion_util;
+
+use hytask::gcode::canon::Plane;
+use hytask::gcode::CanonCmd;
+use hytask::motion::{plan, MotionConfig};
+use motion_util::*;
+use std::f64::consts::PI;
+
+/// G2/G3 in XY from the current point to (x, y) around (cx, cy), ending at z.
+fn arc(g: &mut Prog, x: f64, y: f64, cx: f64, cy: f64, rotation: i32, z: f64) {
+    g.cmd(CanonCmd::ArcFeed {
+        first_end: x,
+        second_end: y,
+        first_center: cx,
+        second_center: cy,
+        rotation,
+        axis_end: z,
+        plane: Plane::Xy,
+        end: pose(x, y, z),
+    });
+}
+
+/// Distance of a point from the ideal helix/circle (radial error in XY).
+fn radial_error(p: &[f64; 9], cx: f64, cy: f64, r: f64) -> f64 {
+    ((p[0] - cx).hypot(p[1] - cy) - r).abs()
+}
+
+#[test]
+fn full_circle_with_turns_and_helix() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(2400.0).g64(0.02).g1(10.0, 0.0, 0.0);
+    arc(&mut g, 10.0, 0.0, 0.0, 0.0, 2, -4.0); // two CCW turns, 4 mm down
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    assert_within_limits(&tr, &cfg);
+    assert_eq!(last(&tr), pose(10.0, 0.0, -4.0));
+    // On the helix: radial error within the chord tolerance (after the lead-in line).
+    // (Past the blend that joins the radial lead-in line, whose points are off the circle.)
+    let on_arc: Vec<_> = tr.poses_mm.iter().filter(|q| q[2] < -0.05).collect();
+    assert!(!on_arc.is_empty());
+    let worst = on_arc
+        .iter()
+        .map(|q| radial_error(q, 0.0, 0.0, 10.0))
+        .fold(0.0, f64::max);
+    assert!(
+        worst <= cfg.arc_chord_tolerance_mm + 1e-9,
+        "radial error {worst}"
+    );
+    // Z falls linearly with the angle: length of the helix ≈ 2 turns.
+    let expect = ((4.0 * PI * 10.0f64).powi(2) + 16.0).sqrt() + 10.0;
+    assert!(
+        (p.distance_mm - expect).abs() < 0.05,
+        "{} vs {expect}",
+        p.distance_mm
+    );
+}
+
+#[test]
+fn clockwise_arc_goes_the_short_way_round_the_right_side() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(1200.0).g1(10.0, 0.0, 0.0);
+    arc(&mut g, 0.0, -10.0, 0.0, 0.0, -1, 0.0); // CW quarter: through (7.07, -7.07)
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    assert!(tr.poses_mm.iter().all(|q| q[1] <= 1e-9 && q[0] >= -1e-9));
+    assert_eq!(last(&tr), pose(0.0, -10.0, 0.0));
+    assert_within_limits(&tr, &cfg);
+}
+
+/// LinuxCNC issue #3773: tiny arcs between lines made the blend overshoot acceleration by
+/// up to 8×. Here every blend is planned from the same S-curve, whatever the arc size.
+#[test]
+fn small_arc_blends_never_exceed_acceleration() {
+    let cfg = MotionConfig::default();
+    for r in [0.001, 0.01, 0.05, 0.2, 1.0] {
+        let mut g = Prog::new();
+        g.feed(3000.0).g64(0.05);
+        let mut x = 0.0;
+        let mut path = vec![pose(0.0, 0.0, 0.0)];
+        for i in 0..10 {
+            x += 5.0;
+            let y = if i % 2 == 0 { 0.0 } else { 2.0 * r };
+            g.g1(x, y, 0.0);
+            path.push(pose(x, y, 0.0));
+            // Half circle to the other side (a fillet-like tiny arc).
+            let (ny, rot) = if i % 2 == 0 { (2.0 * r, 1) } else { (0.0, -1) };
+            arc(&mut g, x, ny, x, r, rot, 0.0);
+            path.push(pose(x + r, r, 0.0));
+            path.push(pose(x, ny, 0.0));
+        }
+        let p = plan(&g.canon, &cfg).unwrap();
+        let tr = run(&p, &cfg);
+        assert_within_limits(&tr, &cfg);
+        assert_eq!(last(&tr), p.end_mm, "r = {r}");
+    }
+}
+
+#[test]
+fn dense_polyline_on_a_curve_is_fast_and_within_tolerance() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(3000.0).g64(0.02);
+    let mut path = vec![pose(0.0, 0.0, 0.0)];
+    let r = 30.0;
+    for i in 1..=1500 {
+        // 0.1 mm chords on a circle of radius 30 mm, entered tangentially.
+        let a = i as f64 * 0.1 / r;
+        let (x, y) = (r * a.sin(), r * (1.0 - a.cos()));
+        g.g1(x, y, 0.0);
+        path.push(pose(x, y, 0.0));
+    }
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    assert_within_limits(&tr, &cfg);
+    let dev = max_deviation(&tr, &path);
+    assert!(dev <= 0.02 + 1e-9, "deviation {dev}");
+    assert_eq!(last(&tr), p.end_mm);
+    // Feed-limited bound: 150 mm at 50 mm/s = 3 s.
+    assert!(p.duration_s < 1.2 * 3.0, "planned {} s", p.duration_s);
+}
+
+#[test]
+fn arcs_in_other_planes_end_exactly() {
+    let cfg = MotionConfig::default();
+    for plane in [Plane::Xz, Plane::Yz] {
+        let mut g = Prog::new();
+        g.feed(1200.0);
+        // Quarter circle of radius 5 in the plane, starting at the origin.
+        let (i1, i2, _) = hytask::motion::arcs::plane_axes(plane);
+        let mut end = [0.0; 9];
+        end[i1] = 5.0;
+        end[i2] = 5.0;
+        g.cmd(CanonCmd::ArcFeed {
+            first_end: 5.0,
+            second_end: 5.0,
+            first_center: 0.0,
+            second_center: 5.0,
+            rotation: 1,
+            axis_end: 0.0,
+            plane,
+            end,
+        });
+        let p = plan(&g.canon, &cfg).unwrap();
+        let tr = run(&p, &cfg);
+        assert_eq!(last(&tr), end);
+        assert_within_limits(&tr, &cfg);
+    }
+}

@@ -1,0 +1,133 @@
+//! Feed override, rapid override, feed hold/resume and abort through the interpolator's
+//! public API: never beyond a limit, never off the path, exact end where the job completes.
+#![allow(clippy::unwrap_used)]
+
+mod motion_util;
+
+use hytask::motion::trace;
+use hytask::motion::{plan, InterpState, MotionConfig, Plan};
+use motion_util::*;
+
+fn zigzag() -> (Prog, Vec<[f64; 9]>) {
+    let mut g = Prog::new();
+    g.feed(1500.0).g64(0.05);
+    let mut path = vec![pose(0.0, 0.0, 0.0)];
+    for i in 1..=12 {
+        let (x, y) = (i as f64 * 8.0, if i % 2 == 0 { 0.0 } else { 6.0 });
+        g.g1(x, y, 0.0);
+        path.push(pose(x, y, 0.0));
+    }
+    (g, path)
+}
+
+fn setup() -> (MotionConfig, Plan, Vec<[f64; 9]>) {
+    let cfg = MotionConfig::default();
+    let (g, path) = zigzag();
+    let p = plan(&g.canon, &cfg).unwrap();
+    (cfg, p, path)
+}
+
+#[test]
+fn feed_override_changes_stay_within_limits() {
+    let (cfg, p, path) = setup();
+    let tr = trace::run(&p, &cfg, max_periods(&p, &cfg), |n, it| match n {
+        200 => it.set_feed_override(2.0),
+        900 => it.set_feed_override(0.3),
+        1500 => it.set_feed_override(1.7),
+        2300 => it.set_feed_override(1.0),
+        _ => {}
+    });
+    assert_within_limits(&tr, &cfg);
+    assert!(max_deviation(&tr, &path) <= 0.05 + 1e-9);
+    assert_eq!(last(&tr), p.end_mm);
+}
+
+#[test]
+fn higher_override_is_faster_lower_is_slower() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(1200.0)
+        .g1(100.0, 0.0, 0.0)
+        .g1(100.0, 100.0, 0.0)
+        .g1(0.0, 0.0, 0.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let fast = trace::run(&p, &cfg, max_periods(&p, &cfg), |n, it| {
+        if n == 0 {
+            it.set_feed_override(2.0)
+        }
+    });
+    let slow = trace::run(&p, &cfg, max_periods(&p, &cfg), |n, it| {
+        if n == 0 {
+            it.set_feed_override(0.5)
+        }
+    });
+    let normal = run(&p, &cfg);
+    eprintln!(
+        "fast {} normal {} slow {}",
+        fast.duration_s(),
+        normal.duration_s(),
+        slow.duration_s()
+    );
+    assert!(fast.duration_s() < normal.duration_s());
+    assert!(slow.duration_s() > 1.5 * normal.duration_s());
+    assert_within_limits(&fast, &cfg);
+    assert_within_limits(&slow, &cfg);
+}
+
+#[test]
+fn hold_stops_on_path_and_resume_finishes_exactly() {
+    let (cfg, p, path) = setup();
+    let mut held_at = None;
+    let tr = trace::run(&p, &cfg, max_periods(&p, &cfg), |n, it| {
+        if n == 700 {
+            it.hold();
+        }
+        if n == 2500 {
+            held_at = Some(it.output().pose_mm);
+            assert_eq!(it.output().state, InterpState::Holding);
+            it.resume();
+        }
+    });
+    assert_within_limits(&tr, &cfg);
+    assert!(max_deviation(&tr, &path) <= 0.05 + 1e-9);
+    assert_eq!(last(&tr), p.end_mm);
+    let held = held_at.unwrap();
+    assert!(tr.states.contains(&InterpState::Holding));
+    // Standing still while held.
+    let i = tr.poses_mm.iter().position(|q| *q == held).unwrap();
+    assert_eq!(tr.poses_mm[i + 1], held);
+}
+
+#[test]
+fn abort_stops_within_limits_and_drops_the_rest() {
+    let (cfg, p, path) = setup();
+    let tr = trace::run(&p, &cfg, max_periods(&p, &cfg), |n, it| {
+        if n == 600 {
+            it.abort();
+        }
+    });
+    assert_within_limits(&tr, &cfg);
+    assert!(max_deviation(&tr, &path) <= 0.05 + 1e-9);
+    assert_eq!(*tr.states.last().unwrap(), InterpState::Idle);
+    assert_ne!(last(&tr), p.end_mm);
+    // Stopped: the last poses are equal.
+    let n = tr.poses_mm.len();
+    assert_eq!(tr.poses_mm[n - 1], tr.poses_mm[n - 2]);
+}
+
+#[test]
+fn rapid_override_slows_rapids() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.g0(200.0, 0.0, 0.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = trace::run(&p, &cfg, max_periods(&p, &cfg), |n, it| {
+        if n == 0 {
+            it.set_rapid_override(0.25)
+        }
+    });
+    let pk = tr.peaks();
+    assert!((pk.vel[0] - 12.5).abs() < 0.01, "{}", pk.vel[0]);
+    assert_within_limits(&tr, &cfg);
+    assert_eq!(last(&tr), p.end_mm);
+}

@@ -1,0 +1,119 @@
+//! Shared helpers of the motion tests: canonical streams built in code (the interpreter is
+//! developed in parallel), and trace checks. Included by the `motion_*` tests with `mod`.
+#![allow(dead_code, clippy::unwrap_used)]
+
+use hytask::gcode::canon::MotionControl;
+use hytask::gcode::{Canon, CanonCmd, SourceLoc};
+use hytask::motion::trace::{self, Trace};
+use hytask::motion::{MotionConfig, Plan};
+
+/// Relative tolerance on limit checks: finite differences of an f64 trace.
+pub const LIMIT_TOL: f64 = 1e-6;
+
+/// Builds canon streams with increasing line numbers.
+#[derive(Default)]
+pub struct Prog {
+    /// The stream built so far.
+    pub canon: Vec<Canon>,
+    line: u32,
+}
+
+impl Prog {
+    /// An empty program.
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Appends a command on the next line.
+    pub fn cmd(&mut self, cmd: CanonCmd) -> &mut Self {
+        self.line += 1;
+        self.canon.push(Canon {
+            loc: SourceLoc {
+                file: "test.ngc".into(),
+                line: self.line,
+                col: 1,
+            },
+            cmd,
+        });
+        self
+    }
+    /// Line number of the last command.
+    pub fn line(&self) -> u32 {
+        self.line
+    }
+    /// `F`, mm/min.
+    pub fn feed(&mut self, f_mm_min: f64) -> &mut Self {
+        self.cmd(CanonCmd::SetFeedRate(f_mm_min))
+    }
+    /// `G64 P`.
+    pub fn g64(&mut self, p: f64) -> &mut Self {
+        self.cmd(CanonCmd::SetMotionControl(MotionControl::Continuous {
+            tolerance: p,
+        }))
+    }
+    /// `G1 X Y Z`.
+    pub fn g1(&mut self, x: f64, y: f64, z: f64) -> &mut Self {
+        self.cmd(CanonCmd::StraightFeed(pose(x, y, z)))
+    }
+    /// `G0 X Y Z`.
+    pub fn g0(&mut self, x: f64, y: f64, z: f64) -> &mut Self {
+        self.cmd(CanonCmd::StraightTraverse(pose(x, y, z)))
+    }
+}
+
+/// A pose with X Y Z set.
+pub fn pose(x: f64, y: f64, z: f64) -> [f64; 9] {
+    let mut p = [0.0; 9];
+    p[0] = x;
+    p[1] = y;
+    p[2] = z;
+    p
+}
+
+/// Runs a plan without intervention.
+pub fn run(plan: &Plan, cfg: &MotionConfig) -> Trace {
+    trace::run(plan, cfg, max_periods(plan, cfg), |_, _| {})
+}
+
+/// Generous bound on the periods a plan needs.
+pub fn max_periods(plan: &Plan, cfg: &MotionConfig) -> usize {
+    (plan.duration_s * 20.0 / cfg.servo_period_s) as usize + 20_000
+}
+
+/// Asserts every axis' peak velocity, acceleration and jerk is within its limit.
+pub fn assert_within_limits(tr: &Trace, cfg: &MotionConfig) {
+    let pk = tr.peaks();
+    for (a, l) in cfg.axes.iter().enumerate() {
+        let t = 1.0 + LIMIT_TOL;
+        assert!(
+            pk.vel[a] <= l.max_vel_mm_s * t,
+            "axis {a}: velocity {} > {}",
+            pk.vel[a],
+            l.max_vel_mm_s
+        );
+        assert!(
+            pk.acc[a] <= l.max_acc_mm_s2 * t,
+            "axis {a}: acceleration {} > {}",
+            pk.acc[a],
+            l.max_acc_mm_s2
+        );
+        assert!(
+            pk.jerk[a] <= l.max_jerk_mm_s3 * t,
+            "axis {a}: jerk {} > {}",
+            pk.jerk[a],
+            l.max_jerk_mm_s3
+        );
+    }
+}
+
+/// Largest distance of the trace from the programmed polyline (XYZ).
+pub fn max_deviation(tr: &Trace, path: &[[f64; 9]]) -> f64 {
+    tr.poses_mm
+        .iter()
+        .map(|p| trace::distance_to_polyline_mm(p, path))
+        .fold(0.0, f64::max)
+}
+
+/// Last pose of a trace.
+pub fn last(tr: &Trace) -> [f64; 9] {
+    *tr.poses_mm.last().unwrap()
+}
