@@ -200,6 +200,16 @@ pub fn fold(
             CanonCmd::SetXyRotation(r) => st.rotation_deg = *r,
             CanonCmd::UseToolLengthOffset(o) => st.tool_mm = st.to_mm(o),
             CanonCmd::SelectPlane(_) | CanonCmd::Comment(_) => {}
+            // Interpreter bookkeeping with no effect on motion: (PRINT,…) goes to the
+            // interpreter's log, tool-table edits arrive as UseToolLengthOffset when used.
+            CanonCmd::Print(_)
+            | CanonCmd::PalletShuttle
+            | CanonCmd::OnReset
+            | CanonCmd::SetFeedReference
+            | CanonCmd::SetSpindleMode { .. }
+            | CanonCmd::Probe { .. }
+            | CanonCmd::SetToolTableEntry { .. }
+            | CanonCmd::Finish => {}
             CanonCmd::SetFeedRate(f) => st.feed = *f,
             CanonCmd::SetFeedMode(m) => st.feed_mode = *m,
             CanonCmd::SetMotionControl(m) => st.control = *m,
