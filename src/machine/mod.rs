@@ -2,6 +2,7 @@
 //! checks the topology and runs the machine state machine and its safety paths.
 
 pub mod api;
+pub mod job;
 pub mod mode;
 pub mod safety;
 

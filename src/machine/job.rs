@@ -1,0 +1,210 @@
+//! Job preparation, off the realtime path: interpret a G-code program in full, plan it in
+//! full (soft limits, kinematics, every axis limit), and only then hand it to the machine.
+//! A job with any error is refused as a whole before anything moves, and the error names
+//! file, line and column.
+
+use crate::config::MachineConfig;
+use crate::gcode::{self, InterpOptions, NUM_AXES};
+use crate::machine::api::{ApiError, JobSource};
+use crate::motion::{self, AxisLimits, KinematicsConfig, MotionConfig, Plan};
+use std::path::Path;
+
+/// A job that interpreted and planned without error.
+#[derive(Debug, Clone)]
+pub struct PreparedJob {
+    /// Display name (file name, or the given name for inline text).
+    pub name: String,
+    /// Lines in the source text.
+    pub total_lines: u32,
+    /// Canonical commands the interpreter produced.
+    pub commands: usize,
+    /// The plan: segment queue, messages, duration, distance.
+    pub plan: Plan,
+}
+
+/// Maps the machine description onto the planner's plain-data configuration.
+pub fn motion_config(cfg: &MachineConfig) -> MotionConfig {
+    let mut m = MotionConfig::default();
+    if let Some(t) = cfg.servo_thread() {
+        m.servo_period_s = t.period_us as f64 * 1e-6;
+    }
+    for a in &cfg.axes {
+        let i = a.name as usize;
+        m.axes[i] = AxisLimits {
+            max_vel_mm_s: a.max_velocity,
+            max_acc_mm_s2: a.max_acceleration,
+            // No jerk limit configured: full acceleration within one servo period, which is
+            // the trapezoidal profile at the servo's resolution.
+            max_jerk_mm_s3: a.max_jerk.unwrap_or(a.max_acceleration / m.servo_period_s),
+            min_mm: a.min_limit,
+            max_mm: a.max_limit,
+        };
+    }
+    // Axes the machine does not have may not move at all: zero travel.
+    for (i, limits) in m.axes.iter_mut().enumerate() {
+        if !cfg.axes.iter().any(|a| a.name as usize == i) {
+            limits.min_mm = 0.0;
+            limits.max_mm = 0.0;
+        }
+    }
+    m.lookahead_moves = cfg.motion.lookahead as usize;
+    m.default_tolerance_mm = cfg.motion.g64_tolerance;
+    m.max_feed_override = cfg.motion.max_feed_override;
+    m.kinematics = match cfg.machine.kinematics() {
+        crate::config::Kinematics::Identity => KinematicsConfig::Identity,
+        crate::config::Kinematics::Scara { link1_mm, link2_mm } => {
+            let mut sc = motion::ScaraConfig {
+                link1_mm,
+                link2_mm,
+                elbow_positive: true,
+                joint_min: [-1.0e9; NUM_AXES],
+                joint_max: [1.0e9; NUM_AXES],
+            };
+            sc.joint_min[0] = -180.0;
+            sc.joint_max[0] = 180.0;
+            sc.joint_min[1] = -170.0;
+            sc.joint_max[1] = 170.0;
+            KinematicsConfig::Scara(sc)
+        }
+    };
+    m
+}
+
+/// Interpreter options for this machine (tool table, machine units).
+pub fn interp_options(cfg: &MachineConfig) -> InterpOptions {
+    InterpOptions {
+        tool_table: cfg.tool_table.as_ref().map(|t| t.path.clone()),
+        ..InterpOptions::default()
+    }
+}
+
+/// Interprets and plans a job from a file or inline text, starting at machine pose
+/// `start_mm`.
+pub fn prepare(
+    src: &JobSource,
+    opts: &InterpOptions,
+    motion: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+) -> Result<PreparedJob, ApiError> {
+    let (name, text) = match (&src.path, &src.text) {
+        (Some(path), None) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| ApiError::InvalidParams(format!("cannot read job {path}: {e}")))?;
+            (path.clone(), text)
+        }
+        (None, Some(text)) => (
+            src.name.clone().unwrap_or_else(|| "inline".into()),
+            text.clone(),
+        ),
+        _ => {
+            return Err(ApiError::InvalidParams(
+                "give exactly one of 'path' or 'text'".into(),
+            ))
+        }
+    };
+    let program = match &src.path {
+        Some(p) => gcode::load_file(Path::new(p), opts),
+        None => gcode::load_str(&name, &text, opts),
+    }
+    .map_err(|e| ApiError::Gcode(e.to_string()))?;
+    let plan = motion::plan_from(&program.canon, motion, start_mm)
+        .map_err(|e| ApiError::Gcode(format!("{name}: {e}")))?;
+    let display = Path::new(&name)
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or(name);
+    Ok(PreparedJob {
+        name: display,
+        total_lines: text.lines().count() as u32,
+        commands: program.canon.len(),
+        plan,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sim() -> MachineConfig {
+        crate::config::builtin_sim().expect("built-in config")
+    }
+
+    #[test]
+    fn motion_config_takes_axis_limits_and_servo_period() {
+        let m = motion_config(&sim());
+        assert_eq!(m.axes[0].max_vel_mm_s, 100.0);
+        assert_eq!(m.axes[2].min_mm, -100.0);
+        assert_eq!(m.servo_period_s, 0.001);
+        // The sim mill has no A axis: it may not move.
+        assert_eq!((m.axes[3].min_mm, m.axes[3].max_mm), (0.0, 0.0));
+        m.validate().expect("valid");
+    }
+
+    #[test]
+    fn a_job_with_a_gcode_error_is_refused_with_its_location() {
+        let cfg = sim();
+        let src = JobSource {
+            path: None,
+            text: Some("G21 G90\nG0 X10 Y10 Z-5\nG1 X20 F600 G0\n".into()),
+            name: Some("bad.ngc".into()),
+        };
+        let e = prepare(
+            &src,
+            &interp_options(&cfg),
+            &motion_config(&cfg),
+            [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .unwrap_err();
+        let ApiError::Gcode(msg) = e else {
+            panic!("{e:?}")
+        };
+        assert!(msg.starts_with("bad.ngc:3:"), "{msg}");
+    }
+
+    #[test]
+    fn a_job_leaving_the_soft_limits_is_refused_before_motion() {
+        let cfg = sim();
+        let src = JobSource {
+            path: None,
+            text: Some("G21 G90\nG0 X10 Y10 Z-5\nG1 X400 F600\nM2\n".into()),
+            name: Some("far.ngc".into()),
+        };
+        let e = prepare(
+            &src,
+            &interp_options(&cfg),
+            &motion_config(&cfg),
+            [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("far.ngc") && msg.contains("line 3") && msg.contains("400"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn a_good_job_is_planned_in_full() {
+        let cfg = sim();
+        let src = JobSource {
+            path: None,
+            text: Some("G21 G90\nG0 X10 Y10 Z-5\nG1 X20 F600\nM2\n".into()),
+            name: None,
+        };
+        let j = prepare(
+            &src,
+            &interp_options(&cfg),
+            &motion_config(&cfg),
+            [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+        .expect("plans");
+        assert_eq!(j.name, "inline");
+        assert_eq!(j.total_lines, 4);
+        assert!(
+            j.plan.duration_s > 0.9 && j.plan.duration_s < 2.0,
+            "{}",
+            j.plan.duration_s
+        );
+        assert!((j.plan.end_mm[0] - 20.0).abs() < 1e-9);
+    }
+}
