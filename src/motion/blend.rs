@@ -6,6 +6,11 @@
 //! no blend can overshoot the limits, however small (cf. LinuxCNC issue #3773).
 
 use super::limits::Limits;
+
+/// Largest share of each adjacent move a blend may use: with 1/2, blends on a dense curve
+/// may tile the chords completely; the lookahead passes then lower junction speeds (which
+/// shortens the blends) wherever a move needs straight room to change speed.
+pub const BLEND_ROOM_FRACTION: f64 = 0.5;
 use super::profile::Shape;
 use crate::gcode::NUM_AXES;
 
@@ -69,7 +74,7 @@ impl Corner {
         if self.is_straight() {
             return cap_mm_s;
         }
-        let room = 0.5 * len_a_mm.min(len_b_mm);
+        let room = BLEND_ROOM_FRACTION * len_a_mm.min(len_b_mm);
         let ok = |v: f64| self.half_length_mm(v) <= room && self.deviation_mm(v) <= tolerance_mm;
         if ok(cap_mm_s) {
             return cap_mm_s;

@@ -147,12 +147,45 @@ fn plan_run(
             c.max_speed(a.vcap_mm_s.min(b.vcap_mm_s), a.len_mm, b.len_mm, tol)
         })
         .collect();
-    let dmax: Vec<f64> = (0..n)
-        .map(|k| corners[k].map_or(0.0, |c| c.half_length_mm(jmax[k])))
-        .collect();
-    let mmin: Vec<f64> = (0..n)
-        .map(|k| (p[k].len_mm - dmax[k] - if k > 0 { dmax[k - 1] } else { 0.0 }).max(0.0))
-        .collect();
+    // Move k must hold the blend halves at both ends plus its speed change:
+    // g_k(a, b) = d_{k-1}(a) + d_k(b) + D_k(a, b) ≤ L_k, a and b the junction speeds.
+    let half = |j: Option<usize>, v: f64| {
+        j.and_then(|j| corners[j])
+            .map_or(0.0, |c| c.half_length_mm(v))
+    };
+    let g = |k: usize, a: f64, b: f64| {
+        half(k.checked_sub(1), a) + half(Some(k), b) + p[k].tang.distance_mm(a, b)
+    };
+    let bisect = |mut lo: f64, mut hi: f64, ok: &dyn Fn(f64) -> bool| {
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if ok(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if hi - lo <= 1e-9 * hi.max(1.0) {
+                break;
+            }
+        }
+        lo
+    };
+    // Backward step over move k: highest entry speed a ≤ a_cap that can slow to b.
+    let entry = |k: usize, a_cap: f64, b: f64| {
+        if a_cap <= b || g(k, a_cap, b) <= p[k].len_mm {
+            a_cap
+        } else {
+            bisect(b, a_cap, &|a| g(k, a, b) <= p[k].len_mm)
+        }
+    };
+    // Forward step over move k: highest exit speed b ≤ b_cap reachable from a.
+    let exit = |k: usize, a: f64, b_cap: f64| {
+        if b_cap <= a || g(k, a, b_cap) <= p[k].len_mm {
+            b_cap
+        } else {
+            bisect(a, b_cap, &|b| g(k, a, b) <= p[k].len_mm)
+        }
+    };
 
     let mut vj = jmax.clone();
     let mut base = 0;
@@ -160,22 +193,14 @@ fn plan_run(
     while base < n {
         let end = (base + window).min(n);
         // Backward pass from a stop at the end of the window.
-        vj[end - 1] = if end == n {
-            0.0
-        } else {
-            0.0f64.min(jmax[end - 1])
-        };
+        vj[end - 1] = 0.0;
         for k in (base..end - 1).rev() {
-            vj[k] = jmax[k].min(p[k + 1].tang.reach_mm_s(
-                vj[k + 1],
-                mmin[k + 1],
-                p[k + 1].vcap_mm_s,
-            ));
+            vj[k] = entry(k + 1, jmax[k], vj[k + 1]);
         }
         // Forward pass.
         let mut prev = v_start;
         for k in base..end {
-            vj[k] = vj[k].min(p[k].tang.reach_mm_s(prev, mmin[k], p[k].vcap_mm_s));
+            vj[k] = exit(k, prev, vj[k]);
             prev = vj[k];
         }
         let commit = if end == n {

@@ -44,6 +44,7 @@
 
 pub mod arcs;
 pub mod blend;
+pub mod bounds;
 pub mod config;
 mod error;
 pub mod from_canon;
