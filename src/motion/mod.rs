@@ -56,6 +56,7 @@ pub mod merge;
 pub mod moves;
 pub mod profile;
 pub mod segment;
+pub mod svg;
 pub mod trace;
 
 pub use config::{AxisLimits, KinematicsConfig, MotionConfig, ScaraConfig};
