@@ -42,3 +42,53 @@ proptest! {
         prop_assert_eq!(last(&tr), *path.last().unwrap());
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, .. ProptestConfig::default() })]
+
+    /// Random override changes, holds, resumes and an optional abort at random periods
+    /// never push an axis past a limit, never leave the path, and a job that is not aborted
+    /// ends exactly at its end point.
+    #[test]
+    fn random_override_hold_abort_schedules_respect_limits(
+        pts in prop::collection::vec((-30.0f64..30.0, -30.0f64..30.0), 2..12),
+        feed in 300.0f64..3000.0,
+        events in prop::collection::vec((0usize..6000, 0u8..5, 0.0f64..2.0), 0..8),
+        abort_at in prop::option::of(0usize..4000),
+    ) {
+        let cfg = MotionConfig::default();
+        let mut g = Prog::new();
+        g.feed(feed).g64(0.05);
+        let mut path = vec![pose(0.0, 0.0, 0.0)];
+        for (x, y) in pts {
+            g.g1(x, y, 0.0);
+            path.push(pose(x, y, 0.0));
+        }
+        let p = plan(&g.canon, &cfg).unwrap();
+        let tr = hytask::motion::trace::run(&p, &cfg, max_periods(&p, &cfg) + 20_000, |n, it| {
+            for (at, what, val) in &events {
+                if *at == n {
+                    match what {
+                        0 | 1 => it.set_feed_override(*val),
+                        2 => it.hold(),
+                        3 => it.resume(),
+                        _ => it.set_rapid_override(*val),
+                    }
+                }
+            }
+            if n == 7000 {
+                it.resume();
+                it.set_feed_override(1.0);
+            }
+            if Some(n) == abort_at {
+                it.abort();
+            }
+        });
+        assert_within_limits(&tr, &cfg);
+        let dev = max_deviation(&tr, &path);
+        prop_assert!(dev <= 0.05 + 1e-9, "deviation {}", dev);
+        if abort_at.is_none() {
+            prop_assert_eq!(last(&tr), *path.last().unwrap());
+        }
+    }
+}
