@@ -127,23 +127,47 @@ pub fn load(file: &Path) -> anyhow::Result<Vec<crate::gcode::Canon>> {
 pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     let cfg = args.motion.config()?;
     let canon = load(&args.file)?;
+    let mut out = String::new();
+    let within = report(&args.file.display().to_string(), &canon, &cfg, &mut out)?;
+    print!("{out}");
+    Ok(if within {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}
+
+/// Plans `canon`, interpolates it at the servo period and writes the report; returns false
+/// if a trace peak exceeds its limit (which the planner is built never to allow).
+pub fn report(
+    name: &str,
+    canon: &[crate::gcode::Canon],
+    cfg: &MotionConfig,
+    out: &mut String,
+) -> anyhow::Result<bool> {
+    use std::fmt::Write;
     let t0 = std::time::Instant::now();
-    let plan = crate::motion::plan(&canon, &cfg)?;
+    let plan = crate::motion::plan(canon, cfg)?;
     let plan_s = t0.elapsed().as_secs_f64();
-    let b = bounds::bounds(&canon, &cfg)?;
+    let b = bounds::bounds(canon, cfg)?;
     let periods = (plan.duration_s * 10.0 / cfg.servo_period_s) as usize + 100_000;
-    let tr = trace::run(&plan, &cfg, periods, |_, _| {});
+    let tr = trace::run(&plan, cfg, periods, |_, _| {});
     let pk = tr.peaks();
-    println!("file:            {}", args.file.display());
-    println!(
+    writeln!(out, "file:            {name}")?;
+    writeln!(
+        out,
         "planned:         {} lines, {} segments in {:.1} ms ({:.0} segments/s)",
         plan.line_count,
         plan.segment_count,
         plan_s * 1e3,
         plan.segment_count as f64 / plan_s.max(1e-9)
-    );
-    println!("job time:        {:.3} s at 100% override", plan.duration_s);
-    println!("distance:        {:.3} mm", plan.distance_mm);
+    )?;
+    writeln!(
+        out,
+        "job time:        {:.3} s at 100% override",
+        plan.duration_s
+    )?;
+    writeln!(out, "distance:        {:.3} mm", plan.distance_mm)?;
     let ratio = |x: f64| {
         if x > 0.0 {
             plan.duration_s / x
@@ -151,35 +175,40 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
             f64::NAN
         }
     };
-    println!(
+    writeln!(
+        out,
         "feed bound:      {:.3} s  (plan = {:.3}x)",
         b.feed_limited_s,
         ratio(b.feed_limited_s)
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "accel bound:     {:.3} s  (plan = {:.3}x)",
         b.accel_aware_s,
         ratio(b.accel_aware_s)
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "stop at corners: {:.3} s  (plan = {:.3}x)",
         b.naive_stop_s,
         ratio(b.naive_stop_s)
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "trace:           {} periods of {:.3} ms = {:.3} s",
         tr.poses_mm.len(),
         cfg.servo_period_s * 1e3,
         tr.duration_s()
-    );
-    println!("axis   peak vel / limit (mm/s)      peak acc / limit (mm/s²)     peak jerk / limit (mm/s³)");
+    )?;
+    writeln!(out, "axis   peak vel / limit (mm/s)      peak acc / limit (mm/s²)     peak jerk / limit (mm/s³)")?;
     let mut within = true;
     for (a, l) in cfg.axes.iter().enumerate() {
         if pk.vel[a] == 0.0 {
             continue;
         }
         let pct = |x: f64, lim: f64| 100.0 * x / lim;
-        println!(
+        writeln!(
+            out,
             "{}      {:>9.3} / {:<9.3} {:>5.1}%  {:>10.2} / {:<10.2} {:>5.1}%  {:>11.1} / {:<11.1} {:>5.1}%",
             AXIS_NAMES[a],
             pk.vel[a],
@@ -191,16 +220,15 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
             pk.jerk[a],
             l.max_jerk_mm_s3,
             pct(pk.jerk[a], l.max_jerk_mm_s3)
-        );
+        )?;
         within &= pk.vel[a] <= l.max_vel_mm_s * 1.000_001
             && pk.acc[a] <= l.max_acc_mm_s2 * 1.000_001
             && pk.jerk[a] <= l.max_jerk_mm_s3 * 1.000_001;
     }
     if !within {
-        println!("LIMIT EXCEEDED");
-        return Ok(ExitCode::FAILURE);
+        writeln!(out, "LIMIT EXCEEDED")?;
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(within)
 }
 
 #[cfg(test)]
@@ -226,6 +254,38 @@ mod tests {
         assert_eq!(cfg.axes[2].max_acc_mm_s2, 700.0);
         assert_eq!(cfg.axes[3], MotionConfig::default().axes[3]);
         assert_eq!(cfg.servo_period_s, 0.0005);
+    }
+
+    #[test]
+    fn report_names_time_bounds_and_axis_peaks() {
+        use crate::gcode::{Canon, CanonCmd, SourceLoc};
+        let loc = |line| SourceLoc {
+            file: "t.ngc".into(),
+            line,
+            col: 1,
+        };
+        let mut p = [0.0; 9];
+        p[0] = 30.0;
+        p[1] = 10.0;
+        let canon = vec![
+            Canon {
+                loc: loc(1),
+                cmd: CanonCmd::SetFeedRate(1200.0),
+            },
+            Canon {
+                loc: loc(2),
+                cmd: CanonCmd::StraightFeed(p),
+            },
+        ];
+        let mut out = String::new();
+        assert!(report("t.ngc", &canon, &MotionConfig::default(), &mut out).unwrap());
+        assert!(out.contains("job time:"), "{out}");
+        assert!(out.contains("distance:        31.623 mm"), "{out}");
+        assert!(out.contains("feed bound:      1.581 s"), "{out}");
+        assert!(
+            out.lines().any(|l| l.starts_with("X ")) && out.lines().any(|l| l.starts_with("Y "))
+        );
+        assert!(!out.lines().any(|l| l.starts_with("Z ")));
     }
 
     #[test]
