@@ -131,3 +131,36 @@ fn rapid_override_slows_rapids() {
     assert_within_limits(&tr, &cfg);
     assert_eq!(last(&tr), p.end_mm);
 }
+
+#[test]
+fn queue_underrun_while_moving_is_reported() {
+    let (cfg, p, _) = setup();
+    // Feed only the first half of the queue.
+    let half = &p.items[..p.items.len() / 2];
+    let mut it = hytask::motion::Interpolator::new(&cfg, p.start_mm);
+    let mut src = hytask::motion::SliceSource::new(half);
+    let mut underrun = false;
+    for _ in 0..100_000 {
+        let out = *it.step(&mut src);
+        underrun |= out.underrun;
+        if out.state == InterpState::Done {
+            break;
+        }
+    }
+    assert!(underrun);
+    // The whole queue ends at rest: no underrun.
+    let tr_ok = {
+        let mut it = hytask::motion::Interpolator::new(&cfg, p.start_mm);
+        let mut src = hytask::motion::SliceSource::new(&p.items);
+        let mut any = false;
+        for _ in 0..100_000 {
+            let out = *it.step(&mut src);
+            any |= out.underrun;
+            if out.state == InterpState::Done {
+                break;
+            }
+        }
+        any
+    };
+    assert!(!tr_ok);
+}

@@ -19,7 +19,7 @@ use crate::gcode::NUM_AXES;
 /// Most queue items consumed in one servo period (bounds the work of a cycle).
 pub const MAX_ITEMS_PER_STEP: usize = 256;
 /// Auxiliary items that can wait to be reported (one is reported per cycle).
-const AUX_RING: usize = 32;
+const AUX_RING: usize = 64;
 
 /// Where the interpolator takes its segments from: a `Vec` in tests, the realtime core's
 /// lock-free ring buffer in the daemon.
@@ -91,6 +91,10 @@ pub struct InterpOutput {
     pub scale: f64,
     /// Kinematics failure of this period (joints then hold their last value).
     pub fault: Option<KinematicsError>,
+    /// The queue ran dry while the tool was moving (the producer fell behind): motion stopped
+    /// without deceleration. A plan always ends at rest, so this only happens when the
+    /// thread filling the queue is late; the machine should treat it as a fault.
+    pub underrun: bool,
 }
 
 /// The servo-thread interpolator.
@@ -151,6 +155,7 @@ impl Interpolator {
                 aux: None,
                 scale: 1.0,
                 fault: joints.err(),
+                underrun: false,
             },
         }
     }
@@ -272,6 +277,7 @@ impl Interpolator {
     pub fn step(&mut self, src: &mut impl SegmentSource) -> &InterpOutput {
         let mut budget = MAX_ITEMS_PER_STEP;
         self.out.fault = None;
+        self.out.underrun = false;
         if self.abort && self.seg.is_none() {
             self.finish_abort(src, &mut budget);
         }
@@ -308,6 +314,7 @@ impl Interpolator {
                         self.t_s = rest;
                     }
                     None => {
+                        self.out.underrun = !self.waiting && s.v1_mm_s.iter().any(|v| *v != 0.0);
                         self.t_s = 0.0;
                         break;
                     }
