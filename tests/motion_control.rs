@@ -112,7 +112,10 @@ fn abort_stops_within_limits_and_drops_the_rest() {
     assert_ne!(last(&tr), p.end_mm);
     // Stopped: the last poses are equal.
     let n = tr.poses_mm.len();
-    assert_eq!(tr.poses_mm[n - 1], tr.poses_mm[n - 2]);
+    let d: f64 = (0..9)
+        .map(|i| (tr.poses_mm[n - 1][i] - tr.poses_mm[n - 2][i]).abs())
+        .sum();
+    assert!(d < 1e-6, "still moving: {d} mm per period");
 }
 
 #[test]

@@ -263,13 +263,33 @@ impl Interpolator {
         }
     }
 
-    /// Second derivative of the scale for this period: drive `k` to `target` with |k̇| ≤ k1,
-    /// |k̈| ≤ k2, braking early enough in discrete time not to overshoot.
-    fn scale_jerk(&self, target: f64) -> f64 {
+    /// Second derivative of the scale for this period: drive `k` to `target` with |k̇|
+    /// within the segment's rate limit and |k̈| ≤ k2, braking early enough in discrete time
+    /// not to overshoot.
+    fn scale_jerk(&self, s: &Segment, target: f64) -> f64 {
         let e = target - self.k;
         let (k2, dt) = (self.k2, self.dt_s);
-        let brake = ((k2 * dt / 2.0).powi(2) + 2.0 * k2 * e.abs()).sqrt() - k2 * dt / 2.0;
-        let vd = e.signum() * self.k1.min(brake);
+        let left = (s.duration_s - self.t_s).max(0.0);
+        let rate = s
+            .scale_rate_max
+            .min(s.end_scale_rate_max + 0.9 * k2 * left / self.max_override)
+            .max(self.k1);
+        // Largest speed toward the target at the end of this period from which a k̈ = k2
+        // braking still stops at the target, counting the distance covered during the
+        // period itself (trapezoid of the current and the new k̇).
+        let toward = self.kd * e.signum();
+        let room = (e.abs() - toward * dt / 2.0).max(0.0);
+        let brake = ((k2 * dt / 2.0).powi(2) + 2.0 * k2 * room).sqrt() - k2 * dt / 2.0;
+        // Above scale 1 the override caps assume |k̇| ≤ k1 (their margin covers the lag of
+        // that rate only): rising, arrive at 1 no faster than k1 and stay at k1 above it.
+        let rate = if e > 0.0 && target > 1.0 {
+            let below = (1.0 - self.k).max(0.0);
+            rate.min((self.k1 * self.k1 + 2.0 * k2 * below).sqrt())
+                .max(self.k1)
+        } else {
+            rate
+        };
+        let vd = e.signum() * rate.min(brake);
         ((vd - self.kd) / dt).clamp(-k2, k2)
     }
 
@@ -293,13 +313,21 @@ impl Interpolator {
                     dt
                 }
             } else {
-                let kdd = self.scale_jerk(self.target_scale(&s));
+                let kdd = self.scale_jerk(&s, self.target_scale(&s));
                 let a = self.k * dt + self.kd * dt * dt / 2.0 + kdd * dt * dt * dt / 6.0;
                 self.k += self.kd * dt + kdd * dt * dt / 2.0;
                 self.kd += kdd * dt;
                 if self.k < 0.0 {
                     self.k = 0.0;
                     self.kd = self.kd.max(0.0);
+                }
+                if self.hold || self.abort {
+                    // Settle exactly at rest once the remainder is far below anything
+                    // measurable (a 1e-9 scale step is a nm/s-level velocity step).
+                    if self.k < 1e-9 && self.kd.abs() < 1e-6 {
+                        self.k = 0.0;
+                        self.kd = 0.0;
+                    }
                 }
                 a.max(0.0)
             };

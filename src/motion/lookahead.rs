@@ -72,6 +72,8 @@ pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
                     move_rest_mm: 0.0,
                     override_cap: lim.max_override,
                     end_override_cap: lim.max_override,
+                    scale_rate_max: 0.0,
+                    end_scale_rate_max: 0.0,
                 }));
             }
         }
@@ -309,6 +311,8 @@ fn emit_move(
             move_rest_mm: (m.len_mm - *done).max(0.0),
             override_cap: 1.0,
             end_override_cap: 1.0,
+            scale_rate_max: 0.0,
+            end_scale_rate_max: 0.0,
         };
         *pos = end;
         push(out, lim, seg);
@@ -373,6 +377,8 @@ fn emit_move(
                 move_rest_mm: (nb.len_mm - x).max(0.0),
                 override_cap: 1.0,
                 end_override_cap: 1.0,
+                scale_rate_max: 0.0,
+                end_scale_rate_max: 0.0,
             };
             push(out, lim, seg);
         }

@@ -48,6 +48,13 @@ pub struct Segment {
     /// tolerate, ramped back at the interpolator's scale rate): the interpolator brings the
     /// scale down in time for it.
     pub end_override_cap: f64,
+    /// Largest rate of change of the time scale in this segment, 1/s: what the segment's
+    /// acceleration and jerk leave free for the `p'·k̇` and `p''·k·k̇` terms (so a hold in
+    /// a cruise decelerates at nearly the full axis acceleration).
+    pub scale_rate_max: f64,
+    /// Largest scale rate allowed when this segment ends (what follows tolerates, ramped
+    /// back at the interpolator's `k̈` limit).
+    pub end_scale_rate_max: f64,
 }
 
 impl Segment {
