@@ -167,3 +167,28 @@ fn queue_underrun_while_moving_is_reported() {
     };
     assert!(!tr_ok);
 }
+
+/// A hold in a cruise uses the acceleration the cruise leaves free: from 50 mm/s with
+/// 500 mm/s² it stops in 5 mm (the fastest S-curve stop at the full limits takes 2.75 mm; the
+/// rest is the k̈ bound kept from the jerk reserve).
+#[test]
+fn hold_in_cruise_stops_quickly() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(3000.0).g1(200.0, 0.0, 0.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let mut at_hold = 0.0;
+    let tr = trace::run(&p, &cfg, 20_000, |n, it| {
+        if n == 1500 {
+            at_hold = it.output().pose_mm[0];
+            it.hold();
+        }
+        if n == 3000 {
+            it.abort();
+        }
+    });
+    assert_within_limits(&tr, &cfg);
+    let stop = last(&tr)[0] - at_hold;
+    assert!(stop < 5.5, "stopping distance {stop} mm");
+    assert!(stop > 2.75, "faster than physically possible: {stop} mm");
+}
