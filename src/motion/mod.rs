@@ -7,10 +7,26 @@
 //! [`Plan`] of `Copy` [`Item`]s → the [`Interpolator`] on the servo thread.
 //!
 //! Every segment is one S-curve velocity transition between two velocity *vectors* (see
-//! [`profile`]); corners are blends of that same shape. That is what makes the limits
-//! provable: each axis' velocity, acceleration and jerk inside a segment is known in closed
-//! form and planned within the limits, and the interpolator's time scaling (overrides, hold,
-//! abort) uses a reserved share of acceleration and jerk.
+//! [`profile`]); corners are blends of that same shape ([`blend`]). That is what makes the
+//! limits provable: each axis' velocity, acceleration and jerk inside a segment is known in
+//! closed form and planned within the limits, velocity is continuous and acceleration is zero
+//! at every segment boundary, so the trace is C² with bounded jerk everywhere.
+//!
+//! Overrides, feed hold and abort are time scaling in the interpolator (`dσ/dt = k`). The
+//! planner plans with `(1 - override_reserve)` of each axis' acceleration and jerk and
+//! records per segment how far `k` may go ([`Segment::override_cap`]) and how fast it may
+//! change ([`Segment::scale_rate_max`]); the interpolator never leaves those bounds, so no
+//! override change, hold or abort exceeds a limit or leaves the path. Above 100%, only the
+//! parts of the path that are not already at a limit get faster (cruises below the axis
+//! velocity), as with any planner.
+//!
+//! Non-motion commands ride in the queue in program order. Barriers ([`AuxKind::is_barrier`]:
+//! M0/M1/M2, spindle start/stop, tool change, M66 wait, immediate I/O, user M-codes) end the
+//! lookahead run at rest and the interpolator waits for `aux_done`; S changes, synchronised
+//! I/O (M62/M63/M67), coolant and messages are reported when reached without slowing down.
+//!
+//! Usage (the lead wraps `step` in the servo task and feeds the queue through a lock-free
+//! buffer implementing [`SegmentSource`]):
 //!
 //! ```
 //! use hytask::gcode::{Canon, CanonCmd, SourceLoc};
