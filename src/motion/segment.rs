@@ -250,3 +250,41 @@ pub enum Item {
     /// A non-motion command, reached when every item before it has been executed.
     Aux(AuxItem),
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn realtime_safe<T: Copy + Send + Sync + 'static>() {}
+
+    #[test]
+    fn queue_items_are_copy_send_and_small() {
+        realtime_safe::<Item>();
+        realtime_safe::<AuxItem>();
+        // Fixed size, no heap: a ring of 4096 items is under 1.5 MiB.
+        assert!(
+            std::mem::size_of::<Item>() <= 360,
+            "{}",
+            std::mem::size_of::<Item>()
+        );
+    }
+
+    #[test]
+    fn barriers_are_the_commands_that_need_motion_stopped() {
+        assert!(!AuxKind::SpindleSpeed { rpm: 1.0 }.is_barrier());
+        assert!(!AuxKind::DigitalOutput {
+            index: 0,
+            on: true,
+            synced: true
+        }
+        .is_barrier());
+        assert!(AuxKind::DigitalOutput {
+            index: 0,
+            on: true,
+            synced: false
+        }
+        .is_barrier());
+        assert!(AuxKind::SpindleStart(SpindleDir::Clockwise).is_barrier());
+        assert!(AuxKind::ProgramEnd.is_barrier());
+    }
+}
