@@ -147,17 +147,14 @@ pub fn plan_from(
                 distance_mm += s.length_mm;
                 segment_count += 1;
                 lines.insert(s.line);
-                if s.kind != SegmentKind::Dwell
-                    && !matches!(cfg.kinematics, KinematicsConfig::Identity)
-                {
-                    // Joint limits and reach along the way (blends and arcs leave the chords).
-                    for f in [0.5, 1.0] {
-                        kin.inverse(&s.pose_at(f * s.duration_s))
-                            .map_err(|source| PlanError::Kinematics {
-                                line: s.line,
-                                source,
-                            })?;
-                    }
+                if let KinematicsConfig::Scara(sc) = &cfg.kinematics {
+                    // Reach, joint limits and joint speeds along the way (blends and arcs
+                    // leave the chords; joint speeds grow near full extension).
+                    kinematics::check_segment(&kin, s, &sc.joint_max_vel, cfg.servo_period_s)
+                        .map_err(|source| PlanError::Kinematics {
+                            line: s.line,
+                            source,
+                        })?;
                 }
             }
             Item::Aux(a) => {
