@@ -268,11 +268,20 @@ impl Interpolator {
     /// not to overshoot.
     fn scale_jerk(&self, s: &Segment, target: f64) -> f64 {
         let e = target - self.k;
-        let (k2, dt) = (self.k2, self.dt_s);
+        let dt = self.dt_s;
+        // k̈ this segment allows, and what every segment within one braking allows.
         let left = (s.duration_s - self.t_s).max(0.0);
+        let mut k2_here = s.scale_jerk_max;
+        // This period may end in a later segment: respect its limit too.
+        let step_sigma = (self.k + self.kd.abs() * dt + s.scale_jerk_max * dt * dt) * dt;
+        if left <= 2.0 * step_sigma {
+            k2_here = k2_here.min(s.next_scale_jerk_max);
+        }
+        let k2_here = k2_here.max(self.k2);
+        let k2 = s.brake_scale_jerk_max.clamp(self.k2, k2_here);
         let rate = s
             .scale_rate_max
-            .min(s.end_scale_rate_max + 0.9 * k2 * left / self.max_override)
+            .min(s.end_scale_rate_max + 0.9 * self.k2 * left / self.max_override)
             .max(self.k1);
         // Largest speed toward the target at the end of this period from which a k̈ = k2
         // braking still stops at the target, counting the distance covered during the
@@ -284,13 +293,13 @@ impl Interpolator {
         // that rate only): rising, arrive at 1 no faster than k1 and stay at k1 above it.
         let rate = if e > 0.0 && target > 1.0 {
             let below = (1.0 - self.k).max(0.0);
-            rate.min((self.k1 * self.k1 + 2.0 * k2 * below).sqrt())
+            rate.min((self.k1 * self.k1 + 2.0 * self.k2 * below).sqrt())
                 .max(self.k1)
         } else {
             rate
         };
         let vd = e.signum() * rate.min(brake);
-        ((vd - self.kd) / dt).clamp(-k2, k2)
+        ((vd - self.kd) / dt).clamp(-k2_here, k2_here)
     }
 
     /// One servo period.

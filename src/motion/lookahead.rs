@@ -74,6 +74,9 @@ pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
                     end_override_cap: lim.max_override,
                     scale_rate_max: 0.0,
                     end_scale_rate_max: 0.0,
+                    scale_jerk_max: 0.0,
+                    brake_scale_jerk_max: 0.0,
+                    next_scale_jerk_max: 0.0,
                 }));
             }
         }
@@ -189,33 +192,61 @@ fn plan_run(
         }
     };
 
-    let mut vj = jmax.clone();
-    let mut base = 0;
-    let mut v_start = 0.0;
-    while base < n {
-        let end = (base + window).min(n);
-        // Backward pass from a stop at the end of the window.
-        vj[end - 1] = 0.0;
-        for k in (base..end - 1).rev() {
-            vj[k] = entry(k + 1, jmax[k], vj[k + 1]);
+    let passes = |jmax: &[f64]| {
+        let mut vj = jmax.to_vec();
+        let mut base = 0;
+        let mut v_start = 0.0;
+        while base < n {
+            let end = (base + window).min(n);
+            // Backward pass from a stop at the end of the window.
+            vj[end - 1] = 0.0;
+            for k in (base..end - 1).rev() {
+                vj[k] = entry(k + 1, jmax[k], vj[k + 1]);
+            }
+            // Forward pass.
+            let mut prev = v_start;
+            for k in base..end {
+                vj[k] = exit(k, prev, vj[k]);
+                prev = vj[k];
+            }
+            let commit = if end == n {
+                end - base
+            } else {
+                ((end - base) / 2).max(1)
+            };
+            v_start = vj[base + commit - 1];
+            base += commit;
         }
-        // Forward pass.
-        let mut prev = v_start;
-        for k in base..end {
-            vj[k] = exit(k, prev, vj[k]);
-            prev = vj[k];
+        vj
+    };
+    // The room a move needs is not monotone in its exit speed (a faster exit shortens the
+    // slow-down but lengthens the blend), so a window shift can leave a move whose entry was
+    // committed earlier without a feasible exit. Verify every move and repair by lowering
+    // the junction speeds around it until all fit (speeds only go down, so this ends: at
+    // worst in exact stops, which always fit).
+    let mut jmax = jmax;
+    let mut vj = passes(&jmax);
+    for round in 0.. {
+        let mut bad = false;
+        for k in 0..n {
+            let a = if k > 0 { vj[k - 1] } else { 0.0 };
+            if g(k, a, vj[k]) > p[k].len_mm * (1.0 + 1e-12) + 1e-12 {
+                bad = true;
+                let f = if round < 20 { 0.8 } else { 0.0 };
+                if k > 0 {
+                    jmax[k - 1] = jmax[k - 1].min(f * vj[k - 1]);
+                }
+                jmax[k] = jmax[k].min(f * vj[k]);
+            }
         }
-        let commit = if end == n {
-            end - base
-        } else {
-            ((end - base) / 2).max(1)
-        };
-        for k in base..base + commit {
-            let v_in = if k > 0 { vj[k - 1] } else { 0.0 };
-            emit_move(&p, &corners, k, v_in, vj[k], lim, out);
+        if !bad {
+            break;
         }
-        v_start = vj[base + commit - 1];
-        base += commit;
+        vj = passes(&jmax);
+    }
+    for k in 0..n {
+        let v_in = if k > 0 { vj[k - 1] } else { 0.0 };
+        emit_move(&p, &corners, k, v_in, vj[k], lim, out);
     }
 }
 
@@ -313,6 +344,9 @@ fn emit_move(
             end_override_cap: 1.0,
             scale_rate_max: 0.0,
             end_scale_rate_max: 0.0,
+            scale_jerk_max: 0.0,
+            brake_scale_jerk_max: 0.0,
+            next_scale_jerk_max: 0.0,
         };
         *pos = end;
         push(out, lim, seg);
@@ -379,6 +413,9 @@ fn emit_move(
                 end_override_cap: 1.0,
                 scale_rate_max: 0.0,
                 end_scale_rate_max: 0.0,
+                scale_jerk_max: 0.0,
+                brake_scale_jerk_max: 0.0,
+                next_scale_jerk_max: 0.0,
             };
             push(out, lim, seg);
         }

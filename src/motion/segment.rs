@@ -55,6 +55,16 @@ pub struct Segment {
     /// Largest scale rate allowed when this segment ends (what follows tolerates, ramped
     /// back at the interpolator's `k̈` limit).
     pub end_scale_rate_max: f64,
+    /// Largest second derivative of the time scale in this segment, 1/s²: the jerk this
+    /// segment leaves free for the `p'·k̈` term (so a hold in a cruise is nearly as quick as
+    /// the fastest S-curve stop).
+    pub scale_jerk_max: f64,
+    /// Smallest `scale_jerk_max` of the segments that follow within one braking of the
+    /// scale: what the interpolator may count on when it plans to bring `k̇` to zero.
+    pub brake_scale_jerk_max: f64,
+    /// Smallest `scale_jerk_max` of the segments a servo period starting near the end of
+    /// this one can reach: used on the last stretch of the segment.
+    pub next_scale_jerk_max: f64,
 }
 
 impl Segment {
@@ -261,9 +271,9 @@ mod tests {
     fn queue_items_are_copy_send_and_small() {
         realtime_safe::<Item>();
         realtime_safe::<AuxItem>();
-        // Fixed size, no heap: a ring of 4096 items is under 1.5 MiB.
+        // Fixed size, no heap: a ring of 4096 items is about 1.5 MiB.
         assert!(
-            std::mem::size_of::<Item>() <= 360,
+            std::mem::size_of::<Item>() <= 400,
             "{}",
             std::mem::size_of::<Item>()
         );
