@@ -216,3 +216,33 @@ fn cam_like_pocket_job() {
         );
     }
 }
+
+/// G61 stops at the ends of each programmed move, never inside an arc (whose chords are an
+/// implementation detail).
+#[test]
+fn exact_stop_does_not_stop_inside_an_arc() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(1200.0).cmd(CanonCmd::SetMotionControl(
+        hytask::gcode::canon::MotionControl::ExactStop,
+    ));
+    g.g1(10.0, 0.0, 0.0);
+    arc(&mut g, -10.0, 0.0, 0.0, 0.0, 1, 0.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    assert_within_limits(&tr, &cfg);
+    // Periods on the arc where the tool stands still: none between its ends.
+    let still = tr
+        .poses_mm
+        .windows(2)
+        .filter(|w| w[0] == w[1] && w[0][1] > 0.5)
+        .count();
+    assert_eq!(still, 0);
+    let worst = tr
+        .poses_mm
+        .iter()
+        .filter(|q| q[1] > 1e-9)
+        .map(|q| radial_error(q, 0.0, 0.0, 10.0))
+        .fold(0.0, f64::max);
+    assert!(worst <= cfg.arc_chord_tolerance_mm + 1e-9, "{worst}");
+}

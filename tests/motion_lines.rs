@@ -217,3 +217,35 @@ fn rotary_only_move_uses_degrees_per_minute_and_rotary_limits() {
     assert_within_limits(&tr, &cfg);
     assert_eq!(last(&tr)[3], 0.0);
 }
+
+#[test]
+fn reports_line_and_distance_to_go() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(1200.0)
+        .cmd(CanonCmd::SetMotionControl(MotionControl::ExactStop))
+        .g1(10.0, 0.0, 0.0)
+        .g1(10.0, 5.0, 0.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let mut it = hytask::motion::Interpolator::new(&cfg, p.start_mm);
+    let mut src = hytask::motion::SliceSource::new(&p.items);
+    let mut seen = Vec::new();
+    let mut last_dtg = f64::INFINITY;
+    for _ in 0..10_000 {
+        let out = *it.step(&mut src);
+        if out.state == InterpState::Done {
+            break;
+        }
+        if seen.last() != Some(&out.line) {
+            seen.push(out.line);
+            last_dtg = f64::INFINITY;
+        }
+        // Distance to go falls monotonically within a move and matches the geometry.
+        assert!(out.distance_to_go_mm <= last_dtg + 1e-9);
+        last_dtg = out.distance_to_go_mm;
+        if out.line == 3 {
+            assert!((out.distance_to_go_mm - (10.0 - out.pose_mm[0])).abs() < 1e-6);
+        }
+    }
+    assert_eq!(seen, vec![3, 4]);
+}
