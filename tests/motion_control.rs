@@ -191,3 +191,25 @@ fn hold_in_cruise_stops_quickly() {
     assert!(stop < 3.0, "stopping distance {stop} mm");
     assert!(stop > 2.75, "faster than physically possible: {stop} mm");
 }
+
+#[test]
+fn any_queue_can_feed_the_interpolator() {
+    let (cfg, p, _) = setup();
+    let run_with =
+        |src: &mut dyn FnMut(&mut hytask::motion::Interpolator) -> hytask::motion::InterpOutput| {
+            let mut it = hytask::motion::Interpolator::new(&cfg, p.start_mm);
+            for _ in 0..100_000 {
+                let out = src(&mut it);
+                if out.state == InterpState::Done {
+                    return out.pose_mm;
+                }
+            }
+            panic!("not done");
+        };
+    let mut deque: std::collections::VecDeque<_> = p.items.iter().copied().collect();
+    let a = run_with(&mut |it| *it.step(&mut deque));
+    let mut iter = hytask::motion::IterSource(p.items.clone().into_iter());
+    let b = run_with(&mut |it| *it.step(&mut iter));
+    assert_eq!(a, p.end_mm);
+    assert_eq!(b, p.end_mm);
+}

@@ -50,6 +50,16 @@ impl SegmentSource for SliceSource<'_> {
     }
 }
 
+/// Any iterator of items (e.g. a channel's `try_iter`, or `plan.items.into_iter()`).
+#[derive(Debug, Clone)]
+pub struct IterSource<I>(pub I);
+
+impl<I: Iterator<Item = Item>> SegmentSource for IterSource<I> {
+    fn pop(&mut self) -> Option<Item> {
+        self.0.next()
+    }
+}
+
 impl SegmentSource for std::collections::VecDeque<Item> {
     fn pop(&mut self) -> Option<Item> {
         self.pop_front()

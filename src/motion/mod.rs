@@ -77,7 +77,9 @@ pub mod trace;
 
 pub use config::{AxisLimits, KinematicsConfig, MotionConfig, ScaraConfig};
 pub use error::{KinematicsError, PlanError};
-pub use interpolator::{InterpOutput, InterpState, Interpolator, SegmentSource, SliceSource};
+pub use interpolator::{
+    InterpOutput, InterpState, Interpolator, IterSource, SegmentSource, SliceSource,
+};
 pub use segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
 
 use crate::gcode::{Canon, NUM_AXES};
