@@ -87,3 +87,22 @@ fn without_merging_for_comparison() {
     );
     assert!(a3 < 5.0 && a10 < 10.0);
 }
+
+/// Tighter path tolerances cost time (smaller merges, gentler blends): recorded, loosely
+/// bounded.
+#[test]
+fn tighter_tolerances_for_comparison() {
+    for tol in [0.01, 0.005] {
+        let (f3, _) = report(
+            &format!("3000 x 0.1 mm, G64 P{tol}"),
+            &sine_stream(3000, 0.1, 3000.0, tol),
+            &bench_cfg(),
+        );
+        let (f10, _) = report(
+            &format!("10000 x 0.02 mm, G64 P{tol}"),
+            &sine_stream(10_000, 0.02, 3000.0, tol),
+            &bench_cfg(),
+        );
+        assert!(f3 < 3.0 && f10 < 3.0);
+    }
+}
