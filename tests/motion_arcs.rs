@@ -246,3 +246,18 @@ fn exact_stop_does_not_stop_inside_an_arc() {
         .fold(0.0, f64::max);
     assert!(worst <= cfg.arc_chord_tolerance_mm + 1e-9, "{worst}");
 }
+
+#[test]
+fn streaming_measure_matches_the_stored_trace() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(2400.0).g64(0.02).g1(10.0, 0.0, 0.0);
+    arc(&mut g, 10.0, 0.0, 0.0, 0.0, 1, -2.0);
+    g.g0(0.0, 0.0, 5.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    let m = hytask::motion::trace::measure(&p, &cfg, max_periods(&p, &cfg));
+    assert_eq!(m.peaks, tr.peaks());
+    assert_eq!(m.periods, tr.poses_mm.len());
+    assert_eq!(m.duration_s, tr.duration_s());
+}

@@ -151,8 +151,8 @@ pub fn report(
     let plan_s = t0.elapsed().as_secs_f64();
     let b = bounds::bounds(canon, cfg)?;
     let periods = (plan.duration_s * 10.0 / cfg.servo_period_s) as usize + 100_000;
-    let tr = trace::run(&plan, cfg, periods, |_, _| {});
-    let pk = tr.peaks();
+    let tr = trace::measure(&plan, cfg, periods);
+    let pk = tr.peaks;
     writeln!(out, "file:            {name}")?;
     writeln!(
         out,
@@ -196,9 +196,9 @@ pub fn report(
     writeln!(
         out,
         "trace:           {} periods of {:.3} ms = {:.3} s",
-        tr.poses_mm.len(),
+        tr.periods,
         cfg.servo_period_s * 1e3,
-        tr.duration_s()
+        tr.duration_s
     )?;
     writeln!(out, "axis   peak vel / limit (mm/s)      peak acc / limit (mm/s²)     peak jerk / limit (mm/s³)")?;
     let mut within = true;
