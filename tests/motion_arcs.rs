@@ -152,3 +152,112 @@ fn arcs_in_other_planes_end_exactly() {
         assert_within_limits(&tr, &cfg);
     }
 }
+
+/// A CAM-like pocket: rapid in, plunge, rectangular passes with filleted corners (G3
+/// arcs), an S change, M62 on the way, retract, rapid home, dwell and program end.
+#[test]
+fn cam_like_pocket_job() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.cmd(CanonCmd::SetSpindleSpeed(12000.0))
+        .cmd(CanonCmd::StartSpindle(
+            hytask::gcode::canon::SpindleDir::Clockwise,
+        ))
+        .g0(5.0, 0.0, 5.0)
+        .feed(600.0)
+        .g64(0.02)
+        .g1(5.0, 0.0, -2.0)
+        .feed(3000.0);
+    for pass in 0..4 {
+        let o = pass as f64 * 3.0; // inset
+        let (x0, y0, x1, y1, r) = (o, o, 60.0 - o, 40.0 - o, 2.0);
+        // Start on the bottom edge, go CCW with filleted corners.
+        g.g1(x1 - r, y0, -2.0);
+        arc(&mut g, x1, y0 + r, x1 - r, y0 + r, 1, -2.0);
+        g.g1(x1, y1 - r, -2.0);
+        arc(&mut g, x1 - r, y1, x1 - r, y1 - r, 1, -2.0);
+        g.g1(x0 + r, y1, -2.0);
+        if pass == 1 {
+            g.cmd(CanonCmd::SetSpindleSpeed(15000.0));
+            g.cmd(CanonCmd::DigitalOutput {
+                index: 1,
+                on: true,
+                synced: true,
+            });
+        }
+        arc(&mut g, x0, y1 - r, x0 + r, y1 - r, 1, -2.0);
+        g.g1(x0, y0 + r, -2.0);
+        arc(&mut g, x0 + r, y0, x0 + r, y0 + r, 1, -2.0);
+        g.g1(x0 + 3.0 + r, y0 + 3.0, -2.0); // step in diagonally
+    }
+    g.g0(8.0, 9.0, 5.0)
+        .g0(0.0, 0.0, 5.0)
+        .cmd(CanonCmd::Dwell(0.2))
+        .cmd(CanonCmd::ProgramEnd);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    assert_within_limits(&tr, &cfg);
+    assert_eq!(last(&tr), pose(0.0, 0.0, 5.0));
+    let kinds: Vec<_> = tr.aux.iter().map(|(_, a)| a.line).collect();
+    let mut sorted = kinds.clone();
+    sorted.sort();
+    assert_eq!(kinds, sorted, "aux items out of program order");
+    assert_eq!(tr.aux.len(), 5);
+    // Never below the cutting depth, never above the clearance plane.
+    assert!(tr
+        .poses_mm
+        .iter()
+        .all(|q| q[2] >= -2.0 - 1e-9 && q[2] <= 5.0 + 1e-9));
+    // Inside the pocket while cutting (XY within the outline, tolerance 0.02).
+    for q in tr.poses_mm.iter().filter(|q| q[2] < -1.999) {
+        assert!(
+            q[0] >= -0.02 && q[0] <= 60.02 && q[1] >= -0.02 && q[1] <= 40.02,
+            "{q:?}"
+        );
+    }
+}
+
+/// G61 stops at the ends of each programmed move, never inside an arc (whose chords are an
+/// implementation detail).
+#[test]
+fn exact_stop_does_not_stop_inside_an_arc() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(1200.0).cmd(CanonCmd::SetMotionControl(
+        hytask::gcode::canon::MotionControl::ExactStop,
+    ));
+    g.g1(10.0, 0.0, 0.0);
+    arc(&mut g, -10.0, 0.0, 0.0, 0.0, 1, 0.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    assert_within_limits(&tr, &cfg);
+    // Periods on the arc where the tool stands still: none between its ends.
+    let still = tr
+        .poses_mm
+        .windows(2)
+        .filter(|w| w[0] == w[1] && w[0][1] > 0.5)
+        .count();
+    assert_eq!(still, 0);
+    let worst = tr
+        .poses_mm
+        .iter()
+        .filter(|q| q[1] > 1e-9)
+        .map(|q| radial_error(q, 0.0, 0.0, 10.0))
+        .fold(0.0, f64::max);
+    assert!(worst <= cfg.arc_chord_tolerance_mm + 1e-9, "{worst}");
+}
+
+#[test]
+fn streaming_measure_matches_the_stored_trace() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(2400.0).g64(0.02).g1(10.0, 0.0, 0.0);
+    arc(&mut g, 10.0, 0.0, 0.0, 0.0, 1, -2.0);
+    g.g0(0.0, 0.0, 5.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    let m = hytask::motion::trace::measure(&p, &cfg, max_periods(&p, &cfg));
+    assert_eq!(m.peaks, tr.peaks());
+    assert_eq!(m.periods, tr.poses_mm.len());
+    assert_eq!(m.duration_s, tr.duration_s());
+}

@@ -176,3 +176,19 @@ fn aux_items_arrive_in_order_and_barriers_stop_motion() {
     assert!(still >= 500, "{still}");
     assert_within_limits(&tr, &cfg);
 }
+
+#[test]
+fn rotary_feed_is_degrees_per_minute_even_in_inches() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    let mut a = [0.0; 9];
+    a[3] = 90.0;
+    g.cmd(CanonCmd::UseLengthUnits(LengthUnits::Inches))
+        .feed(1800.0)
+        .cmd(CanonCmd::StraightFeed(a));
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    let pk = tr.peaks();
+    assert!((pk.vel[3] - 30.0).abs() < 1e-6, "{}", pk.vel[3]);
+    assert_eq!(p.end_mm[3], 90.0);
+}

@@ -21,6 +21,7 @@ fn scara_cfg(l1: f64, l2: f64) -> ScaraConfig {
         elbow_positive: true,
         joint_min: lo,
         joint_max: hi,
+        joint_max_vel: [360.0, 360.0, 100.0, 1e9, 1e9, 1e9, 1e9, 1e9, 1e9],
     }
 }
 
@@ -132,4 +133,33 @@ fn scara_job_runs_and_reports_joints() {
 fn plan_from_start(g: &Prog, cfg: &MotionConfig) -> Result<hytask::motion::Plan, PlanError> {
     // A SCARA cannot start at machine zero (inside its dead zone): start at (300, 0).
     hytask::motion::plan_from(&g.canon, cfg, pose(300.0, 0.0, 0.0))
+}
+
+#[test]
+fn planner_refuses_joint_speeds_near_full_extension() {
+    let mut sc = scara_cfg(200.0, 150.0);
+    sc.joint_max_vel[0] = 30.0;
+    sc.joint_max_vel[1] = 30.0;
+    let cfg = MotionConfig {
+        kinematics: KinematicsConfig::Scara(sc),
+        ..Default::default()
+    };
+    // Radially outward to almost full extension at 50 mm/s: the elbow must unfold fast.
+    let mut g = Prog::new();
+    g.feed(3000.0).g1(349.9, 0.0, 0.0);
+    let err = plan_from_start(&g, &cfg).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            PlanError::Kinematics {
+                line: 2,
+                source: KinematicsError::JointVelocity { joint: 1, .. }
+            }
+        ),
+        "{err}"
+    );
+    // Slowly, it is fine.
+    let mut g = Prog::new();
+    g.feed(60.0).g1(320.0, 0.0, 0.0);
+    assert!(plan_from_start(&g, &cfg).is_ok());
 }

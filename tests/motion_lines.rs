@@ -138,3 +138,114 @@ fn final_position_is_exact_after_many_short_moves() {
     assert_within_limits(&tr, &cfg);
     assert_eq!(*tr.states.last().unwrap(), InterpState::Done);
 }
+
+#[test]
+fn short_lookahead_window_is_slower_but_within_limits() {
+    let mut g = Prog::new();
+    g.feed(3000.0).g64(0.05);
+    for i in 1..=400 {
+        g.g1(i as f64 * 0.5, (i as f64 * 0.02).sin(), 0.0);
+    }
+    let long = MotionConfig::default();
+    let short = MotionConfig {
+        lookahead_moves: 4,
+        merge_fraction: 0.0,
+        ..Default::default()
+    };
+    let long_nomerge = MotionConfig {
+        merge_fraction: 0.0,
+        ..Default::default()
+    };
+    let pl = plan(&g.canon, &long_nomerge).unwrap();
+    let ps = plan(&g.canon, &short).unwrap();
+    assert!(
+        ps.duration_s > 1.2 * pl.duration_s,
+        "{} vs {}",
+        ps.duration_s,
+        pl.duration_s
+    );
+    let tr = run(&ps, &short);
+    assert_within_limits(&tr, &short);
+    assert_eq!(last(&tr), ps.end_mm);
+    assert!(plan(&g.canon, &long).unwrap().duration_s <= pl.duration_s);
+}
+
+#[test]
+fn g64_q_merges_collinear_short_moves_within_tolerance() {
+    let cfg = MotionConfig {
+        merge_fraction: 0.0,
+        ..Default::default()
+    };
+    let mut g = Prog::new();
+    g.feed(3000.0)
+        .g64(0.02)
+        .cmd(CanonCmd::SetNaivecamTolerance(0.01));
+    let mut path = vec![pose(0.0, 0.0, 0.0)];
+    for i in 1..=200 {
+        // Nearly straight, jittering by ±5 µm.
+        let (x, y) = (i as f64 * 0.1, if i % 2 == 0 { 0.005 } else { -0.005 });
+        g.g1(x, y, 0.0);
+        path.push(pose(x, y, 0.0));
+    }
+    let p = plan(&g.canon, &cfg).unwrap();
+    assert!(p.segment_count <= 5, "{} segments", p.segment_count);
+    let tr = run(&p, &cfg);
+    assert!(max_deviation(&tr, &path) <= 0.02 + 0.01 + 1e-9);
+    assert_eq!(last(&tr), *path.last().unwrap());
+    // Without Q and without automatic merging, every move is planned.
+    let mut g2 = Prog::new();
+    g2.feed(3000.0).g64(0.02);
+    for p in &path[1..] {
+        g2.g1(p[0], p[1], 0.0);
+    }
+    assert!(plan(&g2.canon, &cfg).unwrap().segment_count >= 200);
+}
+
+#[test]
+fn rotary_only_move_uses_degrees_per_minute_and_rotary_limits() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    let mut a = [0.0; 9];
+    a[3] = 720.0;
+    g.feed(3600.0).cmd(CanonCmd::StraightFeed(a)); // 60 deg/s
+    a[3] = 0.0;
+    g.cmd(CanonCmd::StraightTraverse(a)); // rapid back at the A limit, 90 deg/s
+    let p = plan(&g.canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    let pk = tr.peaks();
+    assert!((pk.vel[3] - 90.0).abs() < 1e-6, "{}", pk.vel[3]);
+    assert_within_limits(&tr, &cfg);
+    assert_eq!(last(&tr)[3], 0.0);
+}
+
+#[test]
+fn reports_line_and_distance_to_go() {
+    let cfg = MotionConfig::default();
+    let mut g = Prog::new();
+    g.feed(1200.0)
+        .cmd(CanonCmd::SetMotionControl(MotionControl::ExactStop))
+        .g1(10.0, 0.0, 0.0)
+        .g1(10.0, 5.0, 0.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let mut it = hytask::motion::Interpolator::new(&cfg, p.start_mm);
+    let mut src = hytask::motion::SliceSource::new(&p.items);
+    let mut seen = Vec::new();
+    let mut last_dtg = f64::INFINITY;
+    for _ in 0..10_000 {
+        let out = *it.step(&mut src);
+        if out.state == InterpState::Done {
+            break;
+        }
+        if seen.last() != Some(&out.line) {
+            seen.push(out.line);
+            last_dtg = f64::INFINITY;
+        }
+        // Distance to go falls monotonically within a move and matches the geometry.
+        assert!(out.distance_to_go_mm <= last_dtg + 1e-9);
+        last_dtg = out.distance_to_go_mm;
+        if out.line == 3 {
+            assert!((out.distance_to_go_mm - (10.0 - out.pose_mm[0])).abs() < 1e-6);
+        }
+    }
+    assert_eq!(seen, vec![3, 4]);
+}

@@ -1,12 +1,306 @@
-//! `hytask plan`.
+//! `hytask plan FILE [--config motion.toml] [--max-vel ...]`: interprets a G-code file,
+//! plans it, and prints the cycle-time estimate (planned job time, distance, against lower
+//! bounds and a stop-at-every-corner planner) and, from the trace interpolated at the servo
+//! period, each axis' peak velocity, acceleration and jerk against its limit.
 
+use crate::motion::{bounds, trace, MotionConfig, AXIS_NAMES};
+use anyhow::Context;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// Arguments of `hytask plan`.
 #[derive(Debug, clap::Args)]
-pub struct PlanArgs {}
+pub struct PlanArgs {
+    /// G-code file to plan.
+    pub file: PathBuf,
+    /// Motion limits and planner settings.
+    #[command(flatten)]
+    pub motion: MotionArgs,
+}
+
+/// Motion configuration from an optional TOML file, then command-line overrides (shared by
+/// `plan` and `plot`). Until the machine TOML is mapped onto `MotionConfig`, the file holds
+/// the keys of [`MotionOverrides`].
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct MotionArgs {
+    /// TOML file with motion settings (keys: max_vel_mm_s, max_acc_mm_s2, max_jerk_mm_s3,
+    /// servo_period_s, default_tolerance_mm, lookahead_moves, merge_fraction,
+    /// override_reserve, min_mm, max_mm).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Velocity limit of X Y Z, mm/s.
+    #[arg(long)]
+    pub max_vel: Option<f64>,
+    /// Acceleration limit of X Y Z, mm/s².
+    #[arg(long)]
+    pub max_acc: Option<f64>,
+    /// Jerk limit of X Y Z, mm/s³.
+    #[arg(long)]
+    pub max_jerk: Option<f64>,
+    /// Servo period, ms.
+    #[arg(long)]
+    pub servo_period_ms: Option<f64>,
+    /// G64 tolerance used without P, mm.
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// Lookahead window, moves.
+    #[arg(long)]
+    pub lookahead: Option<usize>,
+    /// Fraction of the G64 tolerance used to merge short collinear moves (0 = off).
+    #[arg(long)]
+    pub merge_fraction: Option<f64>,
+}
+
+/// Keys accepted in the `--config` file.
+#[derive(Debug, Clone, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionOverrides {
+    /// X Y Z velocity, mm/s.
+    pub max_vel_mm_s: Option<f64>,
+    /// X Y Z acceleration, mm/s².
+    pub max_acc_mm_s2: Option<f64>,
+    /// X Y Z jerk, mm/s³.
+    pub max_jerk_mm_s3: Option<f64>,
+    /// Servo period, s.
+    pub servo_period_s: Option<f64>,
+    /// G64 default tolerance, mm.
+    pub default_tolerance_mm: Option<f64>,
+    /// Lookahead window, moves.
+    pub lookahead_moves: Option<usize>,
+    /// Merge fraction.
+    pub merge_fraction: Option<f64>,
+    /// Override reserve.
+    pub override_reserve: Option<f64>,
+    /// X Y Z lower soft limit, mm.
+    pub min_mm: Option<f64>,
+    /// X Y Z upper soft limit, mm.
+    pub max_mm: Option<f64>,
+}
+
+impl MotionArgs {
+    /// The resulting configuration.
+    pub fn config(&self) -> anyhow::Result<MotionConfig> {
+        let mut o = match &self.config {
+            Some(p) => {
+                let text = std::fs::read_to_string(p)
+                    .with_context(|| format!("reading {}", p.display()))?;
+                toml::from_str::<MotionOverrides>(&text)
+                    .with_context(|| format!("parsing {}", p.display()))?
+            }
+            None => MotionOverrides::default(),
+        };
+        o.max_vel_mm_s = self.max_vel.or(o.max_vel_mm_s);
+        o.max_acc_mm_s2 = self.max_acc.or(o.max_acc_mm_s2);
+        o.max_jerk_mm_s3 = self.max_jerk.or(o.max_jerk_mm_s3);
+        o.servo_period_s = self
+            .servo_period_ms
+            .map(|ms| ms / 1000.0)
+            .or(o.servo_period_s);
+        o.default_tolerance_mm = self.tolerance.or(o.default_tolerance_mm);
+        o.lookahead_moves = self.lookahead.or(o.lookahead_moves);
+        o.merge_fraction = self.merge_fraction.or(o.merge_fraction);
+        let mut cfg = MotionConfig::default();
+        for a in &mut cfg.axes[0..3] {
+            a.max_vel_mm_s = o.max_vel_mm_s.unwrap_or(a.max_vel_mm_s);
+            a.max_acc_mm_s2 = o.max_acc_mm_s2.unwrap_or(a.max_acc_mm_s2);
+            a.max_jerk_mm_s3 = o.max_jerk_mm_s3.unwrap_or(a.max_jerk_mm_s3);
+            a.min_mm = o.min_mm.unwrap_or(a.min_mm);
+            a.max_mm = o.max_mm.unwrap_or(a.max_mm);
+        }
+        cfg.servo_period_s = o.servo_period_s.unwrap_or(cfg.servo_period_s);
+        cfg.default_tolerance_mm = o.default_tolerance_mm.unwrap_or(cfg.default_tolerance_mm);
+        cfg.lookahead_moves = o.lookahead_moves.unwrap_or(cfg.lookahead_moves);
+        cfg.merge_fraction = o.merge_fraction.unwrap_or(cfg.merge_fraction);
+        cfg.override_reserve = o.override_reserve.unwrap_or(cfg.override_reserve);
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
+/// Interprets `file` into canonical commands.
+pub fn load(file: &Path) -> anyhow::Result<Vec<crate::gcode::Canon>> {
+    let prog = crate::gcode::load_file(file, &crate::gcode::InterpOptions::default())?;
+    Ok(prog.canon)
+}
 
 /// Runs the subcommand.
-pub fn run(_args: PlanArgs) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("`hytask plan` is not built yet")
+pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
+    let cfg = args.motion.config()?;
+    let canon = load(&args.file)?;
+    let mut out = String::new();
+    let within = report(&args.file.display().to_string(), &canon, &cfg, &mut out)?;
+    print!("{out}");
+    Ok(if within {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}
+
+/// Plans `canon`, interpolates it at the servo period and writes the report; returns false
+/// if a trace peak exceeds its limit (which the planner is built never to allow).
+pub fn report(
+    name: &str,
+    canon: &[crate::gcode::Canon],
+    cfg: &MotionConfig,
+    out: &mut String,
+) -> anyhow::Result<bool> {
+    use std::fmt::Write;
+    let t0 = std::time::Instant::now();
+    let plan = crate::motion::plan(canon, cfg)?;
+    let plan_s = t0.elapsed().as_secs_f64();
+    let b = bounds::bounds(canon, cfg)?;
+    let periods = (plan.duration_s * 10.0 / cfg.servo_period_s) as usize + 100_000;
+    let tr = trace::measure(&plan, cfg, periods);
+    let pk = tr.peaks;
+    writeln!(out, "file:            {name}")?;
+    writeln!(
+        out,
+        "planned:         {} lines, {} segments in {:.1} ms ({:.0} segments/s)",
+        plan.line_count,
+        plan.segment_count,
+        plan_s * 1e3,
+        plan.segment_count as f64 / plan_s.max(1e-9)
+    )?;
+    writeln!(
+        out,
+        "job time:        {:.3} s at 100% override",
+        plan.duration_s
+    )?;
+    writeln!(out, "distance:        {:.3} mm", plan.distance_mm)?;
+    let ratio = |x: f64| {
+        if x > 0.0 {
+            plan.duration_s / x
+        } else {
+            f64::NAN
+        }
+    };
+    writeln!(
+        out,
+        "feed bound:      {:.3} s  (plan = {:.3}x)",
+        b.feed_limited_s,
+        ratio(b.feed_limited_s)
+    )?;
+    writeln!(
+        out,
+        "accel bound:     {:.3} s  (plan = {:.3}x)",
+        b.accel_aware_s,
+        ratio(b.accel_aware_s)
+    )?;
+    writeln!(
+        out,
+        "stop at corners: {:.3} s  (plan = {:.3}x)",
+        b.naive_stop_s,
+        ratio(b.naive_stop_s)
+    )?;
+    writeln!(
+        out,
+        "trace:           {} periods of {:.3} ms = {:.3} s",
+        tr.periods,
+        cfg.servo_period_s * 1e3,
+        tr.duration_s
+    )?;
+    writeln!(out, "axis   peak vel / limit (mm/s)      peak acc / limit (mm/s²)     peak jerk / limit (mm/s³)")?;
+    let mut within = true;
+    for (a, l) in cfg.axes.iter().enumerate() {
+        if pk.vel[a] == 0.0 {
+            continue;
+        }
+        let pct = |x: f64, lim: f64| 100.0 * x / lim;
+        writeln!(
+            out,
+            "{}      {:>9.3} / {:<9.3} {:>5.1}%  {:>10.2} / {:<10.2} {:>5.1}%  {:>11.1} / {:<11.1} {:>5.1}%",
+            AXIS_NAMES[a],
+            pk.vel[a],
+            l.max_vel_mm_s,
+            pct(pk.vel[a], l.max_vel_mm_s),
+            pk.acc[a],
+            l.max_acc_mm_s2,
+            pct(pk.acc[a], l.max_acc_mm_s2),
+            pk.jerk[a],
+            l.max_jerk_mm_s3,
+            pct(pk.jerk[a], l.max_jerk_mm_s3)
+        )?;
+        within &= pk.vel[a] <= l.max_vel_mm_s * 1.000_001
+            && pk.acc[a] <= l.max_acc_mm_s2 * 1.000_001
+            && pk.jerk[a] <= l.max_jerk_mm_s3 * 1.000_001;
+    }
+    if !within {
+        writeln!(out, "LIMIT EXCEEDED")?;
+    }
+    Ok(within)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    #[test]
+    fn config_file_then_flags_override_defaults() {
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        writeln!(
+            f,
+            "max_vel_mm_s = 80.0\nmax_acc_mm_s2 = 1000.0\nservo_period_s = 0.0005"
+        )
+        .unwrap();
+        let args = MotionArgs {
+            config: Some(f.path().into()),
+            max_acc: Some(700.0),
+            ..Default::default()
+        };
+        let cfg = args.config().unwrap();
+        assert_eq!(cfg.axes[0].max_vel_mm_s, 80.0);
+        assert_eq!(cfg.axes[2].max_acc_mm_s2, 700.0);
+        assert_eq!(cfg.axes[3], MotionConfig::default().axes[3]);
+        assert_eq!(cfg.servo_period_s, 0.0005);
+    }
+
+    #[test]
+    fn report_names_time_bounds_and_axis_peaks() {
+        use crate::gcode::{Canon, CanonCmd, SourceLoc};
+        let loc = |line| SourceLoc {
+            file: "t.ngc".into(),
+            line,
+            col: 1,
+        };
+        let mut p = [0.0; 9];
+        p[0] = 30.0;
+        p[1] = 10.0;
+        let canon = vec![
+            Canon {
+                loc: loc(1),
+                cmd: CanonCmd::SetFeedRate(1200.0),
+            },
+            Canon {
+                loc: loc(2),
+                cmd: CanonCmd::StraightFeed(p),
+            },
+        ];
+        let mut out = String::new();
+        assert!(report("t.ngc", &canon, &MotionConfig::default(), &mut out).unwrap());
+        assert!(out.contains("job time:"), "{out}");
+        assert!(out.contains("distance:        31.623 mm"), "{out}");
+        assert!(out.contains("feed bound:      1.581 s"), "{out}");
+        assert!(
+            out.lines().any(|l| l.starts_with("X ")) && out.lines().any(|l| l.starts_with("Y "))
+        );
+        assert!(!out.lines().any(|l| l.starts_with("Z ")));
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_refused() {
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        writeln!(f, "max_velocity = 80.0").unwrap();
+        let args = MotionArgs {
+            config: Some(f.path().into()),
+            ..Default::default()
+        };
+        assert!(args.config().is_err());
+        let args = MotionArgs {
+            max_vel: Some(-1.0),
+            ..Default::default()
+        };
+        assert!(args.config().is_err());
+    }
 }

@@ -6,6 +6,11 @@
 //! no blend can overshoot the limits, however small (cf. LinuxCNC issue #3773).
 
 use super::limits::Limits;
+
+/// Largest share of each adjacent move a blend may use: with 1/2, blends on a dense curve
+/// may tile the chords completely; the lookahead passes then lower junction speeds (which
+/// shortens the blends) wherever a move needs straight room to change speed.
+pub const BLEND_ROOM_FRACTION: f64 = 0.5;
 use super::profile::Shape;
 use crate::gcode::NUM_AXES;
 
@@ -69,7 +74,7 @@ impl Corner {
         if self.is_straight() {
             return cap_mm_s;
         }
-        let room = 0.5 * len_a_mm.min(len_b_mm);
+        let room = BLEND_ROOM_FRACTION * len_a_mm.min(len_b_mm);
         let ok = |v: f64| self.half_length_mm(v) <= room && self.deviation_mm(v) <= tolerance_mm;
         if ok(cap_mm_s) {
             return cap_mm_s;
@@ -87,5 +92,82 @@ impl Corner {
             }
         }
         lo
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::segment::{Segment, SegmentKind};
+    use crate::motion::MotionConfig;
+
+    fn unit(x: f64, y: f64) -> [f64; NUM_AXES] {
+        let n = x.hypot(y);
+        let mut u = [0.0; NUM_AXES];
+        u[0] = x / n;
+        u[1] = y / n;
+        u
+    }
+
+    /// The blend segment starts and ends exactly on the two moves, and no point of it is
+    /// farther from the corner than `deviation_mm` says.
+    #[test]
+    fn blend_geometry_matches_its_formulas() {
+        let lim = Limits::new(&MotionConfig::default());
+        for (deg, v) in [
+            (5.0f64, 50.0),
+            (45.0, 30.0),
+            (90.0, 20.0),
+            (170.0, 5.0),
+            (179.9, 1.0),
+        ] {
+            let (ua, ub) = (
+                unit(1.0, 0.0),
+                unit(deg.to_radians().cos(), deg.to_radians().sin()),
+            );
+            let c = Corner::new(&ua, &ub, &lim);
+            let sh = c.shape(v);
+            let d = c.half_length_mm(v);
+            let mut start = [0.0; NUM_AXES];
+            start[0] = -d; // corner at the origin
+            let seg = Segment {
+                start_mm: start,
+                end_mm: ub.map(|x| x * d),
+                v0_mm_s: ua.map(|x| x * v),
+                v1_mm_s: ub.map(|x| x * v),
+                duration_s: sh.duration_s,
+                jerk_s: sh.jerk_s,
+                kind: SegmentKind::Feed,
+                line: 1,
+                length_mm: 0.0,
+                move_rest_mm: 0.0,
+                override_cap: 1.0,
+                end_override_cap: 1.0,
+                scale_rate_max: 1.0,
+                end_scale_rate_max: 1.0,
+                scale_jerk_max: 1.0,
+                brake_scale_jerk_max: 1.0,
+                next_scale_jerk_max: 1.0,
+            };
+            let end = seg.integrated_end_mm();
+            assert!(
+                (end[0] - ub[0] * d).abs() < 1e-12 && (end[1] - ub[1] * d).abs() < 1e-12,
+                "{deg}"
+            );
+            let mut far = 0.0f64;
+            for i in 0..=1000 {
+                let p = seg.pose_at(sh.duration_s * i as f64 / 1000.0);
+                far = far.max(p[0].hypot(p[1]));
+            }
+            // The farthest point from the corner is where the blend starts (d away); the
+            // deviation bound is about the point nearest to the corner: the blend passes
+            // within it, and the bound is never exceeded by the mid-point.
+            let mid = seg.pose_at(sh.duration_s / 2.0);
+            assert!(
+                (mid[0].hypot(mid[1]) - c.deviation_mm(v)).abs() < 1e-9,
+                "{deg}"
+            );
+            assert!(far <= d + 1e-12);
+        }
     }
 }

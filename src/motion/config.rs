@@ -40,6 +40,7 @@ impl AxisLimits {
 }
 
 /// Which kinematics maps the Cartesian pose (what the planner plans) to joints.
+#[allow(clippy::large_enum_variant)] // plain data, copied to the servo thread: no Box
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum KinematicsConfig {
     /// Cartesian machine: joints are the axes.
@@ -62,6 +63,10 @@ pub struct ScaraConfig {
     pub joint_min: [f64; NUM_AXES],
     /// Upper joint limits.
     pub joint_max: [f64; NUM_AXES],
+    /// Joint velocity limits (deg/s for the two angles, mm/s for Z, axis units after):
+    /// near full extension a modest Cartesian speed needs fast joints, so the planner
+    /// refuses moves whose joint speeds would exceed these (at the allowed override).
+    pub joint_max_vel: [f64; NUM_AXES],
 }
 
 /// Everything the planner and interpolator need to know about the machine.

@@ -78,6 +78,16 @@ pub enum KinematicsError {
         /// Upper limit.
         max: f64,
     },
+    /// A joint would move faster than its limit.
+    #[error("joint {joint} would need {value:.3}/s, above its limit {max}/s")]
+    JointVelocity {
+        /// Joint index.
+        joint: usize,
+        /// Needed joint speed.
+        value: f64,
+        /// Limit.
+        max: f64,
+    },
     /// A non-finite input.
     #[error("non-finite coordinate")]
     NotFinite,

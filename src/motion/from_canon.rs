@@ -128,8 +128,10 @@ impl State {
         }
     }
 
-    /// Path speed of a feed move of `len_mm`, mm/s.
-    fn feed_mm_s(&self, len_mm: f64, line: u32) -> Result<f64, PlanError> {
+    /// Path speed of a feed move of `len_mm`, mm/s (deg/s for rotary-only moves, whose F is
+    /// in degrees per minute whatever the length units, as in LinuxCNC).
+    fn feed_mm_s(&self, len_mm: f64, rotary_only: bool, line: u32) -> Result<f64, PlanError> {
+        let scale = if rotary_only { 1.0 } else { self.scale() };
         let invalid = |what: &str| {
             Err(PlanError::Invalid {
                 line,
@@ -140,11 +142,11 @@ impl State {
             return invalid("feed move with zero or invalid feed rate (F)");
         }
         match self.feed_mode {
-            FeedMode::UnitsPerMinute => Ok(self.feed * self.scale() / 60.0),
+            FeedMode::UnitsPerMinute => Ok(self.feed * scale / 60.0),
             FeedMode::InverseTime => Ok(len_mm * self.feed / 60.0),
             FeedMode::UnitsPerRevolution => {
                 if self.spindle_rpm > 0.0 {
-                    Ok(self.feed * self.scale() * self.spindle_rpm / 60.0)
+                    Ok(self.feed * scale * self.spindle_rpm / 60.0)
                 } else {
                     Err(PlanError::Unsupported {
                         line,
@@ -247,7 +249,7 @@ pub fn fold(
                     prev = *m;
                 }
                 st.arc_id += 1;
-                let feed = st.feed_mm_s(total_mm, line)?;
+                let feed = st.feed_mm_s(total_mm, false, line)?;
                 for m in machine {
                     push_line(&mut out, &st, cfg, m, false, st.arc_id, feed, line)?;
                     st.pos_mm = m;
@@ -362,7 +364,8 @@ fn push_line(
         mv.feed_mm_s = if arc_feed_mm_s > 0.0 {
             arc_feed_mm_s
         } else {
-            st.feed_mm_s(len, line)?
+            let rotary_only = LINEAR.iter().all(|&i| mv.end_mm[i] == mv.start_mm[i]);
+            st.feed_mm_s(len, rotary_only, line)?
         };
     }
     if arc_id != 0 {

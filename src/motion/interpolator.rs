@@ -19,7 +19,7 @@ use crate::gcode::NUM_AXES;
 /// Most queue items consumed in one servo period (bounds the work of a cycle).
 pub const MAX_ITEMS_PER_STEP: usize = 256;
 /// Auxiliary items that can wait to be reported (one is reported per cycle).
-const AUX_RING: usize = 32;
+const AUX_RING: usize = 64;
 
 /// Where the interpolator takes its segments from: a `Vec` in tests, the realtime core's
 /// lock-free ring buffer in the daemon.
@@ -47,6 +47,16 @@ impl SegmentSource for SliceSource<'_> {
         let it = self.items.get(self.next).copied();
         self.next += usize::from(it.is_some());
         it
+    }
+}
+
+/// Any iterator of items (e.g. a channel's `try_iter`, or `plan.items.into_iter()`).
+#[derive(Debug, Clone)]
+pub struct IterSource<I>(pub I);
+
+impl<I: Iterator<Item = Item>> SegmentSource for IterSource<I> {
+    fn pop(&mut self) -> Option<Item> {
+        self.0.next()
     }
 }
 
@@ -91,6 +101,10 @@ pub struct InterpOutput {
     pub scale: f64,
     /// Kinematics failure of this period (joints then hold their last value).
     pub fault: Option<KinematicsError>,
+    /// The queue ran dry while the tool was moving (the producer fell behind): motion stopped
+    /// without deceleration. A plan always ends at rest, so this only happens when the
+    /// thread filling the queue is late; the machine should treat it as a fault.
+    pub underrun: bool,
 }
 
 /// The servo-thread interpolator.
@@ -151,6 +165,7 @@ impl Interpolator {
                 aux: None,
                 scale: 1.0,
                 fault: joints.err(),
+                underrun: false,
             },
         }
     }
@@ -258,20 +273,50 @@ impl Interpolator {
         }
     }
 
-    /// Second derivative of the scale for this period: drive `k` to `target` with |k̇| ≤ k1,
-    /// |k̈| ≤ k2, braking early enough in discrete time not to overshoot.
-    fn scale_jerk(&self, target: f64) -> f64 {
+    /// Second derivative of the scale for this period: drive `k` to `target` with |k̇|
+    /// within the segment's rate limit and |k̈| ≤ k2, braking early enough in discrete time
+    /// not to overshoot.
+    fn scale_jerk(&self, s: &Segment, target: f64) -> f64 {
         let e = target - self.k;
-        let (k2, dt) = (self.k2, self.dt_s);
-        let brake = ((k2 * dt / 2.0).powi(2) + 2.0 * k2 * e.abs()).sqrt() - k2 * dt / 2.0;
-        let vd = e.signum() * self.k1.min(brake);
-        ((vd - self.kd) / dt).clamp(-k2, k2)
+        let dt = self.dt_s;
+        // k̈ this segment allows, and what every segment within one braking allows.
+        let left = (s.duration_s - self.t_s).max(0.0);
+        let mut k2_here = s.scale_jerk_max;
+        // This period may end in a later segment: respect its limit too.
+        let step_sigma = (self.k + self.kd.abs() * dt + s.scale_jerk_max * dt * dt) * dt;
+        if left <= 2.0 * step_sigma {
+            k2_here = k2_here.min(s.next_scale_jerk_max);
+        }
+        let k2_here = k2_here.max(self.k2);
+        let k2 = s.brake_scale_jerk_max.clamp(self.k2, k2_here);
+        let rate = s
+            .scale_rate_max
+            .min(s.end_scale_rate_max + 0.9 * self.k2 * left / self.max_override)
+            .max(self.k1);
+        // Largest speed toward the target at the end of this period from which a k̈ = k2
+        // braking still stops at the target, counting the distance covered during the
+        // period itself (trapezoid of the current and the new k̇).
+        let toward = self.kd * e.signum();
+        let room = (e.abs() - toward * dt / 2.0).max(0.0);
+        let brake = ((k2 * dt / 2.0).powi(2) + 2.0 * k2 * room).sqrt() - k2 * dt / 2.0;
+        // Above scale 1 the override caps assume |k̇| ≤ k1 (their margin covers the lag of
+        // that rate only): rising, arrive at 1 no faster than k1 and stay at k1 above it.
+        let rate = if e > 0.0 && target > 1.0 {
+            let below = (1.0 - self.k).max(0.0);
+            rate.min((self.k1 * self.k1 + 2.0 * self.k2 * below).sqrt())
+                .max(self.k1)
+        } else {
+            rate
+        };
+        let vd = e.signum() * rate.min(brake);
+        ((vd - self.kd) / dt).clamp(-k2_here, k2_here)
     }
 
     /// One servo period.
     pub fn step(&mut self, src: &mut impl SegmentSource) -> &InterpOutput {
         let mut budget = MAX_ITEMS_PER_STEP;
         self.out.fault = None;
+        self.out.underrun = false;
         if self.abort && self.seg.is_none() {
             self.finish_abort(src, &mut budget);
         }
@@ -287,13 +332,21 @@ impl Interpolator {
                     dt
                 }
             } else {
-                let kdd = self.scale_jerk(self.target_scale(&s));
+                let kdd = self.scale_jerk(&s, self.target_scale(&s));
                 let a = self.k * dt + self.kd * dt * dt / 2.0 + kdd * dt * dt * dt / 6.0;
                 self.k += self.kd * dt + kdd * dt * dt / 2.0;
                 self.kd += kdd * dt;
                 if self.k < 0.0 {
                     self.k = 0.0;
                     self.kd = self.kd.max(0.0);
+                }
+                if self.hold || self.abort {
+                    // Settle exactly at rest once the remainder is far below anything
+                    // measurable (a 1e-9 scale step is a nm/s-level velocity step).
+                    if self.k < 1e-9 && self.kd.abs() < 1e-6 {
+                        self.k = 0.0;
+                        self.kd = 0.0;
+                    }
                 }
                 a.max(0.0)
             };
@@ -308,6 +361,7 @@ impl Interpolator {
                         self.t_s = rest;
                     }
                     None => {
+                        self.out.underrun = !self.waiting && s.v1_mm_s.iter().any(|v| *v != 0.0);
                         self.t_s = 0.0;
                         break;
                     }

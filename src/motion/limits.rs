@@ -111,20 +111,109 @@ pub fn override_rates(cfg: &MotionConfig) -> (f64, f64) {
 
 /// Lowers the override caps so that a scale above 1 can always be brought down in time
 /// (at rate `k1` per second, real time ≥ planned time / max override) before a segment
-/// that tolerates less; a margin covers the ramp's reversal lag.
+/// that tolerates less; a margin covers the ramp's reversal lag. Then sets each segment's
+/// scale-rate limit from the acceleration and jerk it leaves free, lowered so that the
+/// interpolator (whose `k̈` is bounded) can always meet the next segment's limit.
 pub fn propagate_override_caps(items: &mut [Item], cfg: &MotionConfig) {
     let (k1, k2) = override_rates(cfg);
     let kmax = cfg.max_feed_override;
     let margin = 2.5 * k1 * k1 / k2;
     let mut line = f64::INFINITY; // cap allowed at the start of the next segment
+    let mut rate_line = f64::INFINITY; // scale rate allowed at the start of the next segment
     for it in items.iter_mut().rev() {
         if let Item::Segment(s) = it {
-            let own = s.override_cap - margin.min(s.override_cap - 1.0);
+            let raw = s.override_cap;
+            let own = raw - margin.min(raw - 1.0);
             s.override_cap = own;
             s.end_override_cap = line.min(kmax);
             line = own.min(line + k1 * s.duration_s / kmax);
+            let rate = scale_rate(s, raw, cfg, k1, k2);
+            s.scale_rate_max = rate;
+            s.end_scale_rate_max = rate_line;
+            rate_line = rate.min(rate_line + 0.9 * k2 * s.duration_s / kmax);
+            s.scale_jerk_max = scale_jerk(s, raw, rate, cfg, k2);
         }
     }
+    // Braking guarantee: the smallest k̈ limit over the planned time one braking can span
+    // (|k̇| ≤ √(2·k2·kmax) when braking at ≥ k2 over a scale range ≤ kmax, so a braking lasts
+    // at most √(2·kmax/k2) s of real time, ≤ kmax times that of planned time).
+    let brake = min_ahead(items, kmax * (2.0 * kmax / k2).sqrt());
+    // A servo period can end in a later segment: the smallest limit within two periods.
+    let step = min_ahead(items, 2.0 * kmax * cfg.servo_period_s);
+    let mut n = 0;
+    for it in items.iter_mut() {
+        if let Item::Segment(s) = it {
+            s.brake_scale_jerk_max = s.scale_jerk_max.min(brake[n]);
+            s.next_scale_jerk_max = step[n];
+            n += 1;
+        }
+    }
+}
+
+/// For each segment (in order), the smallest `scale_jerk_max` of the segments that start
+/// within `horizon_s` of planned time after it ends (infinity if none). Sliding-window
+/// minimum, backwards, amortised O(1) per segment.
+fn min_ahead(items: &[Item], horizon_s: f64) -> Vec<f64> {
+    let segs: Vec<(f64, f64)> = items
+        .iter()
+        .filter_map(|it| match it {
+            Item::Segment(s) => Some((s.duration_s, s.scale_jerk_max)),
+            Item::Aux(_) => None,
+        })
+        .collect();
+    let mut out = vec![f64::INFINITY; segs.len()];
+    // (start σ, limit): front = latest added (earliest σ, largest limit), back = smallest.
+    let mut window: std::collections::VecDeque<(f64, f64)> = std::collections::VecDeque::new();
+    let mut sigma: f64 = segs.iter().map(|s| s.0).sum();
+    for (i, &(dur, own)) in segs.iter().enumerate().rev() {
+        let end = sigma;
+        sigma -= dur;
+        while window.back().is_some_and(|&(st, _)| st > end + horizon_s) {
+            window.pop_back();
+        }
+        out[i] = window.back().map_or(f64::INFINITY, |&(_, v)| v);
+        while window.front().is_some_and(|&(_, v)| v >= own) {
+            window.pop_front();
+        }
+        window.push_front((sigma, own));
+    }
+    out
+}
+
+/// Largest `k̈` in `seg` for any scale up to `cap` and `|k̇| ≤ rate`: per axis
+/// `j·k³ + 3·a·k·k̇ + v·k̈ ≤ J`; never below the reserve-based `k2`, which is always safe.
+fn scale_jerk(seg: &Segment, cap: f64, rate: f64, cfg: &MotionConfig, k2: f64) -> f64 {
+    if seg.kind == SegmentKind::Dwell {
+        return f64::INFINITY;
+    }
+    let mut r = f64::INFINITY;
+    for (i, [v, a, j]) in seg.peaks().into_iter().enumerate() {
+        if v > 0.0 {
+            let ax = &cfg.axes[i];
+            r = r.min((ax.max_jerk_mm_s3 - j * cap.powi(3) - 3.0 * a * cap * rate) / v);
+        }
+    }
+    r.max(k2)
+}
+
+/// Largest `k̇` in `seg` for any scale up to `cap`: per axis, acceleration
+/// `a·k² + v·k̇ ≤ A` and jerk `j·k³ + 3·a·k·k̇ + v·k̈ ≤ J` with `k̈ ≤ k2`; never below the
+/// reserve-based `k1`, which is always safe.
+fn scale_rate(seg: &Segment, cap: f64, cfg: &MotionConfig, k1: f64, k2: f64) -> f64 {
+    if seg.kind == SegmentKind::Dwell {
+        return f64::INFINITY;
+    }
+    let mut r = f64::INFINITY;
+    for (i, [v, a, j]) in seg.peaks().into_iter().enumerate() {
+        let ax = &cfg.axes[i];
+        if v > 0.0 {
+            r = r.min((ax.max_acc_mm_s2 - a * cap * cap) / v);
+        }
+        if a > 0.0 {
+            r = r.min((ax.max_jerk_mm_s3 - j * cap.powi(3) - v * k2) / (3.0 * a * cap));
+        }
+    }
+    r.max(k1)
 }
 
 /// Refuses a pose outside the soft limits, naming the line.

@@ -72,6 +72,11 @@ pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
                     move_rest_mm: 0.0,
                     override_cap: lim.max_override,
                     end_override_cap: lim.max_override,
+                    scale_rate_max: 0.0,
+                    end_scale_rate_max: 0.0,
+                    scale_jerk_max: 0.0,
+                    brake_scale_jerk_max: 0.0,
+                    next_scale_jerk_max: 0.0,
                 }));
             }
         }
@@ -147,48 +152,101 @@ fn plan_run(
             c.max_speed(a.vcap_mm_s.min(b.vcap_mm_s), a.len_mm, b.len_mm, tol)
         })
         .collect();
-    let dmax: Vec<f64> = (0..n)
-        .map(|k| corners[k].map_or(0.0, |c| c.half_length_mm(jmax[k])))
-        .collect();
-    let mmin: Vec<f64> = (0..n)
-        .map(|k| (p[k].len_mm - dmax[k] - if k > 0 { dmax[k - 1] } else { 0.0 }).max(0.0))
-        .collect();
+    // Move k must hold the blend halves at both ends plus its speed change:
+    // g_k(a, b) = d_{k-1}(a) + d_k(b) + D_k(a, b) ≤ L_k, a and b the junction speeds.
+    let half = |j: Option<usize>, v: f64| {
+        j.and_then(|j| corners[j])
+            .map_or(0.0, |c| c.half_length_mm(v))
+    };
+    let g = |k: usize, a: f64, b: f64| {
+        half(k.checked_sub(1), a) + half(Some(k), b) + p[k].tang.distance_mm(a, b)
+    };
+    let bisect = |mut lo: f64, mut hi: f64, ok: &dyn Fn(f64) -> bool| {
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if ok(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if hi - lo <= 1e-9 * hi.max(1.0) {
+                break;
+            }
+        }
+        lo
+    };
+    // Backward step over move k: highest entry speed a ≤ a_cap that can slow to b.
+    let entry = |k: usize, a_cap: f64, b: f64| {
+        if a_cap <= b || g(k, a_cap, b) <= p[k].len_mm {
+            a_cap
+        } else {
+            bisect(b, a_cap, &|a| g(k, a, b) <= p[k].len_mm)
+        }
+    };
+    // Forward step over move k: highest exit speed b ≤ b_cap reachable from a.
+    let exit = |k: usize, a: f64, b_cap: f64| {
+        if b_cap <= a || g(k, a, b_cap) <= p[k].len_mm {
+            b_cap
+        } else {
+            bisect(a, b_cap, &|b| g(k, a, b) <= p[k].len_mm)
+        }
+    };
 
-    let mut vj = jmax.clone();
-    let mut base = 0;
-    let mut v_start = 0.0;
-    while base < n {
-        let end = (base + window).min(n);
-        // Backward pass from a stop at the end of the window.
-        vj[end - 1] = if end == n {
-            0.0
-        } else {
-            0.0f64.min(jmax[end - 1])
-        };
-        for k in (base..end - 1).rev() {
-            vj[k] = jmax[k].min(p[k + 1].tang.reach_mm_s(
-                vj[k + 1],
-                mmin[k + 1],
-                p[k + 1].vcap_mm_s,
-            ));
+    let passes = |jmax: &[f64]| {
+        let mut vj = jmax.to_vec();
+        let mut base = 0;
+        let mut v_start = 0.0;
+        while base < n {
+            let end = (base + window).min(n);
+            // Backward pass from a stop at the end of the window.
+            vj[end - 1] = 0.0;
+            for k in (base..end - 1).rev() {
+                vj[k] = entry(k + 1, jmax[k], vj[k + 1]);
+            }
+            // Forward pass.
+            let mut prev = v_start;
+            for k in base..end {
+                vj[k] = exit(k, prev, vj[k]);
+                prev = vj[k];
+            }
+            let commit = if end == n {
+                end - base
+            } else {
+                ((end - base) / 2).max(1)
+            };
+            v_start = vj[base + commit - 1];
+            base += commit;
         }
-        // Forward pass.
-        let mut prev = v_start;
-        for k in base..end {
-            vj[k] = vj[k].min(p[k].tang.reach_mm_s(prev, mmin[k], p[k].vcap_mm_s));
-            prev = vj[k];
+        vj
+    };
+    // The room a move needs is not monotone in its exit speed (a faster exit shortens the
+    // slow-down but lengthens the blend), so a window shift can leave a move whose entry was
+    // committed earlier without a feasible exit. Verify every move and repair by lowering
+    // the junction speeds around it until all fit (speeds only go down, so this ends: at
+    // worst in exact stops, which always fit).
+    let mut jmax = jmax;
+    let mut vj = passes(&jmax);
+    for round in 0.. {
+        let mut bad = false;
+        for k in 0..n {
+            let a = if k > 0 { vj[k - 1] } else { 0.0 };
+            if g(k, a, vj[k]) > p[k].len_mm * (1.0 + 1e-12) + 1e-12 {
+                bad = true;
+                let f = if round < 20 { 0.8 } else { 0.0 };
+                if k > 0 {
+                    jmax[k - 1] = jmax[k - 1].min(f * vj[k - 1]);
+                }
+                jmax[k] = jmax[k].min(f * vj[k]);
+            }
         }
-        let commit = if end == n {
-            end - base
-        } else {
-            ((end - base) / 2).max(1)
-        };
-        for k in base..base + commit {
-            let v_in = if k > 0 { vj[k - 1] } else { 0.0 };
-            emit_move(&p, &corners, k, v_in, vj[k], lim, out);
+        if !bad {
+            break;
         }
-        v_start = vj[base + commit - 1];
-        base += commit;
+        vj = passes(&jmax);
+    }
+    for k in 0..n {
+        let v_in = if k > 0 { vj[k - 1] } else { 0.0 };
+        emit_move(&p, &corners, k, v_in, vj[k], lim, out);
     }
 }
 
@@ -284,6 +342,11 @@ fn emit_move(
             move_rest_mm: (m.len_mm - *done).max(0.0),
             override_cap: 1.0,
             end_override_cap: 1.0,
+            scale_rate_max: 0.0,
+            end_scale_rate_max: 0.0,
+            scale_jerk_max: 0.0,
+            brake_scale_jerk_max: 0.0,
+            next_scale_jerk_max: 0.0,
         };
         *pos = end;
         push(out, lim, seg);
@@ -348,6 +411,11 @@ fn emit_move(
                 move_rest_mm: (nb.len_mm - x).max(0.0),
                 override_cap: 1.0,
                 end_override_cap: 1.0,
+                scale_rate_max: 0.0,
+                end_scale_rate_max: 0.0,
+                scale_jerk_max: 0.0,
+                brake_scale_jerk_max: 0.0,
+                next_scale_jerk_max: 0.0,
             };
             push(out, lim, seg);
         }

@@ -7,7 +7,7 @@ use super::moves::{Junction, Move, MoveKind};
 use crate::gcode::NUM_AXES;
 
 /// Longest run merged into one move (bounds the work per move).
-const MAX_RUN: usize = 64;
+const MAX_RUN: usize = 256;
 
 fn distance_to_segment(p: &[f64; NUM_AXES], a: &[f64; NUM_AXES], b: &[f64; NUM_AXES]) -> f64 {
     let mut ab2 = 0.0;

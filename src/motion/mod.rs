@@ -7,10 +7,26 @@
 //! [`Plan`] of `Copy` [`Item`]s → the [`Interpolator`] on the servo thread.
 //!
 //! Every segment is one S-curve velocity transition between two velocity *vectors* (see
-//! [`profile`]); corners are blends of that same shape. That is what makes the limits
-//! provable: each axis' velocity, acceleration and jerk inside a segment is known in closed
-//! form and planned within the limits, and the interpolator's time scaling (overrides, hold,
-//! abort) uses a reserved share of acceleration and jerk.
+//! [`profile`]); corners are blends of that same shape ([`blend`]). That is what makes the
+//! limits provable: each axis' velocity, acceleration and jerk inside a segment is known in
+//! closed form and planned within the limits, velocity is continuous and acceleration is zero
+//! at every segment boundary, so the trace is C² with bounded jerk everywhere.
+//!
+//! Overrides, feed hold and abort are time scaling in the interpolator (`dσ/dt = k`). The
+//! planner plans with `(1 - override_reserve)` of each axis' acceleration and jerk and
+//! records per segment how far `k` may go ([`Segment::override_cap`]) and how fast it may
+//! change ([`Segment::scale_rate_max`]); the interpolator never leaves those bounds, so no
+//! override change, hold or abort exceeds a limit or leaves the path. Above 100%, only the
+//! parts of the path that are not already at a limit get faster (cruises below the axis
+//! velocity), as with any planner.
+//!
+//! Non-motion commands ride in the queue in program order. Barriers ([`AuxKind::is_barrier`]:
+//! M0/M1/M2, spindle start/stop, tool change, M66 wait, immediate I/O, user M-codes) end the
+//! lookahead run at rest and the interpolator waits for `aux_done`; S changes, synchronised
+//! I/O (M62/M63/M67), coolant and messages are reported when reached without slowing down.
+//!
+//! Usage (the lead wraps `step` in the servo task and feeds the queue through a lock-free
+//! buffer implementing [`SegmentSource`]):
 //!
 //! ```
 //! use hytask::gcode::{Canon, CanonCmd, SourceLoc};
@@ -44,6 +60,7 @@
 
 pub mod arcs;
 pub mod blend;
+pub mod bounds;
 pub mod config;
 mod error;
 pub mod from_canon;
@@ -55,11 +72,14 @@ pub mod merge;
 pub mod moves;
 pub mod profile;
 pub mod segment;
+pub mod svg;
 pub mod trace;
 
 pub use config::{AxisLimits, KinematicsConfig, MotionConfig, ScaraConfig};
 pub use error::{KinematicsError, PlanError};
-pub use interpolator::{InterpOutput, InterpState, Interpolator, SegmentSource, SliceSource};
+pub use interpolator::{
+    InterpOutput, InterpState, Interpolator, IterSource, SegmentSource, SliceSource,
+};
 pub use segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
 
 use crate::gcode::{Canon, NUM_AXES};
@@ -129,17 +149,14 @@ pub fn plan_from(
                 distance_mm += s.length_mm;
                 segment_count += 1;
                 lines.insert(s.line);
-                if s.kind != SegmentKind::Dwell
-                    && !matches!(cfg.kinematics, KinematicsConfig::Identity)
-                {
-                    // Joint limits and reach along the way (blends and arcs leave the chords).
-                    for f in [0.5, 1.0] {
-                        kin.inverse(&s.pose_at(f * s.duration_s))
-                            .map_err(|source| PlanError::Kinematics {
-                                line: s.line,
-                                source,
-                            })?;
-                    }
+                if let KinematicsConfig::Scara(sc) = &cfg.kinematics {
+                    // Reach, joint limits and joint speeds along the way (blends and arcs
+                    // leave the chords; joint speeds grow near full extension).
+                    kinematics::check_segment(&kin, s, &sc.joint_max_vel, cfg.servo_period_s)
+                        .map_err(|source| PlanError::Kinematics {
+                            line: s.line,
+                            source,
+                        })?;
                 }
             }
             Item::Aux(a) => {

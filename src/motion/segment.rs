@@ -48,6 +48,23 @@ pub struct Segment {
     /// tolerate, ramped back at the interpolator's scale rate): the interpolator brings the
     /// scale down in time for it.
     pub end_override_cap: f64,
+    /// Largest rate of change of the time scale in this segment, 1/s: what the segment's
+    /// acceleration and jerk leave free for the `p'·k̇` and `p''·k·k̇` terms (so a hold in
+    /// a cruise decelerates at nearly the full axis acceleration).
+    pub scale_rate_max: f64,
+    /// Largest scale rate allowed when this segment ends (what follows tolerates, ramped
+    /// back at the interpolator's `k̈` limit).
+    pub end_scale_rate_max: f64,
+    /// Largest second derivative of the time scale in this segment, 1/s²: the jerk this
+    /// segment leaves free for the `p'·k̈` term (so a hold in a cruise is nearly as quick as
+    /// the fastest S-curve stop).
+    pub scale_jerk_max: f64,
+    /// Smallest `scale_jerk_max` of the segments that follow within one braking of the
+    /// scale: what the interpolator may count on when it plans to bring `k̇` to zero.
+    pub brake_scale_jerk_max: f64,
+    /// Smallest `scale_jerk_max` of the segments a servo period starting near the end of
+    /// this one can reach: used on the last stretch of the segment.
+    pub next_scale_jerk_max: f64,
 }
 
 impl Segment {
@@ -242,4 +259,42 @@ pub enum Item {
     Segment(Segment),
     /// A non-motion command, reached when every item before it has been executed.
     Aux(AuxItem),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn realtime_safe<T: Copy + Send + Sync + 'static>() {}
+
+    #[test]
+    fn queue_items_are_copy_send_and_small() {
+        realtime_safe::<Item>();
+        realtime_safe::<AuxItem>();
+        // Fixed size, no heap: a ring of 4096 items is about 1.5 MiB.
+        assert!(
+            std::mem::size_of::<Item>() <= 400,
+            "{}",
+            std::mem::size_of::<Item>()
+        );
+    }
+
+    #[test]
+    fn barriers_are_the_commands_that_need_motion_stopped() {
+        assert!(!AuxKind::SpindleSpeed { rpm: 1.0 }.is_barrier());
+        assert!(!AuxKind::DigitalOutput {
+            index: 0,
+            on: true,
+            synced: true
+        }
+        .is_barrier());
+        assert!(AuxKind::DigitalOutput {
+            index: 0,
+            on: true,
+            synced: false
+        }
+        .is_barrier());
+        assert!(AuxKind::SpindleStart(SpindleDir::Clockwise).is_barrier());
+        assert!(AuxKind::ProgramEnd.is_barrier());
+    }
 }

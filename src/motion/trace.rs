@@ -114,6 +114,56 @@ pub fn run(
     tr
 }
 
+/// Peaks of a whole job measured on the fly (constant memory, for long programs).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Measured {
+    /// Per-axis peaks, as [`Trace::peaks`] would give.
+    pub peaks: Peaks,
+    /// Servo periods run (including the initial pose).
+    pub periods: usize,
+    /// Time from the first period to the end of motion, s.
+    pub duration_s: f64,
+}
+
+/// Runs `plan` to completion like [`run`] without intervention, keeping only the last four
+/// poses: the finite-difference peaks of a job of any length in constant memory.
+pub fn measure(plan: &Plan, cfg: &MotionConfig, max_periods: usize) -> Measured {
+    let mut interp = Interpolator::new(cfg, plan.start_mm);
+    let mut src = SliceSource::new(&plan.items);
+    let dt = cfg.servo_period_s;
+    let mut m = Measured::default();
+    let mut w: [[f64; NUM_AXES]; 4] = [plan.start_mm; 4];
+    let mut count = 1usize;
+    let mut push = |p: [f64; NUM_AXES], m: &mut Measured, count: &mut usize| {
+        w.rotate_left(1);
+        w[3] = p;
+        *count += 1;
+        for a in 0..NUM_AXES {
+            m.peaks.vel[a] = m.peaks.vel[a].max(((w[3][a] - w[2][a]) / dt).abs());
+            if *count >= 3 {
+                let d2 = w[3][a] - 2.0 * w[2][a] + w[1][a];
+                m.peaks.acc[a] = m.peaks.acc[a].max((d2 / (dt * dt)).abs());
+            }
+            if *count >= 4 {
+                let d3 = w[3][a] - 3.0 * w[2][a] + 3.0 * w[1][a] - w[0][a];
+                m.peaks.jerk[a] = m.peaks.jerk[a].max((d3 / (dt * dt * dt)).abs());
+            }
+        }
+    };
+    for n in 0..max_periods {
+        let out = *interp.step(&mut src);
+        push(out.pose_mm, &mut m, &mut count);
+        match out.state {
+            InterpState::Waiting => interp.aux_done(),
+            InterpState::Done | InterpState::Idle if n > 0 && out.aux.is_none() => break,
+            _ => {}
+        }
+    }
+    m.periods = count;
+    m.duration_s = (count - 1) as f64 * dt;
+    m
+}
+
 /// Distance from `p` to the polyline `path` (XYZ), mm.
 pub fn distance_to_polyline_mm(p: &[f64; NUM_AXES], path: &[[f64; NUM_AXES]]) -> f64 {
     let mut best = f64::INFINITY;

@@ -10,6 +10,7 @@ pub use identity::Identity;
 pub use scara::Scara;
 
 use super::config::KinematicsConfig;
+use super::segment::Segment;
 use super::KinematicsError;
 use crate::gcode::NUM_AXES;
 
@@ -22,6 +23,7 @@ pub trait Kinematics {
 }
 
 /// The kinematics a configuration selects (a `Copy` value, usable on the servo thread).
+#[allow(clippy::large_enum_variant)] // lives in the interpolator: no Box on the servo thread
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Machine {
     /// Cartesian.
@@ -54,6 +56,43 @@ impl Kinematics for Machine {
             Machine::Scara(k) => k.inverse(pose),
         }
     }
+}
+
+/// Checks a planned segment in joint space: reach and joint position limits at samples one
+/// servo period apart, and joint speeds between them (scaled by the segment's override cap)
+/// against `joint_max_vel`. Identity kinematics needs nothing: axis limits are joint limits.
+pub fn check_segment(
+    kin: &Machine,
+    seg: &Segment,
+    joint_max_vel: &[f64; NUM_AXES],
+    servo_period_s: f64,
+) -> Result<(), KinematicsError> {
+    if matches!(kin, Machine::Identity(_)) || seg.duration_s <= 0.0 {
+        return Ok(());
+    }
+    let n = ((seg.duration_s / servo_period_s).ceil() as usize).max(2);
+    let h = seg.duration_s / n as f64;
+    let mut prev = kin.inverse(&seg.pose_at(0.0))?;
+    for i in 1..=n {
+        let q = kin.inverse(&seg.pose_at(i as f64 * h))?;
+        for j in 0..NUM_AXES {
+            let mut d = q[j] - prev[j];
+            if j < 2 {
+                // Angles are reported in (-180, 180]: take the short way round.
+                d = (d + 180.0).rem_euclid(360.0) - 180.0;
+            }
+            let v = d.abs() / h * seg.override_cap;
+            if v > joint_max_vel[j] * (1.0 + 1e-9) {
+                return Err(KinematicsError::JointVelocity {
+                    joint: j,
+                    value: v,
+                    max: joint_max_vel[j],
+                });
+            }
+        }
+        prev = q;
+    }
+    Ok(())
 }
 
 fn check_finite(p: &[f64; NUM_AXES]) -> Result<(), KinematicsError> {
