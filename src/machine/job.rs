@@ -59,7 +59,13 @@ pub fn motion_config(cfg: &MachineConfig) -> MotionConfig {
                 elbow_positive: true,
                 joint_min: [-1.0e9; NUM_AXES],
                 joint_max: [1.0e9; NUM_AXES],
+                joint_max_vel: [1.0e9; NUM_AXES],
             };
+            // Joint speeds: the configured axis velocities of the joints (deg/s for the two
+            // arm joints, mm/s for Z), as the drives of those joints are limited.
+            for a in &cfg.axes {
+                sc.joint_max_vel[a.name as usize] = a.max_velocity;
+            }
             sc.joint_min[0] = -180.0;
             sc.joint_max[0] = 180.0;
             sc.joint_min[1] = -170.0;
