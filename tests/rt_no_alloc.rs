@@ -1,0 +1,239 @@
+//! Proves that steady-state realtime operations allocate nothing: a counting global allocator
+//! wraps the system one, and each scenario asserts zero allocations (and frees) across many
+//! iterations after a warm-up.
+#![allow(clippy::unwrap_used)]
+
+use hytask::rt::prelude::*;
+use hytask::rt::stats::TimingStats;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    static ALLOCS: Cell<u64> = const { Cell::new(0) };
+}
+
+// SAFETY: forwards to the system allocator; only counts (per thread, so the test harness's
+// other threads do not disturb the count).
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as ours.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as ours.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as ours.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Allocations (and frees) made by `f` on this thread.
+fn allocations(f: impl FnOnce()) -> u64 {
+    let before = ALLOCS.with(Cell::get);
+    f();
+    ALLOCS.with(Cell::get) - before
+}
+
+#[derive(Clone, Copy, Default)]
+struct Payload([u64; 8]);
+
+#[test]
+fn counting_allocator_counts() {
+    assert!(allocations(|| drop(std::hint::black_box(vec![1u8; 10]))) >= 2);
+}
+
+#[test]
+fn data_object_set_get_do_not_allocate() {
+    let obj = DataObject::<Payload>::new("p", 4);
+    let mut w = obj.writer().unwrap();
+    let mut r1 = obj.reader().unwrap();
+    let mut r2 = obj.reader().unwrap();
+    let mut out = Payload::default();
+    let n = allocations(|| {
+        for i in 0..10_000u64 {
+            w.set(Payload([i; 8]));
+            r1.get(&mut out);
+            std::hint::black_box(r2.read());
+        }
+    });
+    assert_eq!(n, 0);
+}
+
+#[test]
+fn buffers_push_pop_overflow_do_not_allocate() {
+    let (w, mut r) = buffer::<Payload>(16, FullPolicy::DropOldest);
+    let (w2, mut r2) = buffer::<Payload>(16, FullPolicy::DropNewest);
+    let n = allocations(|| {
+        for i in 0..10_000u64 {
+            w.push(Payload([i; 8]));
+            w2.push(Payload([i; 8]));
+            let _ = w2.try_push(Payload([i; 8]));
+            if i % 3 == 0 {
+                r.pop();
+                r2.pop();
+            }
+        }
+    });
+    assert_eq!(n, 0);
+    assert!(r.overflows() > 0 && r2.overflows() > 0);
+}
+
+#[test]
+fn events_emit_and_drain_do_not_allocate() {
+    let ev = Event::<Payload>::new("e");
+    let mut sum = 0u64;
+    let counter = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let c2 = counter.clone();
+    ev.subscribe_immediate(move |p: &Payload| {
+        c2.fetch_add(p.0[0], std::sync::atomic::Ordering::Relaxed);
+    });
+    let mut rx = ev.subscribe(8);
+    let mut src = ev.source().unwrap();
+    src.emit(Payload::default()); // picks up the subscribers (configuration)
+    let n = allocations(|| {
+        for i in 0..10_000u64 {
+            src.emit(Payload([i; 8]));
+            if i % 16 == 0 {
+                rx.drain(|p| sum += p.0[0]);
+            }
+        }
+    });
+    assert_eq!(n, 0);
+    assert!(rx.lost() > 0, "overflow path exercised");
+}
+
+#[test]
+fn statistics_recording_does_not_allocate() {
+    let s = TimingStats::for_task();
+    let n = allocations(|| {
+        for i in 0..10_000u64 {
+            s.wakeup.record(i * 10);
+            s.exec.record(i);
+            s.record_overrun(i % 7 == 0);
+        }
+    });
+    assert_eq!(n, 0);
+}
+
+enum Cmd {
+    Go(u64),
+}
+
+impl Commands for Cmd {
+    fn operations() -> &'static [OperationDescriptor] {
+        &[OperationDescriptor {
+            name: "go",
+            doc: "Completes after one evaluation.",
+            params: &[ParamDescriptor {
+                name: "n",
+                ty: ArgType::Int,
+            }],
+            next: NextCommand::AfterCompletion,
+        }]
+    }
+    fn operation_index(&self) -> usize {
+        0
+    }
+    fn from_args(op: &str, args: &[ArgValue]) -> Result<Self, ArgError> {
+        let a = Args::new(Self::operations(), op, args)?;
+        Ok(Cmd::Go(a.int(0)? as u64))
+    }
+}
+
+/// Reads an input, writes an output, serves commands, emits and handles events.
+#[derive(Default)]
+struct Full {
+    input: Option<DataReader<Payload>>,
+    output: Option<DataWriter<Payload>>,
+    ev: Option<EventSource<Payload>>,
+    rx: Option<EventReceiver<Payload>>,
+    x: Payload,
+}
+
+impl Task for Full {
+    type Command = Cmd;
+    fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
+        let me = ctx.task_name().to_owned();
+        let other = if me == "a" { "b" } else { "a" };
+        self.input = Some(ctx.input(&format!("{other}.out")));
+        self.output = Some(ctx.output(&format!("{me}.out")));
+        self.ev = Some(ctx.event("ev"));
+        self.rx = Some(ctx.subscribe(&format!("{other}.ev"), 8));
+        Ok(())
+    }
+    fn read_inputs(&mut self, _: &StepContext) {
+        if let Some(i) = &mut self.input {
+            i.get(&mut self.x);
+        }
+    }
+    fn update(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        self.x.0[0] += 1;
+        if let Some(o) = &mut self.output {
+            o.set(self.x);
+        }
+        if ctx.cycle % 2 == 0 {
+            if let Some(e) = &mut self.ev {
+                e.emit(self.x);
+            }
+        }
+        Ok(())
+    }
+    fn accept(&mut self, _: &Cmd, _: &StepContext) -> Result<(), RejectReason> {
+        Ok(())
+    }
+    fn progress(&mut self, c: &Cmd, _: &StepContext) -> Progress {
+        let Cmd::Go(n) = c;
+        if *n > 0 {
+            Progress::Done
+        } else {
+            Progress::Failed("n must be positive")
+        }
+    }
+    fn process_events(&mut self, _: &StepContext) {
+        let x = &mut self.x;
+        if let Some(rx) = &mut self.rx {
+            rx.drain(|p| x.0[1] = p.0[0]);
+        }
+    }
+}
+
+#[test]
+fn full_periodic_step_of_a_task_group_does_not_allocate() {
+    let mut app = Deployment::new();
+    let sched = Schedule {
+        priority: 50,
+        period_ns: 1_000_000,
+        cpu: None,
+    };
+    let a = app.add_periodic("a", Full::default(), sched).unwrap();
+    app.add_periodic("b", Full::default(), sched).unwrap();
+    app.configure().unwrap();
+    let mut rt = app.start_stepped(SimClock::new(0)).unwrap();
+    // Warm-up: subscribers picked up, first command slot used.
+    let h = a.send(Cmd::Go(1)).unwrap();
+    rt.run_cycles(4);
+    assert_eq!(h.status(), CommandStatus::Done);
+    drop(h);
+    let n = allocations(|| {
+        for _ in 0..1_000 {
+            // A command sent and completed per cycle, from the same thread (as an RT sender).
+            let h = a.send(Cmd::Go(1)).unwrap();
+            rt.run_cycles(1);
+            std::hint::black_box(h.status());
+            drop(h);
+            rt.run_cycles(1);
+        }
+    });
+    assert_eq!(n, 0);
+    assert!(a.info().timing().exec.count > 2_000);
+}
