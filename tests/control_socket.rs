@@ -31,6 +31,8 @@ impl MachineApi for Double {
             spindle_rpm: 0.0,
             faults: vec![],
             threads: vec![],
+            inputs: Default::default(),
+            outputs: Default::default(),
         }
     }
     fn estop(&self) -> Result<(), ApiError> {
@@ -99,6 +101,9 @@ impl MachineApi for Double {
     }
     fn set_sim_input(&self, _: &str, _: f64) -> Result<(), ApiError> {
         Ok(())
+    }
+    fn sim_fault(&self, _: &SimFault) -> Result<(), ApiError> {
+        Err(ApiError::NotSupported("no simulation here".into()))
     }
     fn subscribe(&self) -> broadcast::Receiver<MachineEvent> {
         self.events.subscribe()

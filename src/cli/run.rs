@@ -49,6 +49,11 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             follow_job(client, &job, args.feed_override)
         }
         Err(_) if !args.no_embedded => {
+            if std::env::var_os("RUST_LOG").is_none() {
+                // The embedded machine logs warnings and errors only; progress is ours.
+                std::env::set_var("RUST_LOG", "warn");
+            }
+            super::serve::init_logging();
             let daemon = crate::daemon::Embedded::start(args.config.as_deref())
                 .context("starting the embedded simulated machine")?;
             eprintln!(

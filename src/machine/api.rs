@@ -174,6 +174,30 @@ pub struct Status {
     pub faults: Vec<String>,
     /// Realtime thread timing.
     pub threads: Vec<ThreadTiming>,
+    /// Inputs by name (logical state: 1 = active; analog in engineering units).
+    pub inputs: std::collections::BTreeMap<String, f64>,
+    /// Outputs by name, as the machine commands them.
+    pub outputs: std::collections::BTreeMap<String, f64>,
+}
+
+/// A fault to inject into a simulated machine (`sim.fault`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimFault {
+    /// `drive_fault`, `stall`, `disconnect` (per axis) or `overrun` (servo thread).
+    pub kind: String,
+    /// Axis letter, for the per-axis kinds.
+    #[serde(default)]
+    pub axis: Option<String>,
+    /// Switch a lasting condition (stall, disconnect) on or off; default on.
+    #[serde(default)]
+    pub on: Option<bool>,
+    /// Fault code for `drive_fault` (default 0x2310, over-current).
+    #[serde(default)]
+    pub code: Option<u16>,
+    /// Servo cycles to overrun, for `overrun` (default 5).
+    #[serde(default)]
+    pub cycles: Option<u32>,
 }
 
 /// Jog request.
@@ -318,6 +342,8 @@ pub trait MachineApi: Send + Sync + 'static {
     ) -> Result<serde_json::Value, ApiError>;
     /// Set a simulated input (sim backends only).
     fn set_sim_input(&self, name: &str, value: f64) -> Result<(), ApiError>;
+    /// Inject a fault into a simulated drive or the servo thread (sim backends only).
+    fn sim_fault(&self, fault: &SimFault) -> Result<(), ApiError>;
     /// A receiver of machine events (for `subscribe`).
     fn subscribe(&self) -> tokio::sync::broadcast::Receiver<MachineEvent>;
 }

@@ -127,6 +127,30 @@ pub fn prepare(
     })
 }
 
+/// Interprets and plans one MDI line. The line runs as a `%`-delimited program, which the
+/// interpreter ends without the side effects of M2 (no reset of spindle, coolant or modes),
+/// as LinuxCNC's MDI does; errors are reported against the line itself (`mdi:1:col`).
+pub fn prepare_mdi(
+    line: &str,
+    opts: &InterpOptions,
+    motion: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+) -> Result<PreparedJob, ApiError> {
+    let text = format!("%\n{line}\n%\n");
+    let program = gcode::load_str("mdi", &text, opts).map_err(|mut e| {
+        e.line = e.line.saturating_sub(1).max(1);
+        ApiError::Gcode(e.to_string())
+    })?;
+    let plan = motion::plan_from(&program.canon, motion, start_mm)
+        .map_err(|e| ApiError::Gcode(format!("mdi: {e}")))?;
+    Ok(PreparedJob {
+        name: "mdi".into(),
+        total_lines: 1,
+        commands: program.canon.len(),
+        plan,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -187,6 +211,19 @@ mod tests {
             msg.contains("far.ngc") && msg.contains("line 3") && msg.contains("400"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn mdi_lines_need_no_program_end_and_errors_name_line_one() {
+        let cfg = sim();
+        let start = [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let (o, m) = (interp_options(&cfg), motion_config(&cfg));
+        let j = prepare_mdi("G0 X20", &o, &m, start).expect("plans");
+        assert!((j.plan.end_mm[0] - 20.0).abs() < 1e-9);
+        let e = prepare_mdi("G1 X20 G0", &o, &m, start)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("mdi:1:"), "{e}");
     }
 
     #[test]

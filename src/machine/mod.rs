@@ -2,15 +2,22 @@
 //! checks the topology and runs the machine state machine and its safety paths.
 
 pub mod api;
+pub mod devices;
 pub mod job;
 pub mod mode;
+pub mod runtime;
 pub mod safety;
+pub mod servo;
+
+pub use runtime::{DeployError, Machine};
 
 /// Deploys the machine described by the file at `config` (default: the built-in sim mill).
 pub fn deploy_from(
-    _config: Option<&std::path::Path>,
-) -> anyhow::Result<std::sync::Arc<dyn crate::daemon::Deployed>> {
-    anyhow::bail!("machine deployment is not built yet")
+    config: Option<&std::path::Path>,
+) -> Result<std::sync::Arc<dyn crate::daemon::Deployed>, DeployError> {
+    let cfg = load_config(config)?;
+    let machine: std::sync::Arc<dyn crate::daemon::Deployed> = Machine::deploy(cfg)?;
+    Ok(machine)
 }
 
 /// Loads the machine description at `path`, or the built-in simulated mill.

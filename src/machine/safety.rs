@@ -1,5 +1,6 @@
-//! Safety checks run every servo cycle by the monitor task: e-stop input, drive faults,
-//! following error, soft limits, communication loss and overrun storms.
+//! Safety checks run every servo cycle by the monitor task: drive faults, following error,
+//! soft limits, limit switches and communication loss. (The e-stop input is read by the
+//! machine task itself, and overrun storms come from the realtime core's overrun policy.)
 //!
 //! The checks are pure functions of one cycle's data so that each path is unit-tested
 //! without threads; the monitor task wires them to data objects and turns a [`Trip`] into
@@ -49,6 +50,13 @@ pub enum Trip {
         /// Axis index.
         axis: usize,
     },
+    /// The spindle did not report at-speed in time after M3/M4.
+    SpindleNotAtSpeed,
+    /// Homing of an axis failed (switch not found, limit hit, drive stopped).
+    HomingFailed {
+        /// Axis index.
+        axis: usize,
+    },
     /// The servo thread overran its period too many times in a row.
     OverrunStorm {
         /// Consecutive overruns seen.
@@ -83,8 +91,9 @@ impl Trip {
             | Trip::FollowingError { axis, .. }
             | Trip::SoftLimit { axis, .. }
             | Trip::LimitSwitch { axis }
-            | Trip::CommunicationLost { axis } => Some(axis),
-            Trip::Estop | Trip::OverrunStorm { .. } => None,
+            | Trip::CommunicationLost { axis }
+            | Trip::HomingFailed { axis } => Some(axis),
+            Trip::Estop | Trip::OverrunStorm { .. } | Trip::SpindleNotAtSpeed => None,
         }
     }
 }
@@ -149,40 +158,6 @@ pub fn check_axis(axis: usize, guard: &AxisGuard, s: &AxisSample) -> Option<Trip
         });
     }
     None
-}
-
-/// Counts consecutive overruns and trips after `limit` in a row.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct OverrunWatch {
-    limit: u32,
-    consecutive: u32,
-    last_total: u64,
-}
-
-impl OverrunWatch {
-    /// Trips after `limit` consecutive overrun cycles.
-    pub fn new(limit: u32) -> Self {
-        OverrunWatch {
-            limit,
-            consecutive: 0,
-            last_total: 0,
-        }
-    }
-
-    /// Feeds the thread's total overrun count once per cycle.
-    pub fn update(&mut self, total_overruns: u64) -> Option<Trip> {
-        if total_overruns > self.last_total {
-            self.consecutive = self
-                .consecutive
-                .saturating_add((total_overruns - self.last_total) as u32);
-        } else {
-            self.consecutive = 0;
-        }
-        self.last_total = total_overruns;
-        (self.consecutive >= self.limit).then_some(Trip::OverrunStorm {
-            consecutive: self.consecutive,
-        })
-    }
 }
 
 #[cfg(test)]
@@ -291,16 +266,6 @@ mod tests {
             ..ok_sample()
         };
         assert_eq!(check_axis(0, &GUARD, &s), None);
-    }
-
-    #[test]
-    fn overrun_storm_needs_consecutive_overruns() {
-        let mut w = OverrunWatch::new(3);
-        assert_eq!(w.update(1), None);
-        assert_eq!(w.update(1), None); // a clean cycle resets the count
-        assert_eq!(w.update(2), None);
-        assert_eq!(w.update(3), None);
-        assert_eq!(w.update(4), Some(Trip::OverrunStorm { consecutive: 3 }));
     }
 
     #[test]

@@ -43,6 +43,7 @@ pub const METHODS: &[&str] = &[
     "tasks",
     "call",
     "sim.input",
+    "sim.fault",
 ];
 
 /// Runs one method against the machine.
@@ -67,6 +68,7 @@ pub fn dispatch(m: &dyn MachineApi, method: &str, params: Value) -> Result<Value
         "tasks" => tasks::handle(m, params),
         "call" => call::handle(m, params),
         "sim.input" => sim_input::handle(m, params),
+        "sim.fault" => sim_input::handle_fault(m, params),
         other => Err(ControlError::new(
             ErrorCode::MethodNotFound,
             format!("unknown method '{other}' (methods: {})", METHODS.join(", ")),

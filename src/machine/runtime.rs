@@ -1,0 +1,1205 @@
+//! A deployed, running machine: the realtime tasks on the servo thread, the segment queue
+//! and its feeder, the event bridge, and the [`MachineApi`] operators use.
+//!
+//! Configuration flow ([`Machine::deploy`]): build the HAL backends from the config, create
+//! the tasks (io → machine → interpolator → axes → monitor, one servo thread), configure
+//! them, check the topology (the deployment refuses to start with any error, each naming
+//! task and port), subscribe the non-realtime receivers, start the thread.
+//!
+//! The non-realtime side talks to the tasks only through commands (to the `machine` task),
+//! the segment queue (a bounded lock-free buffer filled by a feeder thread, one per running
+//! job) and data objects/events read here.
+
+use super::api::*;
+use super::devices;
+use super::job::{self, PreparedJob};
+use super::safety::{AxisGuard, Trip};
+use super::servo::axis_task::AxisTask;
+use super::servo::interp_task::InterpolatorTask;
+use super::servo::io_task::{IoTask, SimSpindle};
+use super::servo::machine_task::{MachineCmd, MachineSetup, MachineTask, SpindleIo};
+use super::servo::monitor_task::MonitorTask;
+use super::servo::{
+    ports, AxisFeedback, FaultEvent, Inputs, JobEvent, MachineSnapshot, ModeEvent, MonitorSnapshot,
+    Outputs, QueueItem, Setpoints,
+};
+use crate::config::{ConfigError, IoKind, MachineConfig};
+use crate::gcode::{Canon, CanonCmd, InterpOptions, SourceLoc, NUM_AXES};
+use crate::motion::{self, MotionConfig, AXIS_NAMES};
+use crate::rt::deploy::Runtime;
+use crate::rt::prelude::{
+    buffer, ArgValue, BufferWriter, CommandHandle, CommandStatus, DataReader, Deployment,
+    EventReceiver, FullPolicy, OverrunPolicy, Schedule, TaskHandle,
+};
+use hytask_hal::sim::{SimAxisHandle, SimIoHandle};
+use serde_json::{json, Value};
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+use tokio::sync::broadcast;
+
+/// Segment queue capacity, items. Preallocated at deployment.
+pub const QUEUE_CAPACITY: usize = 4096;
+/// How long an operator call waits for the machine task to accept or reject.
+const ACCEPT_TIMEOUT: Duration = Duration::from_secs(2);
+/// Faults kept for `status`.
+const FAULT_HISTORY: usize = 16;
+
+/// Why a machine could not be deployed.
+#[derive(Debug, thiserror::Error)]
+pub enum DeployError {
+    /// The configuration is invalid or names unavailable backends.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The realtime core refused the topology or could not start a thread.
+    #[error("realtime deployment: {0}")]
+    Rt(#[from] crate::rt::deploy::DeployError),
+    /// Something the configuration implies is missing.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// Non-realtime readers of the tasks' data objects.
+struct Readers {
+    inputs: DataReader<Inputs>,
+    outputs: DataReader<Outputs>,
+    snapshot: DataReader<MachineSnapshot>,
+    setpoints: DataReader<Setpoints>,
+    monitor: DataReader<MonitorSnapshot>,
+    feedback: Vec<(char, usize, DataReader<AxisFeedback>)>,
+}
+
+/// A job that is running, and its feeder.
+struct ActiveJob {
+    id: u32,
+    job: Arc<PreparedJob>,
+    cancel: Arc<AtomicBool>,
+    feeder: Option<std::thread::JoinHandle<()>>,
+    started: Instant,
+    manual: bool,
+}
+
+#[derive(Default)]
+struct JobBook {
+    loaded: Option<Arc<PreparedJob>>,
+    active: Option<ActiveJob>,
+    status: JobStatus,
+    faults: VecDeque<String>,
+}
+
+/// A running machine.
+pub struct Machine {
+    name: String,
+    config: MachineConfig,
+    motion_cfg: MotionConfig,
+    interp_opts: InterpOptions,
+    runtime: Mutex<Option<Runtime>>,
+    machine: TaskHandle<MachineCmd>,
+    queue: BufferWriter<QueueItem>,
+    readers: Mutex<Readers>,
+    book: Arc<Mutex<JobBook>>,
+    events: broadcast::Sender<MachineEvent>,
+    sim_io: Vec<Option<SimIoHandle>>,
+    io_map: devices::IoMap,
+    overrun_injection: Arc<AtomicU32>,
+    sim_axes: Vec<(char, SimAxisHandle)>,
+    next_job: AtomicU32,
+    servo: Arc<crate::rt::activity::ThreadInfo>,
+    bridge_stop: Arc<AtomicBool>,
+    bridge: Mutex<Option<std::thread::JoinHandle<()>>>,
+    step_pending: AtomicBool,
+    step_line: AtomicU32,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+fn axis_letter(i: usize) -> char {
+    AXIS_NAMES.get(i).copied().unwrap_or('?')
+}
+
+/// Words an operator can act on, for each trip.
+pub fn describe_trip(trip: &Trip, line: u32) -> String {
+    let at = if line > 0 {
+        format!(" (line {line})")
+    } else {
+        String::new()
+    };
+    match *trip {
+        Trip::Estop => format!("e-stop{at}"),
+        Trip::DriveFault { axis, code } => {
+            format!("axis {}: drive fault 0x{code:04X}{at}", axis_letter(axis))
+        }
+        Trip::FollowingError { axis, error, limit } => format!(
+            "axis {}: following error {error:.4} exceeds the limit {limit}{at}",
+            axis_letter(axis)
+        ),
+        Trip::SoftLimit { axis, position } => format!(
+            "axis {}: commanded position {position:.4} outside the soft limits{at}",
+            axis_letter(axis)
+        ),
+        Trip::LimitSwitch { axis } => format!("axis {}: limit switch hit{at}", axis_letter(axis)),
+        Trip::CommunicationLost { axis } if axis == usize::MAX => {
+            format!("I/O: communication lost, e-stop state unknown{at}")
+        }
+        Trip::CommunicationLost { axis } => {
+            format!("axis {}: drive communication lost{at}", axis_letter(axis))
+        }
+        Trip::SpindleNotAtSpeed => format!("spindle did not reach speed{at}"),
+        Trip::HomingFailed { axis } => format!("axis {}: homing failed", axis_letter(axis)),
+        Trip::OverrunStorm { consecutive } => {
+            format!("servo thread overran its period {consecutive} times in a row{at}")
+        }
+    }
+}
+
+fn trip_json(trip: &Trip, line: u32) -> Value {
+    let (axis, value) = match *trip {
+        Trip::DriveFault { axis, code } => (Some(axis), Some(f64::from(code))),
+        Trip::FollowingError { axis, error, .. } => (Some(axis), Some(error)),
+        Trip::SoftLimit { axis, position } => (Some(axis), Some(position)),
+        _ => (trip.axis(), None),
+    };
+    json!({
+        "message": describe_trip(trip, line),
+        "kind": format!("{trip:?}").split([' ', '{']).next().unwrap_or(""),
+        "axis": axis.filter(|&a| a < NUM_AXES).map(|a| axis_letter(a).to_string()),
+        "value": value,
+        "line": line,
+    })
+}
+
+/// The machine's tasks, added to a deployment that is not configured yet, with the handles
+/// the non-realtime side needs. [`Machine::deploy`] configures and starts it on real threads;
+/// tests start it on the stepped runtime with simulated time.
+pub struct Built {
+    /// The deployment (tasks added, not configured).
+    pub app: Deployment,
+    /// The machine task's command sender.
+    pub machine: TaskHandle<MachineCmd>,
+    /// Producer side of the segment queue.
+    pub queue: BufferWriter<QueueItem>,
+    /// The planner's configuration.
+    pub motion_cfg: MotionConfig,
+    /// Axis letters and pose indices, in configuration order.
+    pub axes: Vec<(char, usize)>,
+    /// Input handles of simulated I/O devices.
+    pub sim_io: Vec<Option<SimIoHandle>>,
+    /// Machine-wide channel numbering.
+    pub io_map: devices::IoMap,
+    /// Fault-injection handles of simulated drives.
+    pub sim_axes: Vec<(char, SimAxisHandle)>,
+    /// Overrun injection counter (simulated machines).
+    pub overrun_injection: Arc<AtomicU32>,
+}
+
+/// Builds the backends and adds the machine's tasks to a new deployment, in start order
+/// io → machine → interpolator → axis.* → monitor, all on the servo thread.
+pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
+    let devs = devices::build(config)?;
+    let motion_cfg = job::motion_config(config);
+    let servo = config
+        .servo_thread()
+        .ok_or_else(|| DeployError::Invalid("motion.servo_thread names no [[thread]]".into()))?
+        .clone();
+    let schedule = Schedule {
+        priority: i32::from(servo.priority),
+        period_ns: u64::from(servo.period_us) * 1000,
+        cpu: servo.cpu.map(|c| c as usize),
+    };
+    let period_s = f64::from(servo.period_us) * 1e-6;
+    let axes: Vec<(char, usize)> = config
+        .axes
+        .iter()
+        .map(|a| (axis_letter(a.name as usize), a.name as usize))
+        .collect();
+    let di = |name: &str| devs.io_map.index(IoKind::DigitalInput, name);
+    let dout = |name: &str| devs.io_map.index(IoKind::DigitalOutput, name);
+    let aout = |name: &str| devs.io_map.index(IoKind::AnalogOutput, name);
+    let estop_input = di(&config.safety.estop_input).ok_or_else(|| {
+        DeployError::Invalid(format!(
+            "safety.estop_input: no digital input '{}'",
+            config.safety.estop_input
+        ))
+    })?;
+    let spindle = config.spindle.as_ref().and_then(|s| {
+        Some(SpindleIo {
+            enable: dout(&s.enable_output)?,
+            direction: s.direction_output.as_deref().and_then(dout),
+            speed: s.speed_output.as_deref().and_then(aout),
+            at_speed: s.at_speed_input.as_deref().and_then(di),
+            max_rpm: s.max_rpm,
+        })
+    });
+    // The simulated plant's spindle: at speed `spin_up_s` after enable, on sim I/O.
+    let sim_spindle = config.spindle.as_ref().and_then(|s| {
+        let name = s.at_speed_input.as_deref()?;
+        let r = config.find_io(name)?;
+        let handle = devs.sim_io.get(r.device)?.clone()?;
+        let invert = config.io[r.device].digital_inputs[r.channel].invert;
+        Some(SimSpindle::new(
+            spindle?.enable,
+            (handle, r.channel, invert),
+            (s.spin_up_s / period_s).ceil() as u32,
+        ))
+    });
+    let homing_groups: Vec<u32> = config
+        .homing_order()
+        .iter()
+        .map(|g| g.iter().fold(0u32, |m, a| m | 1 << (*a as usize)))
+        .collect();
+    let setup = MachineSetup {
+        axes: axes.clone(),
+        homing_groups,
+        estop_input,
+        spindle,
+        flood_output: config.coolant.flood_output.as_deref().and_then(dout),
+        mist_output: config.coolant.mist_output.as_deref().and_then(dout),
+        max_feed_override: config.motion.max_feed_override,
+        max_stale_io_cycles: (0.02 / period_s).ceil() as u32,
+        enable_timeout_cycles: (2.0 / period_s) as u32,
+        spindle_timeout_cycles: (20.0 / period_s) as u32,
+        overrun_event: format!("rt-p{}-{}us.overrun", servo.priority, servo.period_us),
+        period_s,
+        in_position_window: 0.001,
+        settle_timeout_cycles: (1.0 / period_s) as u32,
+    };
+
+    let (queue_w, queue_r) = buffer::<QueueItem>(QUEUE_CAPACITY, FullPolicy::DropNewest);
+    let mut app = Deployment::new();
+    app.set_overrun_policy(OverrunPolicy {
+        storm_threshold: u64::from(config.safety.overrun_storm_count),
+    });
+    let devices::Devices {
+        axes: axis_devices,
+        io,
+        io_map,
+        sim_axes,
+        sim_io,
+    } = devs;
+    let overrun_injection = Arc::new(AtomicU32::new(0));
+    let mut io_task = IoTask::new(io, io_map.clone(), sim_spindle);
+    if sim_io.iter().all(Option::is_some) {
+        io_task = io_task.with_overrun_injection(overrun_injection.clone());
+    }
+    app.add_periodic("io", io_task, schedule)?;
+    let machine = app.add_periodic("machine", MachineTask::new(setup), schedule)?;
+    app.add_periodic(
+        "interpolator",
+        InterpolatorTask::new(motion_cfg.clone(), axes.clone(), queue_r),
+        schedule,
+    )?;
+    let mut guards = Vec::new();
+    for ((name, dev), cfg) in axis_devices.into_iter().zip(&config.axes) {
+        let i = name as usize;
+        let letter = axis_letter(i);
+        let homing = cfg.home.params();
+        app.add_periodic(
+            &format!("axis.{letter}"),
+            AxisTask::new(letter, i, dev, homing),
+            schedule,
+        )?;
+        guards.push((
+            letter,
+            i,
+            AxisGuard {
+                min: cfg.min_limit,
+                max: cfg.max_limit,
+                following_error_limit: cfg.following_error_limit,
+                max_stale_cycles: (0.01 / period_s).ceil() as u32,
+            },
+        ));
+    }
+    app.add_periodic("monitor", MonitorTask::new(guards), schedule)?;
+    Ok(Built {
+        app,
+        machine,
+        queue: queue_w,
+        motion_cfg,
+        axes,
+        sim_io,
+        io_map,
+        sim_axes: sim_axes
+            .into_iter()
+            .map(|(n, h)| (axis_letter(n as usize), h))
+            .collect(),
+        overrun_injection,
+    })
+}
+
+impl Machine {
+    /// Deploys `config`: builds backends and tasks, checks the topology, starts the servo
+    /// thread. The machine starts in e-stop.
+    pub fn deploy(config: MachineConfig) -> Result<Arc<Machine>, DeployError> {
+        if crate::rt::system::lock_memory().is_err() {
+            crate::rt::system::warn_not_realtime(
+                "mlockall failed (no CAP_IPC_LOCK or RLIMIT_MEMLOCK too low)",
+            );
+        }
+        let Built {
+            mut app,
+            machine,
+            queue: queue_w,
+            motion_cfg,
+            axes,
+            sim_io,
+            io_map,
+            sim_axes,
+            overrun_injection,
+        } = build(&config)?;
+        let report = app.configure()?;
+        for w in &report.warnings {
+            tracing::warn!("topology: {w}");
+        }
+        let mode_rx = app.event::<ModeEvent>("machine.mode")?.subscribe(256);
+        let job_rx = app.event::<JobEvent>("machine.job")?.subscribe(1024);
+        let fault_rx = app.event::<FaultEvent>("machine.fault")?.subscribe(256);
+        let readers = Readers {
+            inputs: app.reader(ports::INPUTS)?,
+            outputs: app.reader(ports::OUTPUTS)?,
+            snapshot: app.reader(ports::SNAPSHOT)?,
+            setpoints: app.reader(ports::SETPOINTS)?,
+            monitor: app.reader(ports::MONITOR)?,
+            feedback: axes
+                .iter()
+                .map(|&(c, i)| Ok((c, i, app.reader(&ports::feedback(c))?)))
+                .collect::<Result<_, crate::rt::deploy::DeployError>>()?,
+        };
+        let runtime = app.start()?;
+        let servo_info = runtime
+            .threads()
+            .first()
+            .cloned()
+            .ok_or_else(|| DeployError::Invalid("no servo thread started".into()))?;
+        let (events, _) = broadcast::channel(1024);
+        let m = Arc::new(Machine {
+            name: config.machine.name.clone(),
+            interp_opts: job::interp_options(&config),
+            motion_cfg,
+            config,
+            runtime: Mutex::new(Some(runtime)),
+            machine,
+            queue: queue_w,
+            readers: Mutex::new(readers),
+            book: Arc::new(Mutex::new(JobBook::default())),
+            events,
+            sim_io,
+            io_map,
+            overrun_injection,
+            sim_axes,
+            next_job: AtomicU32::new(1),
+            servo: servo_info,
+            bridge_stop: Arc::new(AtomicBool::new(false)),
+            bridge: Mutex::new(None),
+            step_pending: AtomicBool::new(false),
+            step_line: AtomicU32::new(0),
+        });
+        let weak = Arc::downgrade(&m);
+        let stop = m.bridge_stop.clone();
+        let bridge = std::thread::Builder::new()
+            .name("event-bridge".into())
+            .spawn(move || bridge_loop(weak, stop, mode_rx, job_rx, fault_rx))
+            .map_err(|e| DeployError::Invalid(format!("cannot start the event bridge: {e}")))?;
+        *lock(&m.bridge) = Some(bridge);
+        Ok(m)
+    }
+
+    /// The servo thread's shared information (timing statistics, realtime flag).
+    pub fn servo_thread(&self) -> &Arc<crate::rt::activity::ThreadInfo> {
+        &self.servo
+    }
+
+    /// Fault-injection handles of the simulated drives (tests, demos).
+    pub fn sim_axis(&self, axis: char) -> Option<&SimAxisHandle> {
+        self.sim_axes
+            .iter()
+            .find(|(c, _)| *c == axis)
+            .map(|(_, h)| h)
+    }
+
+    /// Sends a command and waits until the machine task accepted or rejected it.
+    fn command(&self, cmd: MachineCmd) -> Result<CommandHandle, ApiError> {
+        let h = self
+            .machine
+            .send(cmd)
+            .map_err(|e| ApiError::Rejected(e.to_string()))?;
+        match h.wait_accepted(ACCEPT_TIMEOUT) {
+            CommandStatus::Rejected(r) => Err(ApiError::Rejected(r.to_string())),
+            CommandStatus::Failed(why) => Err(ApiError::Failed(why.into())),
+            CommandStatus::Pending => Err(ApiError::Timeout(
+                "the machine task did not take the command".into(),
+            )),
+            _ => Ok(h),
+        }
+    }
+
+    /// Sends a command and waits for its completion condition.
+    fn command_done(&self, cmd: MachineCmd, timeout: Duration) -> Result<(), ApiError> {
+        let h = self.command(cmd)?;
+        match h.wait(timeout) {
+            CommandStatus::Done => Ok(()),
+            CommandStatus::Failed(why) => Err(ApiError::Failed(why.into())),
+            CommandStatus::Rejected(r) => Err(ApiError::Rejected(r.to_string())),
+            _ => Err(ApiError::Timeout("the command did not complete".into())),
+        }
+    }
+
+    fn snapshot(
+        &self,
+    ) -> (
+        MachineSnapshot,
+        Setpoints,
+        MonitorSnapshot,
+        Vec<(char, usize, AxisFeedback)>,
+    ) {
+        let mut r = lock(&self.readers);
+        let snap = r.snapshot.latest().unwrap_or_default();
+        let sp = r.setpoints.latest().unwrap_or_default();
+        let mon = r.monitor.latest().unwrap_or_default();
+        let fb = r
+            .feedback
+            .iter_mut()
+            .map(|(c, i, rd)| (*c, *i, rd.latest().unwrap_or_default()))
+            .collect();
+        (snap, sp, mon, fb)
+    }
+
+    /// The machine's actual pose (machine frame).
+    fn actual_pose(&self) -> [f64; NUM_AXES] {
+        let (_, sp, _, fb) = self.snapshot();
+        let mut pose = sp.pose_mm;
+        for (_, i, f) in fb {
+            if f.valid {
+                pose[i] = f.actual;
+            }
+        }
+        pose
+    }
+
+    /// Starts a prepared job (or jog/MDI) as job `id`: feeder first, then the `run` command.
+    fn start_job(&self, job: Arc<PreparedJob>, manual: bool) -> Result<(), ApiError> {
+        let pose = self.actual_pose();
+        for &(c, i) in self.axes().iter() {
+            if (job.plan.start_mm[i] - pose[i]).abs() > 0.01 {
+                return Err(ApiError::Rejected(format!(
+                    "axis {c} is at {:.4}, the job was planned from {:.4}: load it again",
+                    pose[i], job.plan.start_mm[i]
+                )));
+            }
+        }
+        let id = self.next_job.fetch_add(1, Ordering::Relaxed);
+        let cancel = Arc::new(AtomicBool::new(false));
+        let feeder = {
+            let queue = self.queue.clone();
+            let items = job.clone();
+            let cancel = cancel.clone();
+            std::thread::Builder::new()
+                .name(format!("feeder-{id}"))
+                .spawn(move || feed(queue, &items.plan.items, id, &cancel))
+                .map_err(|e| ApiError::Failed(format!("cannot start the feeder: {e}")))?
+        };
+        let items = job.plan.items.len() as u64;
+        let mut book = lock(&self.book);
+        book.status = JobStatus {
+            name: job.name.clone(),
+            state: "running".into(),
+            line: 0,
+            total_lines: job.total_lines,
+            progress: 0.0,
+            planned_time_s: job.plan.duration_s,
+            elapsed_s: 0.0,
+            distance_mm: job.plan.distance_mm,
+            distance_to_go_mm: job.plan.distance_mm,
+            reason: None,
+        };
+        let previous = book.active.replace(ActiveJob {
+            id,
+            job,
+            cancel: cancel.clone(),
+            feeder: Some(feeder),
+            started: Instant::now(),
+            manual,
+        });
+        drop(book);
+        if let Some(mut p) = previous {
+            p.cancel.store(true, Ordering::Release);
+            if let Some(f) = p.feeder.take() {
+                let _ = f.join();
+            }
+        }
+        match self.command(MachineCmd::Run {
+            job: id,
+            items,
+            manual,
+        }) {
+            Ok(_) => Ok(()),
+            Err(e) => {
+                cancel.store(true, Ordering::Release);
+                let mut book = lock(&self.book);
+                if let Some(mut a) = book.active.take() {
+                    if let Some(f) = a.feeder.take() {
+                        drop(book);
+                        let _ = f.join();
+                        book = lock(&self.book);
+                    }
+                }
+                book.status.state = "none".into();
+                Err(e)
+            }
+        }
+    }
+
+    fn axes(&self) -> Vec<(char, usize)> {
+        self.config
+            .axes
+            .iter()
+            .map(|a| (axis_letter(a.name as usize), a.name as usize))
+            .collect()
+    }
+
+    fn publish(&self, topic: &str, data: Value) {
+        let _ = self.events.send(MachineEvent {
+            topic: topic.into(),
+            data,
+        });
+    }
+}
+
+/// Pushes a job's items into the segment queue, waiting while it is full, until done or
+/// cancelled. Runs on its own ordinary thread: the realtime side never waits for it.
+fn feed(queue: BufferWriter<QueueItem>, items: &[motion::Item], job: u32, cancel: &AtomicBool) {
+    for &item in items {
+        let mut q = QueueItem { job, item };
+        loop {
+            if cancel.load(Ordering::Acquire) {
+                return;
+            }
+            match queue.try_push(q) {
+                Ok(()) => break,
+                Err(back) => {
+                    q = back;
+                    std::thread::sleep(Duration::from_millis(2));
+                }
+            }
+        }
+    }
+}
+
+/// Forwards realtime events to subscribers, keeps the job book, publishes progress.
+fn bridge_loop(
+    machine: std::sync::Weak<Machine>,
+    stop: Arc<AtomicBool>,
+    mut mode_rx: EventReceiver<ModeEvent>,
+    mut job_rx: EventReceiver<JobEvent>,
+    mut fault_rx: EventReceiver<FaultEvent>,
+) {
+    let mut last_progress = Instant::now();
+    while !stop.load(Ordering::Acquire) {
+        std::thread::sleep(Duration::from_millis(5));
+        let Some(m) = machine.upgrade() else {
+            return;
+        };
+        while let Some(e) = mode_rx.pop() {
+            let mode = serde_json::to_value(e.mode).unwrap_or(Value::Null);
+            tracing::info!("mode: {mode}");
+            m.publish("mode", json!({ "mode": mode }));
+        }
+        while let Some(f) = fault_rx.pop() {
+            let msg = describe_trip(&f.trip, f.line);
+            tracing::error!("fault: {msg}");
+            let mut book = lock(&m.book);
+            if book.faults.len() == FAULT_HISTORY {
+                book.faults.pop_front();
+            }
+            book.faults.push_back(msg);
+            drop(book);
+            m.publish("fault", trip_json(&f.trip, f.line));
+        }
+        while let Some(e) = job_rx.pop() {
+            handle_job_event(&m, e);
+        }
+        if m.step_pending.load(Ordering::Acquire) {
+            let (snap, sp, _, _) = m.snapshot();
+            if snap.mode == Mode::Running && sp.line != 0 {
+                step_watch(&m, sp.line);
+            }
+        }
+        if last_progress.elapsed() >= Duration::from_millis(100) {
+            last_progress = Instant::now();
+            let running = lock(&m.book).active.is_some();
+            if running {
+                update_progress(&m);
+                let status = lock(&m.book).status.clone();
+                m.publish(
+                    "progress",
+                    serde_json::to_value(status).unwrap_or(Value::Null),
+                );
+            }
+        }
+    }
+}
+
+/// `job.step`: hold as soon as the executing line changes from the one the step began on.
+fn step_watch(m: &Machine, line: u32) {
+    let from = m.step_line.load(Ordering::Acquire);
+    if from == 0 {
+        m.step_line.store(line, Ordering::Release);
+    } else if line != from {
+        m.step_pending.store(false, Ordering::Release);
+        m.step_line.store(0, Ordering::Release);
+        let _ = m.command(MachineCmd::Pause);
+    }
+}
+
+fn update_progress(m: &Machine) {
+    let (_, sp, _, _) = m.snapshot();
+    let mut book = lock(&m.book);
+    let Some(a) = &book.active else {
+        return;
+    };
+    if sp.job != a.id || sp.tracking {
+        return;
+    }
+    let planned = a.job.plan.duration_s.max(1e-9);
+    let elapsed = a.started.elapsed().as_secs_f64();
+    book.status.line = sp.line;
+    book.status.progress = (sp.planned_time_done_s / planned).clamp(0.0, 1.0);
+    book.status.elapsed_s = elapsed;
+    book.status.distance_to_go_mm = book.status.distance_mm * (1.0 - book.status.progress);
+}
+
+fn handle_job_event(m: &Machine, e: JobEvent) {
+    let mut book = lock(&m.book);
+    let (state, reason, end) = match e {
+        JobEvent::Started => ("running", None, false),
+        JobEvent::Held { line } => {
+            book.status.line = line;
+            ("holding", None, false)
+        }
+        JobEvent::Resumed => ("running", None, false),
+        JobEvent::Finished => ("done", None, true),
+        JobEvent::Aborted { line } => ("aborted", Some(format!("aborted at line {line}")), true),
+        JobEvent::Failed { line, trip } => ("failed", Some(describe_trip(&trip, line)), true),
+        JobEvent::Message { id, line } => {
+            let text = book
+                .active
+                .as_ref()
+                .and_then(|a| a.job.plan.messages.get(id as usize).cloned())
+                .unwrap_or_default();
+            drop(book);
+            tracing::info!("message (line {line}): {text}");
+            m.publish("message", json!({"text": text, "line": line}));
+            return;
+        }
+    };
+    let manual = book.active.as_ref().is_some_and(|a| a.manual);
+    book.status.state = state.into();
+    if reason.is_some() {
+        book.status.reason = reason;
+    }
+    let mut finished = None;
+    if end {
+        if let Some(mut a) = book.active.take() {
+            a.cancel.store(true, Ordering::Release);
+            book.status.elapsed_s = a.started.elapsed().as_secs_f64();
+            if state == "done" {
+                book.status.progress = 1.0;
+                book.status.distance_to_go_mm = 0.0;
+            }
+            finished = a.feeder.take();
+        }
+    }
+    let status = book.status.clone();
+    drop(book);
+    if let Some(f) = finished {
+        let _ = f.join();
+    }
+    if !manual {
+        tracing::info!("job {}: {}", status.name, status.state);
+        m.publish("job", serde_json::to_value(status).unwrap_or(Value::Null));
+    }
+}
+
+impl MachineApi for Machine {
+    fn status(&self) -> Status {
+        let (snap, sp, mon, fb) = self.snapshot();
+        let axes = fb
+            .iter()
+            .map(|&(c, i, f)| AxisStatus {
+                name: c.to_string(),
+                commanded: sp.joints[i],
+                actual: f.actual,
+                velocity: f.velocity,
+                following_error: mon.following_error[i],
+                max_following_error: mon.max_following_error[i],
+                homed: f.homed,
+                drive_state: f.state.to_string(),
+                fault: f.fault.map(|c| format!("0x{c:04X}")),
+            })
+            .collect();
+        let threads = lock(&self.runtime)
+            .as_ref()
+            .map(|rt| {
+                rt.threads()
+                    .iter()
+                    .map(|t| {
+                        let s = t.stats.summary();
+                        let us = |ns: u64| ns as f64 / 1000.0;
+                        ThreadTiming {
+                            name: t.spec.name.clone(),
+                            period_us: t.spec.period_ns / 1000,
+                            priority: t.spec.priority,
+                            cycles: s.wakeup.count,
+                            latency_us: MinAvgMax {
+                                min: us(s.wakeup.min_ns),
+                                avg: us(s.wakeup.avg_ns),
+                                max: us(s.wakeup.max_ns),
+                            },
+                            exec_us: MinAvgMax {
+                                min: us(s.exec.min_ns),
+                                avg: us(s.exec.avg_ns),
+                                max: us(s.exec.max_ns),
+                            },
+                            overruns: s.overruns,
+                        }
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let (inputs, outputs) = {
+            let mut r = lock(&self.readers);
+            (
+                r.inputs.latest().unwrap_or_default(),
+                r.outputs.latest().unwrap_or_default(),
+            )
+        };
+        let map = &self.io_map;
+        let mut in_map = std::collections::BTreeMap::new();
+        for (i, c) in map.di.iter().enumerate() {
+            in_map.insert(c.point.name.clone(), f64::from(u8::from(inputs.di(i))));
+        }
+        for (i, c) in map.ai.iter().enumerate() {
+            in_map.insert(c.point.name.clone(), inputs.analog[i]);
+        }
+        let mut out_map = std::collections::BTreeMap::new();
+        for (i, c) in map.dout.iter().enumerate() {
+            let on = outputs.digital & (1 << i) != 0;
+            out_map.insert(c.point.name.clone(), f64::from(u8::from(on)));
+        }
+        for (i, c) in map.ao.iter().enumerate() {
+            out_map.insert(c.point.name.clone(), outputs.analog[i]);
+        }
+        update_progress(self);
+        let book = lock(&self.book);
+        let mut faults: Vec<String> = book.faults.iter().cloned().collect();
+        if matches!(snap.mode, Mode::Fault | Mode::Estop) {
+            if let Some(t) = snap.last_trip {
+                let msg = describe_trip(&t, 0);
+                if !faults.iter().any(|f| f.starts_with(&msg)) {
+                    faults.push(msg);
+                }
+            }
+        } else {
+            faults.clear();
+        }
+        Status {
+            machine: self.name.clone(),
+            mode: snap.mode,
+            realtime: self.servo.realtime(),
+            axes,
+            job: book.status.clone(),
+            overrides: Overrides {
+                feed: snap.feed_override,
+                rapid: snap.rapid_override,
+                spindle: snap.spindle_override,
+            },
+            spindle_rpm: snap.spindle_rpm,
+            faults,
+            threads,
+            inputs: in_map,
+            outputs: out_map,
+        }
+    }
+
+    fn estop(&self) -> Result<(), ApiError> {
+        self.command(MachineCmd::Estop).map(|_| ())
+    }
+
+    fn estop_reset(&self) -> Result<(), ApiError> {
+        lock(&self.book).faults.clear();
+        self.command_done(MachineCmd::EstopReset, ACCEPT_TIMEOUT)
+    }
+
+    fn machine_on(&self) -> Result<(), ApiError> {
+        lock(&self.book).faults.clear();
+        self.command_done(MachineCmd::On, Duration::from_secs(5))
+    }
+
+    fn machine_off(&self) -> Result<(), ApiError> {
+        self.command_done(MachineCmd::Off, Duration::from_secs(30))
+    }
+
+    fn home(&self, axis: Option<&str>) -> Result<(), ApiError> {
+        let mask = match axis {
+            None => 0,
+            Some(a) => {
+                let up = a.to_ascii_uppercase();
+                let (_, i) = self
+                    .axes()
+                    .into_iter()
+                    .find(|(c, _)| up.len() == 1 && up.starts_with(*c))
+                    .ok_or_else(|| ApiError::InvalidParams(format!("no axis '{a}'")))?;
+                1u32 << i
+            }
+        };
+        self.command(MachineCmd::Home { mask }).map(|_| ())
+    }
+
+    fn jog(&self, req: &JogRequest) -> Result<(), ApiError> {
+        let up = req.axis.to_ascii_uppercase();
+        let (_, i) = self
+            .axes()
+            .into_iter()
+            .find(|(c, _)| up.len() == 1 && up.starts_with(*c))
+            .ok_or_else(|| ApiError::InvalidParams(format!("no axis '{}'", req.axis)))?;
+        let lim = self.motion_cfg.axes[i];
+        let speed = req.velocity.abs().min(lim.max_vel_mm_s);
+        let start = self.actual_pose();
+        let mut end = start;
+        end[i] = match req.distance {
+            Some(d) => start[i] + d.copysign(req.velocity),
+            None if req.velocity > 0.0 => lim.max_mm,
+            None => lim.min_mm,
+        };
+        if (end[i] - start[i]).abs() < 1e-9 {
+            return Err(ApiError::Rejected(format!(
+                "axis {} is already at its soft limit",
+                up
+            )));
+        }
+        let loc = SourceLoc {
+            file: Arc::from("jog"),
+            line: 1,
+            col: 1,
+        };
+        let canon = [
+            Canon {
+                loc: loc.clone(),
+                cmd: CanonCmd::SetFeedRate(speed * 60.0),
+            },
+            Canon {
+                loc,
+                cmd: CanonCmd::StraightFeed(end),
+            },
+        ];
+        let plan = motion::plan_from(&canon, &self.motion_cfg, start)
+            .map_err(|e| ApiError::Rejected(format!("jog: {e}")))?;
+        let job = Arc::new(PreparedJob {
+            name: "jog".into(),
+            total_lines: 1,
+            commands: canon.len(),
+            plan,
+        });
+        self.start_job(job, true)
+    }
+
+    fn jog_stop(&self) -> Result<(), ApiError> {
+        self.command(MachineCmd::Abort).map(|_| ())
+    }
+
+    fn mdi(&self, line: &str) -> Result<(), ApiError> {
+        let job = job::prepare_mdi(
+            line,
+            &self.interp_opts,
+            &self.motion_cfg,
+            self.actual_pose(),
+        )?;
+        self.start_job(Arc::new(job), false)
+    }
+
+    fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError> {
+        let job = job::prepare(src, &self.interp_opts, &self.motion_cfg, self.actual_pose())?;
+        let info = JobInfo {
+            name: job.name.clone(),
+            lines: job.total_lines,
+            commands: job.commands,
+            planned_time_s: job.plan.duration_s,
+            distance_mm: job.plan.distance_mm,
+        };
+        let mut book = lock(&self.book);
+        if book.active.is_none() {
+            book.status = JobStatus {
+                name: job.name.clone(),
+                state: "loaded".into(),
+                total_lines: job.total_lines,
+                planned_time_s: job.plan.duration_s,
+                distance_mm: job.plan.distance_mm,
+                distance_to_go_mm: job.plan.distance_mm,
+                ..JobStatus::default()
+            };
+        }
+        book.loaded = Some(Arc::new(job));
+        Ok(info)
+    }
+
+    fn job_run(&self) -> Result<(), ApiError> {
+        let job = lock(&self.book)
+            .loaded
+            .clone()
+            .ok_or_else(|| ApiError::Rejected("no job loaded".into()))?;
+        self.start_job(job, false)
+    }
+
+    fn job_pause(&self) -> Result<(), ApiError> {
+        self.command(MachineCmd::Pause).map(|_| ())
+    }
+
+    fn job_resume(&self) -> Result<(), ApiError> {
+        self.step_pending.store(false, Ordering::Release);
+        self.command(MachineCmd::Resume).map(|_| ())
+    }
+
+    fn job_abort(&self) -> Result<(), ApiError> {
+        self.step_pending.store(false, Ordering::Release);
+        self.command(MachineCmd::Abort).map(|_| ())
+    }
+
+    fn job_step(&self) -> Result<(), ApiError> {
+        let (snap, _, _, _) = self.snapshot();
+        match snap.mode {
+            Mode::Holding => {
+                self.step_line.store(0, Ordering::Release);
+                self.step_pending.store(true, Ordering::Release);
+                self.command(MachineCmd::Resume).map(|_| ())
+            }
+            Mode::Running => {
+                self.step_line.store(0, Ordering::Release);
+                self.step_pending.store(true, Ordering::Release);
+                Ok(())
+            }
+            _ => Err(ApiError::Rejected("no job is running".into())),
+        }
+    }
+
+    fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError> {
+        let (snap, ..) = self.snapshot();
+        let feed = req.feed.unwrap_or(snap.feed_override);
+        if feed > self.config.motion.max_feed_override {
+            return Err(ApiError::InvalidParams(format!(
+                "feed override above this machine's maximum {}",
+                self.config.motion.max_feed_override
+            )));
+        }
+        let cmd = MachineCmd::Overrides {
+            feed,
+            rapid: req.rapid.unwrap_or(snap.rapid_override),
+            spindle: req.spindle.unwrap_or(snap.spindle_override),
+        };
+        self.command(cmd)?;
+        Ok(Overrides {
+            feed,
+            rapid: req.rapid.unwrap_or(snap.rapid_override),
+            spindle: req.spindle.unwrap_or(snap.spindle_override),
+        })
+    }
+
+    fn tasks(&self) -> Vec<TaskInfo> {
+        let rt = lock(&self.runtime);
+        let Some(rt) = rt.as_ref() else {
+            return Vec::new();
+        };
+        rt.tasks()
+            .iter()
+            .map(|t| {
+                let i = t.interface();
+                TaskInfo {
+                    name: t.name().to_string(),
+                    state: format!("{:?}", t.state()).to_lowercase(),
+                    thread: t.thread().to_string(),
+                    operations: i
+                        .operations
+                        .iter()
+                        .map(|o| OperationInfo {
+                            name: o.name.into(),
+                            doc: o.doc.into(),
+                            params: o
+                                .params
+                                .iter()
+                                .map(|p| format!("{}: {:?}", p.name, p.ty).to_lowercase())
+                                .collect(),
+                        })
+                        .collect(),
+                    events: i.emits.iter().map(|e| e.name.clone()).collect(),
+                    ports: i
+                        .ports
+                        .iter()
+                        .map(|p| {
+                            let dir = match p.direction {
+                                crate::rt::interface::PortDirection::Input => "in",
+                                crate::rt::interface::PortDirection::Output => "out",
+                            };
+                            format!("{dir} {}", p.object)
+                        })
+                        .collect(),
+                }
+            })
+            .collect()
+    }
+
+    fn call(&self, task: &str, operation: &str, args: &Value) -> Result<Value, ApiError> {
+        let handle = {
+            let rt = lock(&self.runtime);
+            let rt = rt
+                .as_ref()
+                .ok_or_else(|| ApiError::Rejected("the machine is stopped".into()))?;
+            let t = rt
+                .task(task)
+                .ok_or_else(|| ApiError::InvalidParams(format!("no task '{task}'")))?;
+            let op = t
+                .commands()
+                .operations()
+                .iter()
+                .find(|o| o.name == operation)
+                .ok_or_else(|| {
+                    ApiError::InvalidParams(format!("task '{task}' has no operation '{operation}'"))
+                })?;
+            let values: Vec<Value> = match args {
+                Value::Null => Vec::new(),
+                Value::Array(a) => a.clone(),
+                Value::Object(o) => op
+                    .params
+                    .iter()
+                    .map(|p| o.get(p.name).cloned().unwrap_or(Value::Null))
+                    .collect(),
+                other => vec![other.clone()],
+            };
+            let parsed: Vec<ArgValue> = values
+                .into_iter()
+                .map(serde_json::from_value)
+                .collect::<Result<_, _>>()
+                .map_err(|e| ApiError::InvalidParams(format!("arguments: {e}")))?;
+            t.commands()
+                .send_args(operation, &parsed)
+                .map_err(|e| ApiError::InvalidParams(e.to_string()))?
+        };
+        let status = handle.wait(Duration::from_secs(5));
+        match status {
+            CommandStatus::Rejected(r) => Err(ApiError::Rejected(r.to_string())),
+            CommandStatus::Failed(why) => Err(ApiError::Failed(why.into())),
+            CommandStatus::Done => Ok(json!({"status": "done"})),
+            CommandStatus::Accepted => Ok(json!({"status": "accepted"})),
+            CommandStatus::Pending => Err(ApiError::Timeout(format!(
+                "task '{task}' did not take the command"
+            ))),
+        }
+    }
+
+    fn set_sim_input(&self, name: &str, value: f64) -> Result<(), ApiError> {
+        let r = self
+            .config
+            .find_io(name)
+            .ok_or_else(|| ApiError::InvalidParams(format!("no I/O channel '{name}'")))?;
+        let handle = self
+            .sim_io
+            .get(r.device)
+            .and_then(Option::as_ref)
+            .ok_or_else(|| {
+                ApiError::NotSupported(format!("'{name}' is not on a simulated device"))
+            })?;
+        let dev = &self.config.io[r.device];
+        let res = match r.kind {
+            IoKind::DigitalInput => {
+                let level = dev.digital_inputs[r.channel].level(value != 0.0);
+                handle.set_digital_input(r.channel, level)
+            }
+            IoKind::AnalogInput => {
+                let raw = dev.analog_inputs[r.channel].to_raw(value);
+                handle.set_analog_input(r.channel, raw)
+            }
+            _ => {
+                return Err(ApiError::InvalidParams(format!(
+                    "'{name}' is an output, not an input"
+                )))
+            }
+        };
+        res.map_err(|e| ApiError::Failed(e.to_string()))
+    }
+
+    fn sim_fault(&self, f: &SimFault) -> Result<(), ApiError> {
+        if f.kind == "overrun" {
+            if self.sim_io.iter().any(Option::is_none) {
+                return Err(ApiError::NotSupported(
+                    "overrun injection needs an all-simulated machine".into(),
+                ));
+            }
+            let cycles = f.cycles.unwrap_or(5).clamp(1, 1000);
+            self.overrun_injection.store(cycles, Ordering::Release);
+            return Ok(());
+        }
+        let axis = f
+            .axis
+            .as_deref()
+            .ok_or_else(|| ApiError::InvalidParams(format!("'{}' needs an axis", f.kind)))?;
+        let letter = axis.to_ascii_uppercase().chars().next().unwrap_or('?');
+        let h = self.sim_axis(letter).ok_or_else(|| {
+            ApiError::NotSupported(format!("axis '{axis}' is not a simulated drive"))
+        })?;
+        let on = f.on.unwrap_or(true);
+        match f.kind.as_str() {
+            "drive_fault" => h.inject_fault(hytask_hal::axis::FaultCode(f.code.unwrap_or(0x2310))),
+            "stall" => h.set_stalled(on),
+            "disconnect" => h.set_disconnected(on),
+            other => {
+                return Err(ApiError::InvalidParams(format!(
+                    "unknown fault kind '{other}' (drive_fault, stall, disconnect, overrun)"
+                )))
+            }
+        }
+        Ok(())
+    }
+
+    fn subscribe(&self) -> broadcast::Receiver<MachineEvent> {
+        self.events.subscribe()
+    }
+}
+
+impl crate::daemon::Deployed for Machine {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn realtime(&self) -> bool {
+        // The servo thread sets its flag when it starts: wait for that, briefly.
+        let t0 = Instant::now();
+        while !self.servo.running() && t0.elapsed() < Duration::from_secs(1) {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        self.servo.realtime()
+    }
+
+    fn servo_cycles(&self) -> u64 {
+        self.servo.stats.summary().wakeup.count
+    }
+
+    fn shutdown(&self) -> anyhow::Result<()> {
+        // A controlled stop of whatever moves, then drives off, then threads down.
+        let (snap, ..) = self.snapshot();
+        if !matches!(snap.mode, Mode::Estop | Mode::Off) {
+            if let Err(e) = self.command_done(MachineCmd::Off, Duration::from_secs(30)) {
+                tracing::warn!("controlled stop at shutdown: {e}; tripping the e-stop");
+                let _ = self.command(MachineCmd::Estop);
+                std::thread::sleep(Duration::from_millis(200));
+            }
+        }
+        self.bridge_stop.store(true, Ordering::Release);
+        if let Some(b) = lock(&self.bridge).take() {
+            let _ = b.join();
+        }
+        if let Some(rt) = lock(&self.runtime).take() {
+            let _ = rt.stop();
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,206 @@
+//! The `interpolator` task: wraps [`motion::Interpolator`](crate::motion::Interpolator) on
+//! the servo thread.
+//!
+//! While the machine task asks it to *track* (no motion commanded: idle, homing, e-stop,
+//! off, fault), the commanded position follows the actual position, so that enabling the
+//! drives or starting a job never makes a jump. Otherwise it steps the interpolator on the
+//! segment queue of the current job: queue items stamped with an older job id (leftovers of
+//! an aborted job) are discarded, at most [`MAX_DISCARD_PER_CYCLE`] per cycle.
+
+use super::{ports, AxisFeedback, MotionControl, QueueItem, Setpoints};
+use crate::gcode::NUM_AXES;
+use crate::motion::kinematics::{Kinematics, Machine};
+use crate::motion::{InterpState, Interpolator, Item, MotionConfig, SegmentSource};
+use crate::rt::prelude::*;
+
+/// Bound on stale items dropped per cycle (bounded work per cycle).
+pub const MAX_DISCARD_PER_CYCLE: usize = 1024;
+
+/// The segment queue seen as the interpolator's source, for one job.
+struct JobSource<'a> {
+    reader: &'a mut BufferReader<QueueItem>,
+    job: u32,
+    /// An item of a newer job, kept until that job runs.
+    parked: &'a mut Option<QueueItem>,
+    consumed: &'a mut u64,
+}
+
+impl SegmentSource for JobSource<'_> {
+    fn pop(&mut self) -> Option<Item> {
+        if let Some(p) = *self.parked {
+            if p.job == self.job {
+                *self.parked = None;
+                *self.consumed += 1;
+                return Some(p.item);
+            }
+            if p.job.wrapping_sub(self.job) as i32 > 0 {
+                return None;
+            }
+            *self.parked = None;
+        }
+        for _ in 0..MAX_DISCARD_PER_CYCLE {
+            let q = self.reader.pop()?;
+            if q.job == self.job {
+                *self.consumed += 1;
+                return Some(q.item);
+            }
+            if q.job.wrapping_sub(self.job) as i32 > 0 {
+                *self.parked = Some(q);
+                return None;
+            }
+        }
+        None
+    }
+}
+
+/// The interpolator task.
+pub struct InterpolatorTask {
+    cfg: MotionConfig,
+    interp: Interpolator,
+    kin: Machine,
+    /// Pose index of each configured axis, in configuration order.
+    axes: Vec<(char, usize)>,
+    queue: BufferReader<QueueItem>,
+    parked: Option<QueueItem>,
+    control_in: Option<DataReader<MotionControl>>,
+    feedback_in: Vec<DataReader<AxisFeedback>>,
+    out: Option<DataWriter<Setpoints>>,
+    control: MotionControl,
+    feedback: [AxisFeedback; NUM_AXES],
+    sp: Setpoints,
+    last_abort: u32,
+    last_aux_done: u32,
+}
+
+impl InterpolatorTask {
+    /// An interpolator for `cfg` consuming `queue`.
+    pub fn new(
+        cfg: MotionConfig,
+        axes: Vec<(char, usize)>,
+        queue: BufferReader<QueueItem>,
+    ) -> Self {
+        let kin = Machine::new(&cfg.kinematics);
+        InterpolatorTask {
+            interp: Interpolator::new(&cfg, [0.0; NUM_AXES]),
+            cfg,
+            kin,
+            axes,
+            queue,
+            parked: None,
+            control_in: None,
+            feedback_in: Vec::new(),
+            out: None,
+            control: MotionControl::default(),
+            feedback: [AxisFeedback::default(); NUM_AXES],
+            sp: Setpoints::default(),
+            last_abort: 0,
+            last_aux_done: 0,
+        }
+    }
+
+    /// Follow the drives: commanded = actual.
+    fn track(&mut self) {
+        let mut joints = self.sp.joints;
+        for &(_, i) in &self.axes {
+            if self.feedback[i].valid {
+                joints[i] = self.feedback[i].actual;
+            }
+        }
+        let pose = self.kin.forward(&joints).unwrap_or(self.sp.pose_mm);
+        self.interp = Interpolator::new(&self.cfg, pose);
+        self.interp.set_feed_override(self.control.feed_override);
+        self.interp.set_rapid_override(self.control.rapid_override);
+        self.sp.joints = joints;
+        self.sp.pose_mm = pose;
+        self.sp.state = InterpState::Idle;
+        self.sp.aux = None;
+        self.sp.distance_to_go_mm = 0.0;
+        self.sp.scale = 0.0;
+        self.sp.tracking = true;
+        self.sp.abort_ack = self.control.abort_seq;
+        self.last_abort = self.control.abort_seq;
+        self.last_aux_done = self.control.aux_done_seq;
+    }
+}
+
+impl Task for InterpolatorTask {
+    type Command = NoCommands;
+
+    fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
+        self.control_in = Some(ctx.input(ports::MOTION_CONTROL));
+        self.feedback_in = self
+            .axes
+            .iter()
+            .map(|&(name, _)| ctx.input(&ports::feedback(name)))
+            .collect();
+        self.out = Some(ctx.output(ports::SETPOINTS));
+        Ok(())
+    }
+
+    fn read_inputs(&mut self, _ctx: &StepContext) {
+        if let Some(r) = &mut self.control_in {
+            r.get(&mut self.control);
+        }
+        for (k, r) in self.feedback_in.iter_mut().enumerate() {
+            if let Some(&(_, i)) = self.axes.get(k) {
+                r.get(&mut self.feedback[i]);
+            }
+        }
+    }
+
+    fn update(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        let c = self.control;
+        if c.track_actual {
+            self.track();
+        } else {
+            if self.sp.tracking || c.job != self.sp.job {
+                // A new motion starts from where tracking left the interpolator.
+                self.sp.tracking = false;
+                self.sp.job = c.job;
+                self.sp.items_consumed = 0;
+                self.sp.planned_time_done_s = 0.0;
+            }
+            self.interp.set_feed_override(c.feed_override);
+            self.interp.set_rapid_override(c.rapid_override);
+            if c.hold {
+                self.interp.hold();
+            } else {
+                self.interp.resume();
+            }
+            if c.abort_seq != self.last_abort {
+                self.last_abort = c.abort_seq;
+                self.interp.abort();
+            }
+            if c.aux_done_seq != self.last_aux_done {
+                self.last_aux_done = c.aux_done_seq;
+                self.interp.aux_done();
+            }
+            let mut src = JobSource {
+                reader: &mut self.queue,
+                job: c.job,
+                parked: &mut self.parked,
+                consumed: &mut self.sp.items_consumed,
+            };
+            let out = *self.interp.step(&mut src);
+            let dt_s = ctx.period_ns as f64 * 1e-9;
+            self.sp.planned_time_done_s += dt_s * out.scale;
+            self.sp.joints = out.joints;
+            self.sp.pose_mm = out.pose_mm;
+            self.sp.line = out.line;
+            self.sp.state = out.state;
+            self.sp.distance_to_go_mm = out.distance_to_go_mm;
+            self.sp.scale = out.scale;
+            self.sp.aux = out.aux;
+            if out.aux.is_some() {
+                self.sp.aux_seq = self.sp.aux_seq.wrapping_add(1);
+            }
+            if matches!(out.state, InterpState::Idle | InterpState::Done) {
+                self.sp.abort_ack = self.last_abort;
+            }
+        }
+        if let Some(w) = &mut self.out {
+            w.set(self.sp);
+        }
+        Ok(())
+    }
+}

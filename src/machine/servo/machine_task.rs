@@ -1,0 +1,1061 @@
+//! The `machine` task: the machine state machine on the servo thread.
+//!
+//! It serves the operator's commands (each accepted or rejected by [`ModeMachine`] with a
+//! reason, then completed by its completion condition), and every cycle:
+//! 1. reads the e-stop input: pressed (or unreadable) → e-stop in this very cycle: drives
+//!    quick-stop, outputs go to their safe state (all off), motion is dropped;
+//! 2. executes the auxiliary command the interpolator reached (spindle, coolant, tool,
+//!    I/O, M0/M1, M66 waits, messages) and tells the interpolator when a barrier is done;
+//! 3. sequences homing group by group, in the configured order;
+//! 4. finishes jobs, aborts and controlled stops, and disables the drives when a stop
+//!    that asked for it has come to rest.
+//!
+//! Faults come from the monitor as `monitor.fault` events and overrun storms as the
+//! thread's overrun event; both are handled at this task's safe point (deferred handlers,
+//! step 6), so a fault found in cycle n starts the controlled stop in cycle n + 1.
+
+use super::{
+    ports, AxisFeedback, DriveControl, FaultEvent, Inputs, JobEvent, MachineSnapshot, ModeEvent,
+    MonitorSnapshot, MotionControl, Outputs, Setpoints,
+};
+use crate::gcode::canon::{InputKind, SpindleDir, WaitKind};
+use crate::gcode::NUM_AXES;
+use crate::machine::api::Mode;
+use crate::machine::mode::{Fact, ModeMachine, Request};
+use crate::machine::safety::Trip;
+use crate::motion::{AuxKind, InterpState};
+use crate::rt::prelude::*;
+
+/// The machine's operations.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MachineCmd {
+    /// Trip the e-stop.
+    Estop,
+    /// Release the e-stop.
+    EstopReset,
+    /// Enable the drives.
+    On,
+    /// Stop, then disable the drives.
+    Off,
+    /// Home the axes in `mask` (bit i = axis i of the pose; 0 = every axis).
+    Home {
+        /// Axes to home.
+        mask: u32,
+    },
+    /// Run queued job `job` of `items` queue items (jog and MDI are jobs too).
+    Run {
+        /// Job id stamped on its queue items.
+        job: u32,
+        /// Queue items of the job.
+        items: u64,
+        /// Manual (jog) rather than automatic (job, MDI).
+        manual: bool,
+    },
+    /// Feed hold.
+    Pause,
+    /// Resume after a hold or an M0.
+    Resume,
+    /// Controlled stop; the rest of the job is dropped.
+    Abort,
+    /// Overrides (fractions).
+    Overrides {
+        /// Feed, 0..=max.
+        feed: f64,
+        /// Rapid, 0..=1.
+        rapid: f64,
+        /// Spindle, 0..=2.
+        spindle: f64,
+    },
+}
+
+const NO_PARAMS: &[ParamDescriptor] = &[];
+
+static OPERATIONS: [OperationDescriptor; 10] = [
+    OperationDescriptor {
+        name: "estop",
+        doc: "Trip the e-stop: every drive quick-stops this cycle, outputs go safe.",
+        params: NO_PARAMS,
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "estop_reset",
+        doc: "Release the e-stop (refused while the e-stop input is active).",
+        params: NO_PARAMS,
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "machine_on",
+        doc: "Enable the drives; done when every drive is operational.",
+        params: NO_PARAMS,
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "machine_off",
+        doc: "Stop under control, then disable the drives.",
+        params: NO_PARAMS,
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "home",
+        doc: "Home the axes in the bit mask (0 = all), group by group; done when homed.",
+        params: &[ParamDescriptor {
+            name: "axis_mask",
+            ty: ArgType::Int,
+        }],
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "run",
+        doc: "Run queued job `job` of `items` items; done at its end.",
+        params: &[
+            ParamDescriptor {
+                name: "job",
+                ty: ArgType::Int,
+            },
+            ParamDescriptor {
+                name: "items",
+                ty: ArgType::Int,
+            },
+            ParamDescriptor {
+                name: "manual",
+                ty: ArgType::Bool,
+            },
+        ],
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "pause",
+        doc: "Feed hold; done when motion has stopped on the path.",
+        params: NO_PARAMS,
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "resume",
+        doc: "Resume after a feed hold or M0.",
+        params: NO_PARAMS,
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "abort",
+        doc: "Controlled stop within the axis limits; the rest of the job is dropped.",
+        params: NO_PARAMS,
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
+        name: "set_overrides",
+        doc: "Feed (0..max), rapid (0..1) and spindle (0..2) overrides.",
+        params: &[
+            ParamDescriptor {
+                name: "feed",
+                ty: ArgType::Float,
+            },
+            ParamDescriptor {
+                name: "rapid",
+                ty: ArgType::Float,
+            },
+            ParamDescriptor {
+                name: "spindle",
+                ty: ArgType::Float,
+            },
+        ],
+        next: NextCommand::AfterAcceptance,
+    },
+];
+
+impl Commands for MachineCmd {
+    fn operations() -> &'static [OperationDescriptor] {
+        &OPERATIONS
+    }
+
+    fn operation_index(&self) -> usize {
+        match self {
+            MachineCmd::Estop => 0,
+            MachineCmd::EstopReset => 1,
+            MachineCmd::On => 2,
+            MachineCmd::Off => 3,
+            MachineCmd::Home { .. } => 4,
+            MachineCmd::Run { .. } => 5,
+            MachineCmd::Pause => 6,
+            MachineCmd::Resume => 7,
+            MachineCmd::Abort => 8,
+            MachineCmd::Overrides { .. } => 9,
+        }
+    }
+
+    fn from_args(operation: &str, args: &[ArgValue]) -> Result<Self, ArgError> {
+        let a = Args::new(Self::operations(), operation, args)?;
+        Ok(match a.operation() {
+            "estop" => MachineCmd::Estop,
+            "estop_reset" => MachineCmd::EstopReset,
+            "machine_on" => MachineCmd::On,
+            "machine_off" => MachineCmd::Off,
+            "home" => MachineCmd::Home {
+                mask: a.int(0)? as u32,
+            },
+            "run" => MachineCmd::Run {
+                job: a.int(0)? as u32,
+                items: a.int(1)?.max(0) as u64,
+                manual: a.bool(2)?,
+            },
+            "pause" => MachineCmd::Pause,
+            "resume" => MachineCmd::Resume,
+            "abort" => MachineCmd::Abort,
+            _ => MachineCmd::Overrides {
+                feed: a.float(0)?,
+                rapid: a.float(1)?,
+                spindle: a.float(2)?,
+            },
+        })
+    }
+}
+
+/// Fixed facts about the machine the task needs.
+#[derive(Debug, Clone)]
+pub struct MachineSetup {
+    /// Axis letters in configuration order (`'X'`...), with their pose index.
+    pub axes: Vec<(char, usize)>,
+    /// Homing groups, in order, as pose-index masks.
+    pub homing_groups: Vec<u32>,
+    /// Machine-wide digital input index of the e-stop.
+    pub estop_input: usize,
+    /// Spindle outputs (digital enable, digital direction, analog speed) and at-speed input.
+    pub spindle: Option<SpindleIo>,
+    /// Coolant outputs.
+    pub flood_output: Option<usize>,
+    /// Mist output.
+    pub mist_output: Option<usize>,
+    /// Highest feed override.
+    pub max_feed_override: f64,
+    /// Cycles an e-stop input may stay unreadable before it counts as pressed.
+    pub max_stale_io_cycles: u32,
+    /// Cycles allowed for drives to enable or disable.
+    pub enable_timeout_cycles: u32,
+    /// Cycles allowed for the spindle to reach speed.
+    pub spindle_timeout_cycles: u32,
+    /// Name of the servo thread's overrun-storm event.
+    pub overrun_event: String,
+    /// Servo period, s (turns M66 timeouts into cycles).
+    pub period_s: f64,
+    /// A job is done when every |following error| is within this window (mm)...
+    pub in_position_window: f64,
+    /// ... or after this many cycles of settling.
+    pub settle_timeout_cycles: u32,
+}
+
+/// Spindle I/O, as machine-wide indices.
+#[derive(Debug, Clone, Copy)]
+pub struct SpindleIo {
+    /// Enable output.
+    pub enable: usize,
+    /// Direction output (on = counter-clockwise).
+    pub direction: Option<usize>,
+    /// Speed reference output (rpm).
+    pub speed: Option<usize>,
+    /// At-speed input.
+    pub at_speed: Option<usize>,
+    /// Largest speed.
+    pub max_rpm: f64,
+}
+
+/// A barrier the interpolator waits on while the machine carries it out.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Barrier {
+    None,
+    /// M3/M4 waits for the spindle to reach speed.
+    SpindleAtSpeed {
+        since: u64,
+    },
+    /// M66 waits for an input.
+    Wait {
+        index: u32,
+        input: InputKind,
+        kind: WaitKind,
+        deadline: u64,
+        last: bool,
+    },
+    /// M0 (or M1 with optional stop on): held until `resume`.
+    ProgramStop,
+}
+
+/// What the current motion is, and how it should end.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Motion {
+    None,
+    Job { job: u32, items: u64 },
+}
+
+/// The machine task.
+pub struct MachineTask {
+    setup: MachineSetup,
+    mode: ModeMachine,
+    // ports
+    inputs_in: Option<DataReader<Inputs>>,
+    setpoints_in: Option<DataReader<Setpoints>>,
+    feedback_in: Vec<DataReader<AxisFeedback>>,
+    monitor_in: Option<DataReader<MonitorSnapshot>>,
+    outputs_out: Option<DataWriter<Outputs>>,
+    drive_out: Option<DataWriter<DriveControl>>,
+    motion_out: Option<DataWriter<MotionControl>>,
+    snapshot_out: Option<DataWriter<MachineSnapshot>>,
+    faults_in: Option<EventReceiver<FaultEvent>>,
+    overruns_in: Option<EventReceiver<Overrun>>,
+    mode_ev: Option<EventSource<ModeEvent>>,
+    job_ev: Option<EventSource<JobEvent>>,
+    fault_ev: Option<EventSource<FaultEvent>>,
+    // working copies
+    inputs: Inputs,
+    monitor: MonitorSnapshot,
+    setpoints: Setpoints,
+    feedback: [AxisFeedback; NUM_AXES],
+    outputs: Outputs,
+    drive: DriveControl,
+    motion: MotionControl,
+    snap: MachineSnapshot,
+    cycle: u64,
+    last_aux_seq: u32,
+    barrier: Barrier,
+    current: Motion,
+    /// A stop was requested; when motion has come to rest: disable drives (if set), emit
+    /// the end event.
+    stopping: Option<Stopping>,
+    homing_group: Option<usize>,
+    homing_mask: u32,
+    enable_since: u64,
+    last_mode: Mode,
+    spindle_dir: Option<SpindleDir>,
+    spindle_rpm: f64,
+    optional_stop: bool,
+    /// Cycle at which the path of the current job was complete (settling since).
+    settle_since: Option<u64>,
+    /// Job id of the current or last motion, and how it ended.
+    job_id: u32,
+    ended: Option<(u32, JobEvent)>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Stopping {
+    abort_seq: u32,
+    disable: bool,
+    end: Option<JobEvent>,
+}
+
+impl MachineTask {
+    /// A machine task for `setup`; it starts in e-stop.
+    pub fn new(setup: MachineSetup) -> Self {
+        let motion = MotionControl::default();
+        MachineTask {
+            setup,
+            mode: ModeMachine::new(),
+            inputs_in: None,
+            setpoints_in: None,
+            feedback_in: Vec::new(),
+            monitor_in: None,
+            outputs_out: None,
+            drive_out: None,
+            motion_out: None,
+            snapshot_out: None,
+            faults_in: None,
+            overruns_in: None,
+            mode_ev: None,
+            job_ev: None,
+            fault_ev: None,
+            inputs: Inputs::default(),
+            monitor: MonitorSnapshot::default(),
+            setpoints: Setpoints::default(),
+            feedback: [AxisFeedback::default(); NUM_AXES],
+            outputs: Outputs::default(),
+            drive: DriveControl::default(),
+            motion,
+            snap: MachineSnapshot::default(),
+            cycle: 0,
+            last_aux_seq: 0,
+            barrier: Barrier::None,
+            current: Motion::None,
+            stopping: None,
+            homing_group: None,
+            homing_mask: 0,
+            enable_since: 0,
+            last_mode: Mode::Estop,
+            spindle_dir: None,
+            spindle_rpm: 0.0,
+            optional_stop: false,
+            settle_since: None,
+            job_id: 0,
+            ended: None,
+        }
+    }
+
+    fn all_homed(&self) -> bool {
+        self.setup.axes.iter().all(|&(_, i)| self.feedback[i].homed)
+    }
+
+    /// Homed axes as of this cycle's feedback.
+    fn homed_mask(&self) -> u32 {
+        self.setup
+            .axes
+            .iter()
+            .filter(|&&(_, i)| self.feedback[i].homed)
+            .fold(0, |m, &(_, i)| m | 1 << i)
+    }
+
+    fn axes_mask(&self) -> u32 {
+        self.setup.axes.iter().fold(0, |m, &(_, i)| m | 1 << i)
+    }
+
+    fn emit_job(&mut self, e: JobEvent) {
+        if matches!(
+            e,
+            JobEvent::Finished | JobEvent::Aborted { .. } | JobEvent::Failed { .. }
+        ) {
+            self.ended = Some((self.job_id, e));
+        }
+        if let Some(ev) = &mut self.job_ev {
+            ev.emit(e);
+        }
+    }
+
+    /// Motion at rest after the stop with `abort_seq`.
+    fn stopped(&self, abort_seq: u32) -> bool {
+        self.setpoints.abort_ack == abort_seq
+            && matches!(self.setpoints.state, InterpState::Idle | InterpState::Done)
+            || self.setpoints.tracking
+    }
+
+    /// Starts a controlled stop of whatever moves; `disable` drives once at rest.
+    fn controlled_stop(&mut self, disable: bool, end: Option<JobEvent>) {
+        self.motion.abort_seq = self.motion.abort_seq.wrapping_add(1);
+        self.motion.hold = false;
+        self.barrier = Barrier::None;
+        self.homing_group = None;
+        self.stopping = Some(Stopping {
+            abort_seq: self.motion.abort_seq,
+            disable,
+            end,
+        });
+    }
+
+    /// Reports a trip the machine acts on (event `machine.fault`).
+    fn report(&mut self, trip: Trip, line: u32) {
+        self.snap.last_trip = Some(trip);
+        self.snap.trips = self.snap.trips.wrapping_add(1);
+        if let Some(ev) = &mut self.fault_ev {
+            ev.emit(FaultEvent { trip, line });
+        }
+    }
+
+    /// E-stop: in this very cycle.
+    fn enter_estop(&mut self, trip: Trip) {
+        let line = self.setpoints.line;
+        self.report(trip, line);
+        let was_moving = self.current != Motion::None;
+        self.mode.fact(Fact::EstopInput);
+        self.drive.enable = false;
+        self.drive.quick_stop = true;
+        self.drive.home_abort_seq = self.drive.home_abort_seq.wrapping_add(1);
+        self.motion.track_actual = true;
+        self.motion.abort_seq = self.motion.abort_seq.wrapping_add(1);
+        self.motion.hold = false;
+        self.outputs = Outputs::default();
+        self.spindle_dir = None;
+        self.barrier = Barrier::None;
+        self.homing_group = None;
+        self.stopping = None;
+        self.current = Motion::None;
+        if was_moving {
+            self.emit_job(JobEvent::Failed { line, trip });
+        }
+    }
+
+    fn on_trip(&mut self, trip: Trip, line: u32) {
+        match self.mode.mode() {
+            Mode::Estop | Mode::Off => return,
+            Mode::Fault if self.stopping.is_some() => return,
+            _ => {}
+        }
+        self.report(trip, line);
+        let end = (self.current != Motion::None).then_some(JobEvent::Failed { line, trip });
+        self.current = Motion::None;
+        self.mode.fact(Fact::Faulted);
+        self.spindle_stop();
+        self.drive.home_abort_seq = self.drive.home_abort_seq.wrapping_add(1);
+        self.controlled_stop(true, end);
+    }
+
+    fn spindle_stop(&mut self) {
+        self.spindle_dir = None;
+        self.apply_spindle();
+    }
+
+    fn apply_spindle(&mut self) {
+        let Some(sp) = self.setup.spindle else {
+            return;
+        };
+        let rpm = (self.spindle_rpm * self.snap.spindle_override).clamp(0.0, sp.max_rpm);
+        self.outputs.set_do(sp.enable, self.spindle_dir.is_some());
+        if let Some(d) = sp.direction {
+            self.outputs
+                .set_do(d, self.spindle_dir == Some(SpindleDir::CounterClockwise));
+        }
+        if let Some(s) = sp.speed {
+            if s < self.outputs.analog.len() {
+                self.outputs.analog[s] = if self.spindle_dir.is_some() { rpm } else { 0.0 };
+            }
+        }
+        self.snap.spindle_rpm = match self.spindle_dir {
+            Some(SpindleDir::Clockwise) => rpm,
+            Some(SpindleDir::CounterClockwise) => -rpm,
+            None => 0.0,
+        };
+    }
+
+    /// Runs an aux item the interpolator reached. Barriers hold the interpolator until
+    /// `motion.aux_done_seq` moves on.
+    fn run_aux(&mut self, kind: AuxKind, line: u32) {
+        let mut done = true;
+        match kind {
+            AuxKind::SpindleSpeed { rpm } => {
+                self.spindle_rpm = rpm;
+                self.apply_spindle();
+            }
+            AuxKind::SpindleStart(dir) => {
+                self.spindle_dir = Some(dir);
+                self.apply_spindle();
+                if self.setup.spindle.and_then(|s| s.at_speed).is_some() {
+                    self.barrier = Barrier::SpindleAtSpeed { since: self.cycle };
+                    done = false;
+                }
+            }
+            AuxKind::SpindleStop => self.spindle_stop(),
+            AuxKind::Flood(on) => {
+                if let Some(o) = self.setup.flood_output {
+                    self.outputs.set_do(o, on);
+                }
+                if !on {
+                    if let Some(o) = self.setup.mist_output {
+                        self.outputs.set_do(o, false);
+                    }
+                }
+            }
+            AuxKind::Mist(on) => {
+                if let Some(o) = self.setup.mist_output {
+                    self.outputs.set_do(o, on);
+                }
+                if !on {
+                    if let Some(o) = self.setup.flood_output {
+                        self.outputs.set_do(o, false);
+                    }
+                }
+            }
+            AuxKind::SelectTool(_) | AuxKind::StartToolChange => {}
+            AuxKind::ChangeTool(t) | AuxKind::ChangeToolNumber(t) => self.snap.tool = t,
+            AuxKind::DigitalOutput { index, on, .. } => self.outputs.set_do(index as usize, on),
+            AuxKind::AnalogOutput { index, value, .. } => {
+                if let Some(v) = self.outputs.analog.get_mut(index as usize) {
+                    *v = value;
+                }
+            }
+            AuxKind::Wait {
+                index,
+                input,
+                kind,
+                timeout_s,
+            } => {
+                let cycles = (timeout_s / self.setup.period_s).max(0.0) as u64;
+                self.barrier = Barrier::Wait {
+                    index,
+                    input,
+                    kind,
+                    deadline: self.cycle + cycles,
+                    last: self.input_level(index, input),
+                };
+                done = false;
+            }
+            AuxKind::Message { id } => self.emit_job(JobEvent::Message { id, line }),
+            AuxKind::OverrideEnable { .. } | AuxKind::UserMcode { .. } => {}
+            AuxKind::ProgramStop => {
+                self.barrier = Barrier::ProgramStop;
+                self.emit_job(JobEvent::Held { line });
+                done = false;
+            }
+            AuxKind::OptionalProgramStop if self.optional_stop => {
+                self.barrier = Barrier::ProgramStop;
+                self.emit_job(JobEvent::Held { line });
+                done = false;
+            }
+            AuxKind::OptionalProgramStop => {}
+            AuxKind::ProgramEnd => {
+                self.spindle_stop();
+                if let Some(o) = self.setup.flood_output {
+                    self.outputs.set_do(o, false);
+                }
+                if let Some(o) = self.setup.mist_output {
+                    self.outputs.set_do(o, false);
+                }
+            }
+        }
+        if done && kind.is_barrier() {
+            self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
+        }
+    }
+
+    fn input_level(&self, index: u32, input: InputKind) -> bool {
+        match input {
+            InputKind::Digital => self.inputs.di(index as usize),
+            InputKind::Analog => self
+                .inputs
+                .analog
+                .get(index as usize)
+                .is_some_and(|v| *v > 0.5),
+        }
+    }
+
+    /// Progress of the current barrier; releases the interpolator when it is met.
+    fn poll_barrier(&mut self) {
+        let met = match self.barrier {
+            Barrier::None | Barrier::ProgramStop => false,
+            Barrier::SpindleAtSpeed { since } => {
+                let at = self
+                    .setup
+                    .spindle
+                    .and_then(|s| s.at_speed)
+                    .is_none_or(|i| self.inputs.di(i));
+                if !at && self.cycle - since > u64::from(self.setup.spindle_timeout_cycles) {
+                    let line = self.setpoints.line;
+                    self.on_trip(Trip::SpindleNotAtSpeed, line);
+                    return;
+                }
+                at
+            }
+            Barrier::Wait {
+                index,
+                input,
+                kind,
+                deadline,
+                last,
+            } => {
+                let now = self.input_level(index, input);
+                let ok = match kind {
+                    WaitKind::Immediate => true,
+                    WaitKind::Rise => now && !last,
+                    WaitKind::Fall => !now && last,
+                    WaitKind::High => now,
+                    WaitKind::Low => !now,
+                };
+                if let Barrier::Wait { last, .. } = &mut self.barrier {
+                    *last = now;
+                }
+                // LinuxCNC semantics: a timeout is not an error, the program goes on.
+                ok || self.cycle >= deadline
+            }
+        };
+        if met {
+            self.barrier = Barrier::None;
+            self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
+        }
+    }
+
+    fn poll_homing(&mut self) {
+        let Some(g) = self.homing_group else {
+            return;
+        };
+        let group = self.setup.homing_groups.get(g).copied().unwrap_or(0) & self.homing_mask;
+        let mut all = true;
+        for k in 0..self.setup.axes.len() {
+            let i = self.setup.axes[k].1;
+            if group & (1 << i) == 0 {
+                continue;
+            }
+            let fb = self.feedback[i];
+            if fb.homing_failed {
+                self.homing_group = None;
+                self.on_trip(Trip::HomingFailed { axis: i }, 0);
+                return;
+            }
+            all &= fb.homed && !fb.homing;
+        }
+        if all {
+            self.start_homing_group(g + 1);
+        }
+    }
+
+    fn start_homing_group(&mut self, g: usize) {
+        let Some(&group) = self.setup.homing_groups.get(g) else {
+            self.homing_group = None;
+            self.mode.fact(Fact::HomingDone);
+            return;
+        };
+        self.homing_group = Some(g);
+        let group = group & self.homing_mask;
+        for i in 0..NUM_AXES {
+            if group & (1 << i) != 0 {
+                self.drive.home_seq[i] = self.drive.home_seq[i].wrapping_add(1);
+            }
+        }
+        if group == 0 {
+            self.start_homing_group(g + 1);
+        }
+    }
+
+    fn poll_stop(&mut self) {
+        let Some(s) = self.stopping else {
+            return;
+        };
+        if !self.stopped(s.abort_seq) {
+            return;
+        }
+        self.stopping = None;
+        self.motion.track_actual = true;
+        self.motion.hold = false;
+        if s.disable {
+            self.drive.enable = false;
+        }
+        if let Some(e) = s.end {
+            self.emit_job(e);
+        }
+        if matches!(
+            self.mode.mode(),
+            Mode::Running | Mode::Holding | Mode::Manual
+        ) {
+            self.mode.fact(Fact::MotionDone);
+        }
+        self.current = Motion::None;
+    }
+
+    fn poll_motion(&mut self) {
+        let Motion::Job { job, items } = self.current else {
+            return;
+        };
+        if self.stopping.is_some() {
+            return;
+        }
+        let path_done = self.setpoints.job == job
+            && self.setpoints.items_consumed >= items
+            && matches!(self.setpoints.state, InterpState::Done | InterpState::Idle)
+            && self.barrier == Barrier::None;
+        if !path_done {
+            self.settle_since = None;
+            return;
+        }
+        // In position: every axis within the window, or the drives had their settling time.
+        let since = *self.settle_since.get_or_insert(self.cycle);
+        let in_position =
+            self.setup.axes.iter().all(|&(_, i)| {
+                self.monitor.following_error[i].abs() <= self.setup.in_position_window
+            });
+        if in_position || self.cycle - since >= u64::from(self.setup.settle_timeout_cycles) {
+            self.current = Motion::None;
+            self.motion.track_actual = true;
+            self.mode.fact(Fact::MotionDone);
+            self.emit_job(JobEvent::Finished);
+        }
+    }
+}
+
+impl MachineTask {
+    /// Publishes the outputs of this step. Called last in the step (after the command
+    /// processor and the deferred handlers), so a command accepted in this cycle is visible
+    /// to the tasks after this one in this cycle, and to status readers, at once.
+    fn publish(&mut self) {
+        self.snap.homed_mask = self.homed_mask();
+        self.snap.mode = self.mode.mode();
+        self.snap.feed_override = self.motion.feed_override;
+        self.snap.rapid_override = self.motion.rapid_override;
+        if self.snap.mode != self.last_mode {
+            self.last_mode = self.snap.mode;
+            if let Some(ev) = &mut self.mode_ev {
+                ev.emit(ModeEvent {
+                    mode: self.snap.mode,
+                });
+            }
+        }
+        if let Some(w) = &mut self.outputs_out {
+            w.set(self.outputs);
+        }
+        if let Some(w) = &mut self.drive_out {
+            w.set(self.drive);
+        }
+        if let Some(w) = &mut self.motion_out {
+            w.set(self.motion);
+        }
+        if let Some(w) = &mut self.snapshot_out {
+            w.set(self.snap);
+        }
+    }
+}
+
+impl Task for MachineTask {
+    type Command = MachineCmd;
+
+    fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
+        self.inputs_in = Some(ctx.input(ports::INPUTS));
+        self.setpoints_in = Some(ctx.input(ports::SETPOINTS));
+        self.monitor_in = Some(ctx.input(ports::MONITOR));
+        self.feedback_in = self
+            .setup
+            .axes
+            .iter()
+            .map(|&(name, _)| ctx.input(&ports::feedback(name)))
+            .collect();
+        self.outputs_out = Some(ctx.output(ports::OUTPUTS));
+        self.drive_out = Some(ctx.output(ports::DRIVE_CONTROL));
+        self.motion_out = Some(ctx.output(ports::MOTION_CONTROL));
+        self.snapshot_out = Some(ctx.output(ports::SNAPSHOT));
+        self.faults_in = Some(ctx.subscribe("monitor.fault", 64));
+        self.overruns_in = Some(ctx.subscribe(&self.setup.overrun_event, 16));
+        self.mode_ev = Some(ctx.event("mode"));
+        self.fault_ev = Some(ctx.event("fault"));
+        self.job_ev = Some(ctx.event("job"));
+        Ok(())
+    }
+
+    fn read_inputs(&mut self, _ctx: &StepContext) {
+        if let Some(r) = &mut self.inputs_in {
+            r.get(&mut self.inputs);
+        }
+        if let Some(r) = &mut self.setpoints_in {
+            r.get(&mut self.setpoints);
+        }
+        for (k, r) in self.feedback_in.iter_mut().enumerate() {
+            if let Some(&(_, i)) = self.setup.axes.get(k) {
+                r.get(&mut self.feedback[i]);
+            }
+        }
+        if let Some(r) = &mut self.monitor_in {
+            r.get(&mut self.monitor);
+        }
+    }
+
+    fn update(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        self.cycle = ctx.cycle;
+        // 1. E-stop: pressed, or unreadable for too long.
+        let stale = self.inputs.stale_cycles > self.setup.max_stale_io_cycles;
+        let pressed = self.inputs.di(self.setup.estop_input) || stale;
+        if pressed && self.mode.mode() != Mode::Estop {
+            self.enter_estop(if stale {
+                Trip::CommunicationLost { axis: usize::MAX }
+            } else {
+                Trip::Estop
+            });
+        }
+        self.mode.set_estop_input(pressed);
+        if self.mode.mode() == Mode::Estop {
+            // The quick stop is requested until the drives are off.
+            self.drive.quick_stop = self
+                .setup
+                .axes
+                .iter()
+                .any(|&(_, i)| self.feedback[i].state.is_operational());
+        }
+        // 2. Aux items reached by the interpolator (one per cycle at most).
+        if self.setpoints.aux_seq != self.last_aux_seq {
+            self.last_aux_seq = self.setpoints.aux_seq;
+            if let Some(aux) = self.setpoints.aux {
+                if self.current != Motion::None && self.stopping.is_none() {
+                    self.run_aux(aux.kind, aux.line);
+                }
+            }
+        }
+        self.poll_barrier();
+        self.poll_homing();
+        self.poll_motion();
+        self.poll_stop();
+        Ok(())
+    }
+
+    fn accept(&mut self, c: &MachineCmd, ctx: &StepContext) -> Result<(), RejectReason> {
+        let homed = self.all_homed();
+        let reject = RejectReason::Other;
+        match *c {
+            MachineCmd::Estop => {
+                self.mode.request(Request::Estop, homed).map_err(reject)?;
+                self.enter_estop(Trip::Estop);
+            }
+            MachineCmd::EstopReset => {
+                self.mode
+                    .request(Request::EstopReset, homed)
+                    .map_err(reject)?;
+                self.drive.quick_stop = false;
+                self.drive.fault_reset_seq = self.drive.fault_reset_seq.wrapping_add(1);
+            }
+            MachineCmd::On => {
+                self.mode.request(Request::On, homed).map_err(reject)?;
+                self.drive.fault_reset_seq = self.drive.fault_reset_seq.wrapping_add(1);
+                self.drive.enable = true;
+                self.drive.quick_stop = false;
+                self.motion.track_actual = true;
+                self.enable_since = ctx.cycle;
+            }
+            MachineCmd::Off => {
+                let moving = self.current != Motion::None || self.homing_group.is_some();
+                self.mode.request(Request::Off, homed).map_err(reject)?;
+                self.spindle_stop();
+                if moving {
+                    let line = self.setpoints.line;
+                    self.current = Motion::None;
+                    self.controlled_stop(true, Some(JobEvent::Aborted { line }));
+                    self.drive.home_abort_seq = self.drive.home_abort_seq.wrapping_add(1);
+                } else {
+                    self.drive.enable = false;
+                }
+            }
+            MachineCmd::Home { mask } => {
+                let mask = if mask == 0 { self.axes_mask() } else { mask };
+                if mask & !self.axes_mask() != 0 {
+                    return Err(RejectReason::BadParameters("no such axis"));
+                }
+                self.mode.request(Request::Home, homed).map_err(reject)?;
+                self.homing_mask = mask;
+                self.motion.track_actual = true;
+                self.start_homing_group(0);
+            }
+            MachineCmd::Run { job, items, manual } => {
+                let req = if manual { Request::Jog } else { Request::Run };
+                // Jogging is allowed before homing (that is how a machine is brought home by
+                // hand); soft limits apply only to homed axes, checked by the planner.
+                self.mode.request(req, homed || manual).map_err(reject)?;
+                self.current = Motion::Job { job, items };
+                self.job_id = job;
+                self.ended = None;
+                self.motion.job = job;
+                self.motion.track_actual = false;
+                self.motion.hold = false;
+                self.emit_job(JobEvent::Started);
+            }
+            MachineCmd::Pause => {
+                self.mode.request(Request::Pause, homed).map_err(reject)?;
+                self.motion.hold = true;
+            }
+            MachineCmd::Resume => {
+                self.mode.request(Request::Resume, homed).map_err(reject)?;
+                self.motion.hold = false;
+                if self.barrier == Barrier::ProgramStop {
+                    self.barrier = Barrier::None;
+                    self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
+                }
+                self.emit_job(JobEvent::Resumed);
+            }
+            MachineCmd::Abort => {
+                self.mode.request(Request::Abort, homed).map_err(reject)?;
+                let line = self.setpoints.line;
+                if self.homing_group.is_some() {
+                    self.drive.home_abort_seq = self.drive.home_abort_seq.wrapping_add(1);
+                    self.homing_group = None;
+                    self.mode.fact(Fact::HomingDone);
+                } else {
+                    self.current = Motion::None;
+                    self.controlled_stop(false, Some(JobEvent::Aborted { line }));
+                }
+            }
+            MachineCmd::Overrides {
+                feed,
+                rapid,
+                spindle,
+            } => {
+                let ok = |v: f64, max: f64| v.is_finite() && (0.0..=max).contains(&v);
+                if !ok(feed, self.setup.max_feed_override) || !ok(rapid, 1.0) || !ok(spindle, 2.0) {
+                    return Err(RejectReason::BadParameters("override out of range"));
+                }
+                self.motion.feed_override = feed;
+                self.motion.rapid_override = rapid;
+                self.snap.spindle_override = spindle;
+                self.apply_spindle();
+            }
+        }
+        Ok(())
+    }
+
+    fn progress(&mut self, c: &MachineCmd, ctx: &StepContext) -> Progress {
+        let mode = self.mode.mode();
+        match *c {
+            MachineCmd::On => {
+                if mode != Mode::Idle {
+                    return Progress::Failed("the machine left the idle mode while enabling");
+                }
+                let all_on = self
+                    .setup
+                    .axes
+                    .iter()
+                    .all(|&(_, i)| self.feedback[i].state.is_operational());
+                if all_on {
+                    Progress::Done
+                } else if ctx.cycle - self.enable_since
+                    > u64::from(self.setup.enable_timeout_cycles)
+                {
+                    self.drive.enable = false;
+                    self.mode.fact(Fact::Faulted);
+                    Progress::Failed("a drive did not reach operation enabled")
+                } else {
+                    Progress::Running
+                }
+            }
+            MachineCmd::Off => {
+                if self.stopping.is_some()
+                    || self
+                        .setup
+                        .axes
+                        .iter()
+                        .any(|&(_, i)| self.feedback[i].state.is_operational())
+                {
+                    Progress::Running
+                } else {
+                    Progress::Done
+                }
+            }
+            MachineCmd::Home { .. } => match mode {
+                Mode::Homing => Progress::Running,
+                Mode::Idle if self.homed_mask() & self.homing_mask == self.homing_mask => {
+                    Progress::Done
+                }
+                Mode::Idle => Progress::Failed("homing was aborted"),
+                _ => Progress::Failed("homing stopped by a fault or e-stop"),
+            },
+            MachineCmd::Run { job, .. } => match self.ended {
+                Some((j, JobEvent::Finished)) if j == job => Progress::Done,
+                Some((j, JobEvent::Aborted { .. })) if j == job => Progress::Failed("aborted"),
+                Some((j, JobEvent::Failed { .. })) if j == job => {
+                    Progress::Failed("stopped by a fault or e-stop")
+                }
+                _ => Progress::Running,
+            },
+            MachineCmd::Pause => {
+                if mode != Mode::Holding
+                    || matches!(
+                        self.setpoints.state,
+                        InterpState::Holding | InterpState::Done | InterpState::Idle
+                    )
+                {
+                    Progress::Done
+                } else {
+                    Progress::Running
+                }
+            }
+            MachineCmd::Abort => {
+                if self.stopping.is_some() {
+                    Progress::Running
+                } else {
+                    Progress::Done
+                }
+            }
+            MachineCmd::Estop
+            | MachineCmd::EstopReset
+            | MachineCmd::Resume
+            | MachineCmd::Overrides { .. } => Progress::Done,
+        }
+    }
+
+    fn process_events(&mut self, _ctx: &StepContext) {
+        while let Some(f) = self.faults_in.as_mut().and_then(EventReceiver::pop) {
+            self.on_trip(f.trip, f.line);
+        }
+        while let Some(o) = self.overruns_in.as_mut().and_then(EventReceiver::pop) {
+            let line = self.setpoints.line;
+            self.on_trip(
+                Trip::OverrunStorm {
+                    consecutive: o.consecutive as u32,
+                },
+                line,
+            );
+        }
+        self.publish();
+    }
+}

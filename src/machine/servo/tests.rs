@@ -1,0 +1,261 @@
+//! The machine's tasks on the stepped runtime with simulated time: deterministic, cycle-exact
+//! checks of what the end-to-end tests can only see through a socket. E-stop quick-stops
+//! every drive in the cycle the input is seen; an abort and a fault stop along the path
+//! within every axis' velocity and acceleration limit.
+
+use super::machine_task::MachineCmd;
+use super::{ports, AxisFeedback, MachineSnapshot, QueueItem, Setpoints};
+use crate::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
+use crate::machine::api::Mode;
+use crate::machine::runtime::{build, Built};
+use crate::motion::{self, InterpState};
+use crate::rt::deploy::SteppedRuntime;
+use crate::rt::prelude::*;
+use hytask_hal::axis::DriveState;
+use std::sync::Arc;
+
+struct Rig {
+    rt: SteppedRuntime,
+    built_machine: TaskHandle<MachineCmd>,
+    queue: BufferWriter<QueueItem>,
+    motion_cfg: motion::MotionConfig,
+    sim_io: Vec<Option<hytask_hal::sim::SimIoHandle>>,
+    sim_axes: Vec<(char, hytask_hal::sim::SimAxisHandle)>,
+    snap: DataReader<MachineSnapshot>,
+    sp: DataReader<Setpoints>,
+    fb: Vec<DataReader<AxisFeedback>>,
+}
+
+impl Rig {
+    fn new() -> Rig {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
+        let cfg = crate::config::load(&path).expect("config");
+        let Built {
+            mut app,
+            machine,
+            queue,
+            motion_cfg,
+            sim_io,
+            sim_axes,
+            ..
+        } = build(&cfg).expect("build");
+        app.configure().expect("topology");
+        let rt = app.start_stepped(SimClock::new(0)).expect("start");
+        let snap = rt.reader(ports::SNAPSHOT).expect("snapshot");
+        let sp = rt.reader(ports::SETPOINTS).expect("setpoints");
+        let fb = ['X', 'Y', 'Z']
+            .iter()
+            .map(|&c| rt.reader(&ports::feedback(c)).expect("feedback"))
+            .collect();
+        Rig {
+            rt,
+            built_machine: machine,
+            queue,
+            motion_cfg,
+            sim_io,
+            sim_axes,
+            snap,
+            sp,
+            fb,
+        }
+    }
+
+    fn send_until_done(&mut self, cmd: MachineCmd, max_cycles: u64) {
+        let h = self.built_machine.send(cmd).expect("queue");
+        for _ in 0..max_cycles {
+            self.rt.run_cycles(1);
+            match h.status() {
+                CommandStatus::Done => return,
+                CommandStatus::Pending | CommandStatus::Accepted => {}
+                other => panic!("{cmd:?}: {other:?}"),
+            }
+        }
+        panic!("{cmd:?} not done after {max_cycles} cycles");
+    }
+
+    fn mode(&mut self) -> Mode {
+        self.snap.latest().expect("snapshot").mode
+    }
+
+    fn feedback(&mut self, axis: usize) -> AxisFeedback {
+        self.fb[axis].latest().expect("feedback")
+    }
+
+    fn ready(&mut self) {
+        self.send_until_done(MachineCmd::EstopReset, 10);
+        self.send_until_done(MachineCmd::On, 100);
+        self.send_until_done(MachineCmd::Home { mask: 0 }, 20_000);
+        assert_eq!(self.mode(), Mode::Idle);
+    }
+
+    /// Plans a straight feed from where the machine is to `target` and starts it as `job`.
+    fn start_move(&mut self, job: u32, target: [f64; 3], feed_mm_min: f64) {
+        let mut start = [0.0; NUM_AXES];
+        for (i, s) in start.iter_mut().take(3).enumerate() {
+            *s = self.feedback(i).actual;
+        }
+        let mut end = start;
+        end[..3].copy_from_slice(&target);
+        let loc = SourceLoc {
+            file: Arc::from("test"),
+            line: 7,
+            col: 1,
+        };
+        let canon = [
+            Canon {
+                loc: loc.clone(),
+                cmd: CanonCmd::SetFeedRate(feed_mm_min),
+            },
+            Canon {
+                loc,
+                cmd: CanonCmd::StraightFeed(end),
+            },
+        ];
+        let plan = motion::plan_from(&canon, &self.motion_cfg, start).expect("plan");
+        for &item in &plan.items {
+            self.queue
+                .try_push(QueueItem { job, item })
+                .expect("queue room");
+        }
+        let h = self
+            .built_machine
+            .send(MachineCmd::Run {
+                job,
+                items: plan.items.len() as u64,
+                manual: false,
+            })
+            .expect("queue");
+        self.rt.run_cycles(1);
+        assert_eq!(h.status(), CommandStatus::Accepted);
+    }
+
+    /// Runs `n` cycles recording the commanded joints of X Y Z while motion is commanded
+    /// (once the interpolator tracks the actual position again, the drives are off or at
+    /// rest and the commanded position is reset to the actual one: not a motion).
+    fn record(&mut self, n: usize) -> Vec<[f64; 3]> {
+        let mut trace = Vec::new();
+        for _ in 0..n {
+            self.rt.run_cycles(1);
+            let sp = self.sp.latest().expect("setpoints");
+            if !sp.tracking {
+                trace.push([sp.joints[0], sp.joints[1], sp.joints[2]]);
+            }
+        }
+        trace
+    }
+}
+
+/// Largest |acceleration| per axis along a commanded trace sampled every `dt`.
+fn peak_acc(trace: &[[f64; 3]], dt: f64) -> [f64; 3] {
+    let mut peak = [0.0f64; 3];
+    for w in trace.windows(3) {
+        for i in 0..3 {
+            let a = (w[2][i] - 2.0 * w[1][i] + w[0][i]) / (dt * dt);
+            peak[i] = peak[i].max(a.abs());
+        }
+    }
+    peak
+}
+
+#[test]
+fn estop_input_quick_stops_every_drive_in_the_same_cycle() {
+    let mut r = Rig::new();
+    r.ready();
+    r.start_move(1, [250.0, 200.0, -20.0], 3000.0);
+    r.rt.run_cycles(600);
+    assert!(
+        r.feedback(0).velocity.abs() > 1.0,
+        "moving before the e-stop"
+    );
+    let estop = r.sim_io[0].as_ref().expect("sim io");
+    estop.set_digital_input(0, true).expect("input");
+    r.rt.run_cycles(1);
+    assert_eq!(r.mode(), Mode::Estop);
+    for axis in 0..3 {
+        let fb = r.feedback(axis);
+        assert_ne!(
+            fb.state,
+            DriveState::OperationEnabled,
+            "axis {axis} still enabled one cycle after the e-stop input"
+        );
+    }
+    // The drives brake on their quick-stop ramp and end disabled; the outputs are safe.
+    r.rt.run_cycles(300);
+    for axis in 0..3 {
+        let fb = r.feedback(axis);
+        assert!(fb.velocity.abs() < 1e-9, "axis {axis}: {fb:?}");
+        assert_eq!(fb.state, DriveState::SwitchOnDisabled, "axis {axis}");
+    }
+}
+
+#[test]
+fn an_abort_stops_on_the_path_within_the_acceleration_limits() {
+    let mut r = Rig::new();
+    r.ready();
+    r.start_move(1, [250.0, 200.0, -20.0], 6000.0);
+    let mut trace = r.record(700);
+    let h = r.built_machine.send(MachineCmd::Abort).expect("queue");
+    trace.extend(r.record(1500));
+    assert_eq!(h.status(), CommandStatus::Done);
+    assert_eq!(r.mode(), Mode::Idle);
+    let sp = r.sp.latest().expect("setpoints");
+    assert!(sp.tracking || sp.state == InterpState::Idle);
+    let lim = r.motion_cfg.axes;
+    let peak = peak_acc(&trace, 1e-3);
+    for i in 0..3 {
+        assert!(
+            peak[i] <= lim[i].max_acc_mm_s2 * 1.001,
+            "axis {i}: {} > {}",
+            peak[i],
+            lim[i].max_acc_mm_s2
+        );
+    }
+    // Stopped short of the target (X runs from 300 down to 250), on the line.
+    let last = trace.last().expect("trace");
+    assert!(last[0] > 251.0, "{last:?}");
+    let along = (300.0 - last[0]) / 50.0;
+    assert!((last[1] - (300.0 - 100.0 * along)).abs() < 0.01, "{last:?}");
+}
+
+#[test]
+fn a_following_error_fault_stops_the_other_axes_under_control_and_disables_the_drives() {
+    let mut r = Rig::new();
+    r.ready();
+    r.start_move(1, [100.0, 100.0, -30.0], 6000.0);
+    let mut trace = r.record(400);
+    let x = r
+        .sim_axes
+        .iter()
+        .find(|(c, _)| *c == 'X')
+        .expect("X")
+        .1
+        .clone();
+    x.set_stalled(true);
+    trace.extend(r.record(3000));
+    let snap = r.snap.latest().expect("snapshot");
+    assert_eq!(snap.mode, Mode::Fault);
+    assert!(
+        matches!(
+            snap.last_trip,
+            Some(crate::machine::safety::Trip::FollowingError { axis: 0, .. })
+        ),
+        "{:?}",
+        snap.last_trip
+    );
+    let lim = r.motion_cfg.axes;
+    let peak = peak_acc(&trace, 1e-3);
+    for i in 0..3 {
+        assert!(
+            peak[i] <= lim[i].max_acc_mm_s2 * 1.001,
+            "axis {i}: {}",
+            peak[i]
+        );
+    }
+    for axis in 0..3 {
+        assert!(
+            !r.feedback(axis).state.is_operational(),
+            "axis {axis} still enabled"
+        );
+    }
+}
