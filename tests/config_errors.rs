@@ -143,7 +143,7 @@ fn each_section_reports_its_own_keys() {
             "motion.g64_tolerance: must be >= 0, got -0.1",
         ),
         (
-            "overrun_storm_count = 3",
+            "overrun_storm_count = 50",
             "overrun_storm_count = 0",
             "safety.overrun_storm_count: must be >= 1, got 0",
         ),

@@ -1,6 +1,8 @@
 //! Safety paths, each driven end to end through the real daemon and its simulated machine:
 //! e-stop (input and command), following error (stalled motor), drive fault, lost drive
-//! communication, overrun storm on the servo thread, soft limits (refused before motion).
+//! communication, soft limits (refused before motion). The overrun storm has its own test
+//! binary (`tests/daemon_overrun.rs`): it burns CPU at realtime priority on purpose, which
+//! must not run beside other tests' servo threads.
 //! Every path must end in a stopped machine, a fault event naming axis and value, and a
 //! failed job naming its line.
 #![allow(clippy::unwrap_used)]
@@ -181,22 +183,6 @@ fn lost_drive_communication_stops_the_machine() {
     wait_status(&mut c, "fault", Duration::from_secs(5), |s| {
         s["mode"] == json!("fault")
     });
-}
-
-#[test]
-fn an_overrun_storm_on_the_servo_thread_stops_the_machine() {
-    let d = Daemon::start(&fast_sim());
-    let mut c = running_long_job(&d);
-    ok(&mut c, "sim.fault", json!({"kind": "overrun", "cycles": 6}));
-    let events = wait_event(&mut c, "fault event", Duration::from_secs(5), |e| {
-        e.topic == "fault"
-    });
-    let f = &events.last().unwrap().data;
-    assert!(f["message"].as_str().unwrap().contains("overran"), "{f}");
-    let s = wait_status(&mut c, "stopped", Duration::from_secs(5), |s| {
-        s["mode"] == json!("fault") && all_stopped(s)
-    });
-    assert!(s["threads"][0]["overruns"].as_u64().unwrap() >= 3);
 }
 
 #[test]

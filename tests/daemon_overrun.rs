@@ -1,0 +1,49 @@
+//! Safety path: an overrun storm on the servo thread stops the machine under control.
+//!
+//! In its own test binary on purpose: the injected overruns burn 1.5 servo periods of CPU per
+//! cycle at SCHED_FIFO priority, which would starve the servo threads of daemons in other
+//! tests running in parallel (cargo runs test binaries one after another).
+#![allow(clippy::unwrap_used)]
+
+mod support;
+
+use serde_json::{json, Value};
+use std::time::Duration;
+use support::*;
+
+#[test]
+fn an_overrun_storm_on_the_servo_thread_stops_the_machine() {
+    let d = Daemon::start(&fast_sim());
+    let mut c = d.client();
+    ok(&mut c, "subscribe", Value::Null);
+    ready(&mut c);
+    run_job(&mut c, "jobs/long.ngc");
+    wait_status(&mut c, "job moving", Duration::from_secs(10), |s| {
+        s["job"]["line"].as_u64().unwrap() >= 6
+    });
+    // The fixture's storm threshold is 50 consecutive overruns.
+    ok(
+        &mut c,
+        "sim.fault",
+        json!({"kind": "overrun", "cycles": 60}),
+    );
+    let events = wait_event(&mut c, "fault event", Duration::from_secs(5), |e| {
+        e.topic == "fault"
+    });
+    let f = &events.last().unwrap().data;
+    assert!(f["message"].as_str().unwrap().contains("overran"), "{f}");
+    assert!(
+        f["message"].as_str().unwrap().contains("50 times in a row"),
+        "{f}"
+    );
+    let s = wait_status(&mut c, "stopped", Duration::from_secs(5), |s| {
+        s["mode"] == json!("fault")
+            && s["axes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|a| a["velocity"].as_f64().unwrap().abs() < 1e-3)
+    });
+    assert!(s["threads"][0]["overruns"].as_u64().unwrap() >= 50);
+    assert_eq!(s["job"]["state"], json!("failed"));
+}
