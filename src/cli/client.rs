@@ -249,10 +249,12 @@ fn print_status(s: &Value) {
 fn print_tasks(v: &Value) {
     for t in v.as_array().into_iter().flatten() {
         println!(
-            "{} [{}] on {}",
+            "{} [{}] on {}  step avg {:.1} µs, max {:.1} µs",
             t["name"].as_str().unwrap_or(""),
             t["state"].as_str().unwrap_or(""),
-            t["thread"].as_str().unwrap_or("")
+            t["thread"].as_str().unwrap_or(""),
+            t["exec_us"]["avg"].as_f64().unwrap_or(0.0),
+            t["exec_us"]["max"].as_f64().unwrap_or(0.0)
         );
         for op in t["operations"].as_array().into_iter().flatten() {
             let params: Vec<&str> = op["params"]

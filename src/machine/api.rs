@@ -274,6 +274,8 @@ pub struct TaskInfo {
     pub events: Vec<String>,
     /// Ports: name and direction.
     pub ports: Vec<String>,
+    /// Execution time of the task's step, min/avg/max, µs.
+    pub exec_us: MinAvgMax,
 }
 
 /// An operation as data.

@@ -1014,7 +1014,14 @@ impl MachineApi for Machine {
             .iter()
             .map(|t| {
                 let i = t.interface();
+                let timing = t.timing();
+                let us = |ns: u64| ns as f64 / 1000.0;
                 TaskInfo {
+                    exec_us: MinAvgMax {
+                        min: us(timing.exec.min_ns),
+                        avg: us(timing.exec.avg_ns),
+                        max: us(timing.exec.max_ns),
+                    },
                     name: t.name().to_string(),
                     state: format!("{:?}", t.state()).to_lowercase(),
                     thread: t.thread().to_string(),
