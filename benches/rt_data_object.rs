@@ -11,7 +11,7 @@ use std::sync::atomic::{fence, AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 
 #[derive(Clone, Copy, Default)]
-struct Payload([u64; 8]);
+struct Payload(#[allow(dead_code)] [u64; 8]);
 
 /// Textbook seqlock, reference only.
 struct SeqLock {
@@ -89,7 +89,7 @@ fn uncontended(c: &mut Criterion) {
 }
 
 /// Runs `hammer` on another thread while `measure` is benchmarked.
-fn with_hammer<H: FnMut() + Send + 'static>(mut hammer: H, f: impl FnOnce()) {
+fn with_hammer<H: FnMut() + Send + 'static, R>(mut hammer: H, f: impl FnOnce() -> R) {
     let stop = Arc::new(AtomicBool::new(false));
     let s2 = stop.clone();
     let t = std::thread::spawn(move || {
@@ -97,7 +97,7 @@ fn with_hammer<H: FnMut() + Send + 'static>(mut hammer: H, f: impl FnOnce()) {
             hammer();
         }
     });
-    f();
+    let _ = f();
     stop.store(true, Ordering::Relaxed);
     let _ = t.join();
 }
