@@ -844,3 +844,20 @@ fn periodic_thread_runs_and_reports_timing() {
     let _ = rt.stop();
     assert_eq!(w.info().state(), TaskState::Stopped);
 }
+
+#[test]
+fn without_fifo_the_thread_still_runs_and_reports_not_realtime() {
+    // Priority 0 is refused for SCHED_FIFO even as root: the same path as a missing privilege.
+    let mut app = Deployment::new();
+    let w = app
+        .add_periodic("worker", Worker::default(), sched(0, MS))
+        .unwrap();
+    app.configure().unwrap();
+    let rt = app.start().unwrap();
+    let c = w.send(Op::Wait(3)).unwrap();
+    assert_eq!(c.wait(Duration::from_secs(5)), CommandStatus::Done);
+    assert!(!rt.realtime());
+    assert!(!rt.status().realtime);
+    assert!(!rt.threads()[0].realtime());
+    let _ = rt.stop();
+}
