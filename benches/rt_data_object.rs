@@ -58,6 +58,18 @@ fn uncontended(c: &mut Criterion) {
             black_box(r.get(&mut out));
         })
     });
+    let fixed = DataObject::<Payload>::with_fixed_readers("f", 4);
+    let mut fr = fixed.reader().unwrap_or_else(|e| panic!("{e}"));
+    let mut fw = fixed.writer().unwrap_or_else(|e| panic!("{e}"));
+    g.bench_function("hytask_fixed_set_1reader", |b| {
+        b.iter(|| fw.set(black_box(p)))
+    });
+    g.bench_function("hytask_fixed_set_get", |b| {
+        b.iter(|| {
+            fw.set(black_box(p));
+            black_box(fr.get(&mut out));
+        })
+    });
     let mut r2 = obj.reader().unwrap_or_else(|e| panic!("{e}"));
     let mut r3 = obj.reader().unwrap_or_else(|e| panic!("{e}"));
     g.bench_function("hytask_set_3readers", |b| b.iter(|| w.set(black_box(p))));

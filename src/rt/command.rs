@@ -466,7 +466,7 @@ pub(crate) struct QueueShared<C> {
     task: String,
     queue: Ring<(C, u32)>,
     pool: Arc<HandlePool>,
-    state: Arc<super::task::StateCell>,
+    state: std::sync::Arc<super::task::StateCell>,
 }
 
 /// Sends commands to one task. `Clone`; usable from any thread, realtime or not.
@@ -564,7 +564,7 @@ impl<C: Send> CommandReceiver<C> {
 pub(crate) fn command_queue<C: Commands>(
     task: &str,
     capacity: usize,
-    state: Arc<super::task::StateCell>,
+    state: std::sync::Arc<super::task::StateCell>,
 ) -> (CommandSender<C>, CommandReceiver<C>) {
     let queue = Ring::new(capacity);
     let pool = Arc::new(HandlePool::new(queue.capacity() * 2));
@@ -605,7 +605,7 @@ mod loom_tests {
     #[test]
     fn two_senders_one_processor_statuses_and_slot_reuse() {
         loom::model(|| {
-            let state = Arc::new(crate::rt::task::StateCell::new(TaskState::Running));
+            let state = std::sync::Arc::new(crate::rt::task::StateCell::new(TaskState::Running));
             let (tx, mut rx) = command_queue::<C>("t", 2, state);
             let tx2 = tx.clone();
             let t = loom::thread::spawn(move || tx2.send(C::A).ok());
