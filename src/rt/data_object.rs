@@ -268,18 +268,16 @@ impl<T: Clone + Send> DataWriter<T> {
         // Read the registrations only after publishing the seed: the ordering argument of the
         // module doc needs it.
         let mut mask = s.registered.load(Ordering::SeqCst);
-        let mut value = Some(value);
-        while mask != 0 {
-            let i = mask.trailing_zeros() as usize;
+        if mask != 0 {
+            // Clone for every reader but the last, which gets the value itself.
+            let mut i = mask.trailing_zeros() as usize;
             mask &= mask - 1;
-            let v = if mask == 0 {
-                value.take()
-            } else {
-                value.clone()
-            };
-            if let Some(v) = v {
-                s.readers[i].publish(seq, v);
+            while mask != 0 {
+                s.readers[i].publish(seq, value.clone());
+                i = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
             }
+            s.readers[i].publish(seq, value);
         }
         s.last_seq.store(seq, Ordering::Release);
     }
