@@ -861,3 +861,39 @@ fn without_fifo_the_thread_still_runs_and_reports_not_realtime() {
     assert!(!rt.threads()[0].realtime());
     let _ = rt.stop();
 }
+
+/// Records the CPU it runs on.
+struct WhereAmI(Arc<Mutex<Vec<i32>>>);
+
+impl Task for WhereAmI {
+    type Command = NoCommands;
+    fn update(&mut self, _: &StepContext) -> Result<(), TaskError> {
+        // SAFETY: plain libc call without arguments.
+        let cpu = unsafe { libc::sched_getcpu() };
+        self.0.lock().unwrap().push(cpu);
+        Ok(())
+    }
+}
+
+#[test]
+fn cpu_affinity_pins_the_thread() {
+    let cpus = Arc::new(Mutex::new(Vec::new()));
+    let mut app = Deployment::new();
+    app.add_periodic(
+        "where",
+        WhereAmI(cpus.clone()),
+        Schedule {
+            priority: 50,
+            period_ns: MS,
+            cpu: Some(1),
+        },
+    )
+    .unwrap();
+    app.configure().unwrap();
+    let rt = app.start().unwrap();
+    std::thread::sleep(Duration::from_millis(30));
+    let _ = rt.stop();
+    let cpus = cpus.lock().unwrap();
+    assert!(cpus.len() > 5);
+    assert!(cpus.iter().all(|&c| c == 1), "{cpus:?}");
+}
