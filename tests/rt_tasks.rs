@@ -839,6 +839,10 @@ fn periodic_thread_runs_and_reports_timing() {
     assert!(s.wakeup.count >= 10, "{s:?}");
     assert!(s.exec.max_ns >= s.exec.min_ns);
     assert!(w.info().timing().exec.count >= 10);
+    assert!(
+        w.info().timing().wakeup.count >= 10,
+        "task start latency recorded"
+    );
     let status = rt.status();
     assert_eq!(status.realtime, t.realtime());
     let _ = rt.stop();
