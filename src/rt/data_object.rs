@@ -60,11 +60,19 @@ pub const MAX_READERS: usize = 64;
 const DIRTY: u8 = 4;
 const INDEX: u8 = 3;
 
+/// One value slot: the value first and 64-byte aligned, so a cache-line-sized payload is
+/// copied without split (line-crossing) loads and stores; its sequence number after it.
+#[repr(C, align(64))]
+struct Slot<T> {
+    value: T,
+    seq: u64,
+}
+
 /// One triple buffer: three `(sequence, value)` slots, the shared "back" index, and the
 /// private indices of its writer and its (current) reader kept here so a reader slot can be
 /// handed from a dropped reader to a new one.
 struct Triple<T> {
-    slots: [UnsafeCell<(u64, T)>; 3],
+    slots: [UnsafeCell<Slot<T>>; 3],
     back: AtomicU8,
     writer_idx: AtomicU8,
     reader_idx: AtomicU8,
@@ -74,9 +82,18 @@ impl<T: Default> Triple<T> {
     fn new() -> Self {
         Self {
             slots: [
-                UnsafeCell::new((0, T::default())),
-                UnsafeCell::new((0, T::default())),
-                UnsafeCell::new((0, T::default())),
+                UnsafeCell::new(Slot {
+                    value: T::default(),
+                    seq: 0,
+                }),
+                UnsafeCell::new(Slot {
+                    value: T::default(),
+                    seq: 0,
+                }),
+                UnsafeCell::new(Slot {
+                    value: T::default(),
+                    seq: 0,
+                }),
             ],
             back: AtomicU8::new(1),
             writer_idx: AtomicU8::new(0),
@@ -92,7 +109,7 @@ impl<T> Triple<T> {
         let w = self.writer_idx.load(Ordering::Relaxed);
         // SAFETY: slot `w` is owned by the writer: it is neither the back slot nor the
         // reader's slot until the exchange below publishes it.
-        self.slots[usize::from(w)].with_mut(|p| unsafe { *p = (seq, value) });
+        self.slots[usize::from(w)].with_mut(|p| unsafe { *p = Slot { value, seq } });
         let old = self.back.swap(w | DIRTY, Ordering::SeqCst);
         self.writer_idx.store(old & INDEX, Ordering::Relaxed);
     }
@@ -113,7 +130,7 @@ impl<T> Triple<T> {
 
     /// Reader side: read the reader's own slot.
     #[inline(always)]
-    fn with_slot<R>(&self, idx: u8, f: impl FnOnce(&(u64, T)) -> R) -> R {
+    fn with_slot<R>(&self, idx: u8, f: impl FnOnce(&Slot<T>) -> R) -> R {
         // SAFETY: slot `idx` is the reader's own; the writer never writes it.
         self.slots[usize::from(idx)].with(|p| f(unsafe { &*p }))
     }
@@ -220,7 +237,7 @@ impl<T: Clone + Default + Send> DataObject<T> {
         // Register first, then read the seed (see the module doc for why this order).
         s.registered.fetch_or(1u64 << index, Ordering::SeqCst);
         let idx = s.seed.acquire_latest();
-        let (seed_seq, seed_value) = s.seed.with_slot(idx, |(q, v)| (*q, v.clone()));
+        let (seed_seq, seed_value) = s.seed.with_slot(idx, |slot| (slot.seq, slot.value.clone()));
         Ok(DataReader {
             shared: self.shared.clone(),
             index,
@@ -317,7 +334,7 @@ impl<T: Clone + Send> DataReader<T> {
         let s = &*self.shared;
         let triple = &s.readers[self.index];
         let idx = triple.acquire_latest();
-        let seq = triple.with_slot(idx, |(q, _)| *q);
+        let seq = triple.with_slot(idx, |slot| slot.seq);
         if seq > self.have_seq {
             self.have_seq = seq;
             self.from_seed = false;
@@ -335,7 +352,7 @@ impl<T: Clone + Send> DataReader<T> {
         } else {
             // SAFETY: slot `idx` is this reader's own until its next `acquire_latest`, which
             // needs `&mut self` and so cannot happen while the returned borrow lives.
-            s.readers[self.index].slots[usize::from(idx)].with(|p| unsafe { &(*p).1 })
+            s.readers[self.index].slots[usize::from(idx)].with(|p| unsafe { &(*p).value })
         };
         (status, value)
     }
