@@ -839,8 +839,65 @@ fn periodic_thread_runs_and_reports_timing() {
     assert!(s.wakeup.count >= 10, "{s:?}");
     assert!(s.exec.max_ns >= s.exec.min_ns);
     assert!(w.info().timing().exec.count >= 10);
+    assert!(
+        w.info().timing().wakeup.count >= 10,
+        "task start latency recorded"
+    );
     let status = rt.status();
     assert_eq!(status.realtime, t.realtime());
     let _ = rt.stop();
     assert_eq!(w.info().state(), TaskState::Stopped);
+}
+
+#[test]
+fn without_fifo_the_thread_still_runs_and_reports_not_realtime() {
+    // Priority 0 is refused for SCHED_FIFO even as root: the same path as a missing privilege.
+    let mut app = Deployment::new();
+    let w = app
+        .add_periodic("worker", Worker::default(), sched(0, MS))
+        .unwrap();
+    app.configure().unwrap();
+    let rt = app.start().unwrap();
+    let c = w.send(Op::Wait(3)).unwrap();
+    assert_eq!(c.wait(Duration::from_secs(5)), CommandStatus::Done);
+    assert!(!rt.realtime());
+    assert!(!rt.status().realtime);
+    assert!(!rt.threads()[0].realtime());
+    let _ = rt.stop();
+}
+
+/// Records the CPU it runs on.
+struct WhereAmI(Arc<Mutex<Vec<i32>>>);
+
+impl Task for WhereAmI {
+    type Command = NoCommands;
+    fn update(&mut self, _: &StepContext) -> Result<(), TaskError> {
+        // SAFETY: plain libc call without arguments.
+        let cpu = unsafe { libc::sched_getcpu() };
+        self.0.lock().unwrap().push(cpu);
+        Ok(())
+    }
+}
+
+#[test]
+fn cpu_affinity_pins_the_thread() {
+    let cpus = Arc::new(Mutex::new(Vec::new()));
+    let mut app = Deployment::new();
+    app.add_periodic(
+        "where",
+        WhereAmI(cpus.clone()),
+        Schedule {
+            priority: 50,
+            period_ns: MS,
+            cpu: Some(1),
+        },
+    )
+    .unwrap();
+    app.configure().unwrap();
+    let rt = app.start().unwrap();
+    std::thread::sleep(Duration::from_millis(30));
+    let _ = rt.stop();
+    let cpus = cpus.lock().unwrap();
+    assert!(cpus.len() > 5);
+    assert!(cpus.iter().all(|&c| c == 1), "{cpus:?}");
 }

@@ -140,14 +140,20 @@ impl TaskGroup {
 
     /// One cycle scheduled at `deadline_ns`: periodic tasks in start order, then non-periodic
     /// tasks with work while `now()` is before `budget_end_ns`.
-    fn run_tasks(&mut self, deadline_ns: u64, budget_end_ns: u64, now: &dyn Fn() -> u64) {
+    fn run_tasks(
+        &mut self,
+        deadline_ns: u64,
+        budget_end_ns: u64,
+        now: &dyn Fn() -> u64,
+        mono: Option<u64>,
+    ) {
         let ctx = StepContext {
             now_ns: deadline_ns,
             period_ns: self.info.spec.period_ns,
             cycle: self.cycle,
         };
         for t in &mut self.periodic {
-            t.step(&ctx);
+            t.step(&ctx, mono);
         }
         let np_ctx = StepContext {
             period_ns: 0,
@@ -158,7 +164,7 @@ impl TaskGroup {
                 break;
             }
             if t.has_work() {
-                t.step(&np_ctx);
+                t.step(&np_ctx, mono);
             }
         }
         self.cycle += 1;
@@ -347,7 +353,12 @@ fn run_loop(group: &mut TaskGroup, stop: &AtomicBool) {
             .record(woke.saturating_sub(deadline));
         let next = deadline + period;
         // Non-periodic work may use up to three quarters of the period.
-        group.run_tasks(deadline, deadline + period * 3 / 4, &monotonic_ns);
+        group.run_tasks(
+            deadline,
+            deadline + period * 3 / 4,
+            &monotonic_ns,
+            Some(deadline),
+        );
         let end = monotonic_ns();
         group.info.stats.exec.record(end.saturating_sub(woke));
         let overran = end > next;
@@ -393,7 +404,7 @@ impl SteppedActivity {
         let period = self.group.info.spec.period_ns;
         let clock = self.clock.clone();
         self.group
-            .run_tasks(deadline, u64::MAX, &move || clock.now_ns());
+            .run_tasks(deadline, u64::MAX, &move || clock.now_ns(), None);
         let end = self.clock.now_ns();
         self.group.info.stats.exec.record(end - deadline);
         let overran = end > deadline + period;

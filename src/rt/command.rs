@@ -466,7 +466,7 @@ pub(crate) struct QueueShared<C> {
     task: String,
     queue: Ring<(C, u32)>,
     pool: Arc<HandlePool>,
-    state: Arc<super::task::StateCell>,
+    state: std::sync::Arc<super::task::StateCell>,
 }
 
 /// Sends commands to one task. `Clone`; usable from any thread, realtime or not.
@@ -564,7 +564,7 @@ impl<C: Send> CommandReceiver<C> {
 pub(crate) fn command_queue<C: Commands>(
     task: &str,
     capacity: usize,
-    state: Arc<super::task::StateCell>,
+    state: std::sync::Arc<super::task::StateCell>,
 ) -> (CommandSender<C>, CommandReceiver<C>) {
     let queue = Ring::new(capacity);
     let pool = Arc::new(HandlePool::new(queue.capacity() * 2));
@@ -580,4 +580,53 @@ pub(crate) fn command_queue<C: Commands>(
         },
         CommandReceiver { shared },
     )
+}
+
+#[cfg(all(test, loom))]
+mod loom_tests {
+    use super::*;
+
+    enum C {
+        A,
+    }
+
+    impl Commands for C {
+        fn operations() -> &'static [OperationDescriptor] {
+            &[]
+        }
+        fn operation_index(&self) -> usize {
+            0
+        }
+        fn from_args(operation: &str, _: &[ArgValue]) -> Result<Self, ArgError> {
+            Err(ArgError::UnknownOperation(operation.to_owned()))
+        }
+    }
+
+    #[test]
+    fn two_senders_one_processor_statuses_and_slot_reuse() {
+        loom::model(|| {
+            let state = std::sync::Arc::new(crate::rt::task::StateCell::new(TaskState::Running));
+            let (tx, mut rx) = command_queue::<C>("t", 2, state);
+            let tx2 = tx.clone();
+            let t = loom::thread::spawn(move || tx2.send(C::A).ok());
+            // This handle is dropped before the command is processed: its slot must only be
+            // reused once the processor is done with it too.
+            drop(tx.send(C::A));
+            let mut done = 0;
+            while done < 2 {
+                match rx.pop() {
+                    Some((C::A, ticket)) => {
+                        ticket.set(CommandStatus::Rejected(RejectReason::Busy));
+                        done += 1;
+                    }
+                    None => loom::thread::yield_now(),
+                }
+            }
+            let h2 = t.join().unwrap().expect("queue has room");
+            assert_eq!(h2.status(), CommandStatus::Rejected(RejectReason::Busy));
+            // Every slot is back in the pool: a full pool's worth can be allocated again.
+            let again = tx.send(C::A).expect("slot reused");
+            assert_eq!(again.status(), CommandStatus::Pending);
+        });
+    }
 }

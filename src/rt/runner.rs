@@ -98,7 +98,8 @@ impl TaskInfo {
     pub fn state(&self) -> TaskState {
         self.shared.state.get()
     }
-    /// Execution-time statistics of its steps.
+    /// Statistics of its steps: `exec` = execution time; `wakeup` = start latency (cycle
+    /// deadline to the task's start, on real threads only).
     pub fn stats(&self) -> &TimingStats {
         &self.shared.stats
     }
@@ -153,7 +154,9 @@ pub(crate) trait Runnable: Send {
     fn shared(&self) -> &Arc<TaskShared>;
     fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError>;
     fn start(&mut self) -> Result<(), TaskError>;
-    fn step(&mut self, ctx: &StepContext);
+    /// One step. `deadline_mono_ns`: the cycle's deadline on `CLOCK_MONOTONIC` when running
+    /// on a real thread, to record the task's start latency (`None` under simulated time).
+    fn step(&mut self, ctx: &StepContext, deadline_mono_ns: Option<u64>);
     fn stop(&mut self);
     fn cleanup(&mut self);
     fn has_work(&self) -> bool;
@@ -289,9 +292,13 @@ impl<Tk: Task> Runnable for TaskRunner<Tk> {
         Ok(())
     }
 
-    fn step(&mut self, ctx: &StepContext) {
+    fn step(&mut self, ctx: &StepContext, deadline_mono_ns: Option<u64>) {
         self.handle_requests();
         let t0 = monotonic_ns();
+        if let Some(d) = deadline_mono_ns {
+            // Start latency: deadline to this task's start (includes earlier tasks' work).
+            self.shared.stats.wakeup.record(t0.saturating_sub(d));
+        }
         match self.shared.state.get() {
             TaskState::Running => {
                 self.task.read_inputs(ctx);
