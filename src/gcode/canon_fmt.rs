@@ -286,15 +286,16 @@ pub fn push_call(out: &mut String, cmd: &CanonCmd) -> bool {
             pocket,
             tool,
             offset,
-            diameter,
             front_angle,
             back_angle,
             orientation,
+            ..
         } => {
+            // rs274 prints no diameter in this call.
             let _ = write!(out, "SET_TOOL_TABLE_ENTRY({pocket}, {tool}, ");
             push_space_list(out, offset);
             out.push_str(", ");
-            push_list(out, &[*diameter, *front_angle, *back_angle]);
+            push_list(out, &[*front_angle, *back_angle]);
             let _ = write!(out, ", {orientation})");
         }
         CanonCmd::Finish => out.push_str("FINISH()"),

@@ -92,7 +92,8 @@ impl Interp<'_> {
                 "K word given for arc in XY plane",
             ),
         };
-        if !b.has(words.0) && !b.has(words.1) {
+        // LinuxCNC 2.9 accepts an arc with only the helix axis (a full-circle helix).
+        if !b.has(words.0) && !b.has(words.1) && !b.has_axis() {
             return Err(self.err(col, msg_missing));
         }
         if b.has(forbidden) {

@@ -347,7 +347,8 @@ impl Interp<'_> {
                             .map(|c| c.to_ascii_lowercase())
                             .collect();
                         match ParamSource::named(self, &name) {
-                            Some(v) => out.push_str(&format!("{v:.6}")),
+                            // LinuxCNC prints -0 as 0 here.
+                            Some(v) => out.push_str(&format!("{:.6}", v + 0.0)),
                             None => out.push_str("######"),
                         }
                         i += 2 + end + 1;
@@ -364,7 +365,7 @@ impl Interp<'_> {
                             .ok()
                             .and_then(|n| ParamSource::numbered(self, n).ok());
                         match v {
-                            Some(v) => out.push_str(&format!("{v:.6}")),
+                            Some(v) => out.push_str(&format!("{:.6}", v + 0.0)),
                             None => out.push_str("######"),
                         }
                         i += 1 + digits.len();
@@ -431,11 +432,9 @@ impl Interp<'_> {
                 self.emit(CanonCmd::SetMotionControl(MotionControl::ExactStop))
             }
             _ => {
-                let p = b.get(b'p').unwrap_or(0.0);
-                let q = b.get(b'q').unwrap_or(p);
-                if p < 0.0 || q < 0.0 {
-                    return Err(self.err(self.loc.col, "G64 P and Q must not be negative"));
-                }
+                // LinuxCNC treats negative tolerances as 0 (no tolerance).
+                let p = b.get(b'p').unwrap_or(0.0).max(0.0);
+                let q = b.get(b'q').unwrap_or(p).max(0.0);
                 self.s.control = MotionControl::Continuous { tolerance: p };
                 self.s.naive_tol = q;
                 self.emit(CanonCmd::SetMotionControl(self.s.control))?;

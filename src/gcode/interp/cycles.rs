@@ -71,7 +71,14 @@ impl Interp<'_> {
         if m == 860 && self.s.spindle == 0 {
             return Err(self.err(col, "Spindle not turning in G86"));
         }
-        let mut old_z = self.s.pos[2];
+        // A series of contiguous cycles remembers the Z it started from (G98's "old Z").
+        let first = !matches!(self.s.motion, 730 | 810..=890);
+        let cur_z = self.s.pos[2];
+        if first {
+            self.s.cycle_start_z = cur_z;
+        }
+        let start_z = self.s.cycle_start_z;
+        let mut old_z = cur_z;
         let (mut x, mut y, dx, dy, r, bottom) = if self.s.absolute {
             (
                 b.get(b'x').unwrap_or(self.s.pos[0]),
@@ -95,12 +102,26 @@ impl Interp<'_> {
         if r < bottom {
             return Err(self.err(col, "R less than Z in cycle in XY plane"));
         }
-        if old_z < r {
-            old_z = r;
+        // The preliminary rapid to the R plane and the retract height follow rs274 2.9
+        // (observed behaviour, see tests/gcode/corpus/cycles_*.ngc).
+        let pre = if first { cur_z < r } else { start_z <= r };
+        if cur_z < r {
+            old_z = if !first && self.s.retract_old_z {
+                start_z.max(r)
+            } else {
+                r
+            };
         }
-        let (cx, cy) = (self.s.pos[0], self.s.pos[1]);
-        self.cycle_move(false, cx, cy, old_z)?;
-        let clear = if self.s.retract_old_z { old_z } else { r };
+        if pre {
+            let (cx, cy) = (self.s.pos[0], self.s.pos[1]);
+            self.cycle_move(false, cx, cy, r)?;
+        }
+        let clear = if self.s.retract_old_z {
+            start_z.max(r)
+        } else {
+            r
+        };
+
         let saved = self.s.control;
         if saved != MotionControl::ExactPath {
             self.emit(CanonCmd::SetMotionControl(MotionControl::ExactPath))?;

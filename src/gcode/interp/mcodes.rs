@@ -40,15 +40,17 @@ impl Interp<'_> {
         self.emit(CanonCmd::SelectTool(n))
     }
 
-    fn load_tool_params(&mut self) {
+    fn load_tool_params(&mut self, copy_to_spindle: bool) {
+        // Tool parameters are in machine units, as the table.
         self.p.numbered[params::TOOL_NUMBER] = f64::from(self.s.tool);
-        let k = self.s.machine_units.mm_per_unit() / self.s.units.mm_per_unit();
         let t = self.tools.at_slot(self.s.tool_slot).cloned();
         for i in 0..9 {
-            self.p.numbered[params::TOOL_BASE + i] =
-                t.as_ref().map(|t| t.offset[i] * k).unwrap_or(0.0);
+            self.p.numbered[params::TOOL_BASE + i] = t.as_ref().map(|t| t.offset[i]).unwrap_or(0.0);
         }
-        self.p.numbered[params::TOOL_BASE + 9] = t.as_ref().map(|t| t.diameter * k).unwrap_or(0.0);
+        self.p.numbered[params::TOOL_BASE + 9] = t.as_ref().map(|t| t.diameter).unwrap_or(0.0);
+        if copy_to_spindle {
+            self.s.spindle_tool = t;
+        }
     }
 
     pub(super) fn exec_mcodes_before_motion(&mut self, b: &Block) -> Result<(), GcodeError> {
@@ -72,7 +74,7 @@ impl Interp<'_> {
                 ))?;
                 self.s.tool = n;
                 self.s.tool_slot = slot;
-                self.load_tool_params();
+                self.load_tool_params(true);
             } else {
                 let q = b
                     .get(b'q')
@@ -92,7 +94,7 @@ impl Interp<'_> {
                 ))?;
                 self.s.tool = n;
                 self.s.tool_slot = slot;
-                self.load_tool_params();
+                self.load_tool_params(false);
             }
         }
         // spindle
@@ -287,8 +289,9 @@ impl Interp<'_> {
 
     /// Restores the modal state saved by M70/M73, reporting each change to canon.
     pub(super) fn restore_modal(&mut self, s: &super::Settings) -> Result<(), GcodeError> {
+        use crate::gcode::canon::{LengthUnits, MotionControl};
         if s.units != self.s.units {
-            self.set_units(if s.units == crate::gcode::canon::LengthUnits::Inches {
+            self.set_units(if s.units == LengthUnits::Inches {
                 200
             } else {
                 210
@@ -298,9 +301,6 @@ impl Interp<'_> {
             self.s.plane = s.plane;
             self.emit(CanonCmd::SelectPlane(s.plane))?;
         }
-        self.s.absolute = s.absolute;
-        self.s.ijk_absolute = s.ijk_absolute;
-        self.s.retract_old_z = s.retract_old_z;
         if s.feed_mode != self.s.feed_mode {
             self.s.feed_mode = s.feed_mode;
             self.emit(CanonCmd::SetFeedMode(s.feed_mode))?;
@@ -321,28 +321,39 @@ impl Interp<'_> {
                 _ => CanonCmd::StopSpindle,
             })?;
         }
+        if s.absolute != self.s.absolute {
+            self.s.absolute = s.absolute;
+            self.emit(CanonCmd::Comment(
+                if s.absolute {
+                    "interpreter: distance mode changed to absolute"
+                } else {
+                    "interpreter: distance mode changed to incremental"
+                }
+                .into(),
+            ))?;
+        }
+        self.s.ijk_absolute = s.ijk_absolute;
+        self.s.retract_old_z = s.retract_old_z;
         if s.mist != self.s.mist || s.flood != self.s.flood {
             self.s.mist = s.mist;
             self.s.flood = s.flood;
-            self.emit(if s.mist {
-                CanonCmd::MistOn
+            if !s.mist && !s.flood {
+                self.emit(CanonCmd::MistOff)?;
+                self.emit(CanonCmd::FloodOff)?;
             } else {
-                CanonCmd::MistOff
-            })?;
-            self.emit(if s.flood {
-                CanonCmd::FloodOn
-            } else {
-                CanonCmd::FloodOff
-            })?;
+                if s.mist {
+                    self.emit(CanonCmd::MistOn)?;
+                }
+                if s.flood {
+                    self.emit(CanonCmd::FloodOn)?;
+                }
+            }
         }
         if s.control != self.s.control || s.naive_tol != self.s.naive_tol {
             self.s.control = s.control;
             self.s.naive_tol = s.naive_tol;
             self.emit(CanonCmd::SetMotionControl(s.control))?;
-            if matches!(
-                s.control,
-                crate::gcode::canon::MotionControl::Continuous { .. }
-            ) {
+            if matches!(s.control, MotionControl::Continuous { .. }) {
                 self.emit(CanonCmd::SetNaivecamTolerance(s.naive_tol))?;
             }
         }
@@ -364,8 +375,11 @@ impl Interp<'_> {
             _ => {
                 // LinuxCNC's reset on program end.
                 let base = g5x_base(1);
+                let k = self.s.k_mp();
                 let mut o = [0.0; 6];
-                o.copy_from_slice(&self.p.numbered[base..base + 6]);
+                for (i, v) in o.iter_mut().enumerate() {
+                    *v = self.p.numbered[base + i] * super::motion::lin(i, k);
+                }
                 for (i, v) in o.iter().enumerate() {
                     self.s.pos[i] += self.s.g5x[i] - v;
                 }

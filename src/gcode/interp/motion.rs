@@ -126,17 +126,6 @@ impl Interp<'_> {
         if (3..6).any(|i| end[i] != self.s.pos[i]) {
             return Err(self.err(self.loc.col, "Cannot move rotary axes during probing"));
         }
-        let d = ((end[0] - self.s.pos[0]).powi(2)
-            + (end[1] - self.s.pos[1]).powi(2)
-            + (end[2] - self.s.pos[2]).powi(2))
-        .sqrt();
-        let min = 0.01 * self.s.units_per_inch();
-        if d < min {
-            return Err(self.err(
-                self.loc.col,
-                "Start of probe move is within 0.01 inch of target",
-            ));
-        }
         let kind = match m {
             382 => ProbeKind::TowardErr,
             383 => ProbeKind::Toward,
@@ -150,11 +139,11 @@ impl Interp<'_> {
             kind,
         })?;
         self.emit(CanonCmd::Probe { on: false })?;
-        // Without a machine the probe "trips" at the programmed end, as in rs274.
+        // Without a machine the probe ends at the programmed end without tripping, as in rs274.
         for (i, v) in end.iter().enumerate() {
             self.p.numbered[5061 + i] = *v;
         }
-        self.p.numbered[5070] = 1.0;
+        self.p.numbered[5070] = 0.0;
         self.s.pos = end;
         Ok(())
     }
@@ -180,14 +169,7 @@ impl Interp<'_> {
         for v in self.s.tool_offset.iter_mut() {
             *v *= k;
         }
-        // Stored offsets: G28, G30, G92 and all nine coordinate systems (linear axes).
-        let mut bases = vec![params::G28_BASE, params::G30_BASE, params::G92_BASE];
-        bases.extend((1..=9).map(g5x_base));
-        for base in bases {
-            for i in 0..3 {
-                self.p.numbered[base + i] *= k;
-            }
-        }
+        // Stored offsets (parameters) stay in machine units, as in LinuxCNC.
         Ok(())
     }
 
@@ -196,7 +178,8 @@ impl Interp<'_> {
         let mut off: Pose = [0.0; 9];
         match g {
             430 => {
-                let tool = match b.get(b'h') {
+                let k = self.s.k_mp();
+                let entry = match b.get(b'h') {
                     Some(h) => {
                         if h < 0.0 || h.fract() != 0.0 {
                             return Err(self.err(
@@ -204,22 +187,26 @@ impl Interp<'_> {
                                 "Negative H word tool length offset index used",
                             ));
                         }
-                        h as u32
-                    }
-                    None => self.s.tool,
-                };
-                if tool != 0 {
-                    let Some(slot) = self.tools.slot_of(tool) else {
-                        return Err(self.err(
-                            self.loc.col,
-                            format!("Invalid tool number {tool} in G43 (not in the tool table)"),
-                        ));
-                    };
-                    let k = self.s.machine_units.mm_per_unit() / self.s.units.mm_per_unit();
-                    if let Some(t) = self.tools.at_slot(slot) {
-                        for (o, v) in off.iter_mut().zip(t.offset.iter()) {
-                            *o = v * k;
+                        let tool = h as u32;
+                        if tool == 0 {
+                            None
+                        } else {
+                            let slot = self.tools.slot_of(tool).ok_or_else(|| {
+                                self.err(
+                                    self.loc.col,
+                                    format!(
+                                        "Invalid tool number {tool} in G43 (not in the tool table)"
+                                    ),
+                                )
+                            })?;
+                            self.tools.at_slot(slot).cloned()
                         }
+                    }
+                    None => self.s.spindle_tool.clone(),
+                };
+                if let Some(t) = entry {
+                    for (o, v) in off.iter_mut().zip(t.offset.iter()) {
+                        *o = v * k;
                     }
                 }
             }
@@ -242,8 +229,11 @@ impl Interp<'_> {
 
     fn load_g5x(&self, index: u8) -> ([f64; 6], f64) {
         let base = g5x_base(index);
+        let k = self.s.k_mp();
         let mut o = [0.0; 6];
-        o.copy_from_slice(&self.p.numbered[base..base + 6]);
+        for (i, v) in o.iter_mut().enumerate() {
+            *v = self.p.numbered[base + i] * lin(i, k);
+        }
         (o, self.p.numbered[base + 9])
     }
 
@@ -286,9 +276,11 @@ impl Interp<'_> {
                 } else {
                     params::G30_BASE
                 };
+                let k = 1.0 / self.s.k_mp();
                 for i in 0..6 {
                     self.p.numbered[base + i] =
-                        self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i];
+                        (self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i])
+                            * lin(i, k);
                 }
                 Ok(())
             }
@@ -303,8 +295,9 @@ impl Interp<'_> {
                         self.s.g92[i] = new;
                     }
                 }
+                let k = 1.0 / self.s.k_mp();
                 for i in 0..6 {
-                    self.p.numbered[params::G92_BASE + i] = self.s.g92[i];
+                    self.p.numbered[params::G92_BASE + i] = self.s.g92[i] * lin(i, k);
                 }
                 self.p.numbered[params::G92_ENABLED] = 1.0;
                 self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
@@ -322,7 +315,7 @@ impl Interp<'_> {
             }
             923 => {
                 for i in 0..6 {
-                    let v = self.p.numbered[params::G92_BASE + i];
+                    let v = self.p.numbered[params::G92_BASE + i] * lin(i, self.s.k_mp());
                     self.s.pos[i] += self.s.g92[i] - v;
                     self.s.g92[i] = v;
                 }
@@ -346,7 +339,7 @@ impl Interp<'_> {
         let mut end = mid;
         for (i, &c) in AXES.iter().enumerate() {
             if !any || b.has(c) {
-                end[i] = self.p.numbered[base + i]
+                end[i] = self.p.numbered[base + i] * lin(i, self.s.k_mp())
                     - self.s.g5x[i]
                     - self.s.g92[i]
                     - self.s.tool_offset[i];
@@ -387,11 +380,12 @@ impl Interp<'_> {
                 let base = g5x_base(index);
                 for (i, &c) in AXES.iter().enumerate() {
                     if let Some(v) = b.get(c) {
-                        self.p.numbered[base + i] = if l == 2 {
+                        let prog = if l == 2 {
                             v
                         } else {
                             self.s.pos[i] + self.s.g5x[i] - v
                         };
+                        self.p.numbered[base + i] = prog * lin(i, 1.0 / self.s.k_mp());
                     }
                 }
                 if let Some(r) = b.get(b'r') {
@@ -424,8 +418,17 @@ fn fmt_g(m: u16) -> String {
 }
 
 impl super::Settings {
-    /// Current units per inch (for LinuxCNC's inch-denominated tolerances).
-    pub(crate) fn units_per_inch(&self) -> f64 {
-        25.4 / self.units.mm_per_unit()
+    /// Factor from machine units (stored parameters, tool table) to program units.
+    pub(crate) fn k_mp(&self) -> f64 {
+        self.machine_units.mm_per_unit() / self.units.mm_per_unit()
+    }
+}
+
+/// Scale factor for axis `i` between unit systems: linear axes scale, rotary do not.
+pub(crate) fn lin(i: usize, k: f64) -> f64 {
+    if i < 3 {
+        k
+    } else {
+        1.0
     }
 }

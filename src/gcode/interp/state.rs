@@ -66,8 +66,13 @@ pub(crate) struct Settings {
     pub tool: u32,
     /// Slot of the tool in the spindle.
     pub tool_slot: usize,
+    /// Copy of the table entry of the tool loaded by M6 (LinuxCNC's pocket 0). M61 changes
+    /// the tool number but not this copy, and G43 without H reads it.
+    pub spindle_tool: Option<crate::gcode::tooltable::Tool>,
     /// T word: prepared tool number and slot.
     pub selected: Option<(u32, usize)>,
+    /// Canned cycle: Z before the current series of contiguous cycles (G98 retracts to it).
+    pub cycle_start_z: f64,
     /// Canned cycle: Z of the last cycle block (sticky).
     pub cycle_z: f64,
     /// Canned cycle: R of the last cycle block (sticky).
@@ -116,7 +121,9 @@ impl Settings {
             feed_hold: true,
             tool: 0,
             tool_slot: 0,
+            spindle_tool: None,
             selected: None,
+            cycle_start_z: 0.0,
             cycle_z: 0.0,
             cycle_r: 0.0,
             cycle_q: 0.0,
