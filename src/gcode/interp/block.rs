@@ -272,7 +272,7 @@ impl Interp<'_> {
             ),
             (
                 b'd',
-                b.gcode(14) == Some(960),
+                b.gcode(14) == Some(960) || matches!(b.gcode(7), Some(410 | 411 | 420 | 421)),
                 "D word with no G41, G41.1, G42, G42.1 or G96 to use it",
             ),
             (

@@ -257,6 +257,9 @@ impl<'a> Interp<'a> {
         self.pc = (0, 0);
         while !self.ended {
             let (f, l) = self.pc;
+            if !Arc::ptr_eq(&self.loc.file, &self.files[f].name) {
+                self.loc.file = self.files[f].name.clone();
+            }
             self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
             self.loc.col = 1;
             if l >= self.files[f].end {
