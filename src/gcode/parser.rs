@@ -8,6 +8,9 @@
 use super::expr::{BinOp, Expr, Func};
 use super::lexer::Cursor;
 
+/// Most operands in one bracketed expression.
+const MAX_OPERANDS: usize = 256;
+
 /// A syntax error: column and message.
 pub type ParseError = (u32, String);
 
@@ -440,6 +443,7 @@ impl Parser<'_> {
         }
         let mut vals = vec![self.value(depth + 1)?];
         let mut ops: Vec<BinOp> = Vec::new();
+        let mut n_ops = 0usize;
         while let Some(op) = self.binop()? {
             while let Some(&top) = ops.last() {
                 if top.precedence() >= op.precedence() {
@@ -450,13 +454,13 @@ impl Parser<'_> {
             }
             ops.push(op);
             vals.push(self.value(depth + 1)?);
-            if ops.len() > self.max_depth {
+            // Left-associative chains build trees as deep as they are long; bound them so
+            // evaluation cannot exhaust the stack.
+            n_ops += 1;
+            if ops.len() > self.max_depth || n_ops >= MAX_OPERANDS {
                 return err(
                     col,
-                    format!(
-                        "Expression too long (limit {} operators pending)",
-                        self.max_depth
-                    ),
+                    format!("Expression too long (limit {MAX_OPERANDS} operands)"),
                 );
             }
         }
