@@ -92,9 +92,9 @@ fn strip(trace: &str) -> Vec<String> {
 
 fn hytask_trace(p: &Path) -> Result<Vec<String>, String> {
     let prog = load_file(p, &options()).map_err(|e| e.to_string())?;
-    let mut s = String::new();
+    let mut s = Vec::new();
     canon_fmt::write_trace(&mut s, &prog.canon);
-    Ok(strip(&s))
+    Ok(strip(&String::from_utf8(s).unwrap()))
 }
 
 fn name(p: &Path) -> String {

@@ -66,13 +66,19 @@ pub fn run(args: GcodeArgs) -> anyhow::Result<ExitCode> {
     match args.command {
         GcodeCommand::Canon(a) => {
             let prog = load_file(&a.file, &a.options()?)?;
-            let mut out = String::with_capacity(prog.canon.len() * 64);
-            canon_fmt::write_trace(&mut out, &prog.canon);
+            // Formatted and written in chunks: the trace of a long program is large.
             let stdout = std::io::stdout();
             let mut lock = stdout.lock();
-            lock.write_all(out.as_bytes())
-                .context("writing the trace")?;
+            let mut buf = Vec::with_capacity(1 << 17);
+            let mut seq = 0u64;
+            for chunk in prog.canon.chunks(1024) {
+                buf.clear();
+                seq = canon_fmt::write_trace_from(&mut buf, chunk, seq);
+                lock.write_all(&buf).context("writing the trace")?;
+            }
             lock.flush().context("writing the trace")?;
+            // The process ends here: skip freeing the program piece by piece.
+            std::mem::forget(prog);
             Ok(ExitCode::SUCCESS)
         }
         GcodeCommand::Check(a) => {

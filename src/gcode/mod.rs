@@ -122,7 +122,10 @@ pub fn load_file(path: &Path, opts: &InterpOptions) -> Result<Program, GcodeErro
         col: 1,
         message: format!("Unable to open file: {e}"),
     })?;
-    let text = String::from_utf8_lossy(&text).into_owned();
+    let text = match String::from_utf8(text) {
+        Ok(t) => t,
+        Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
+    };
     let mut o = opts.clone();
     if o.program_dir.is_none() {
         o.program_dir = path.parent().map(Path::to_path_buf);

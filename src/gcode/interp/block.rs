@@ -244,7 +244,26 @@ impl Interp<'_> {
         let cycle = matches!(g1, Some(730 | 810..=890));
         let g10 = g0 == Some(100);
         let user_m = b.m[10].is_some();
-        let mut checks: Vec<(u8, bool, &str)> = vec![
+        if !b"ijkredhpql".iter().any(|&c| b.has(c)) {
+            return Ok(());
+        }
+        let p_ok = arc
+            || g0 == Some(40)
+            || g10
+            || b.gcode(13) == Some(640)
+            || matches!(motion, 820 | 860 | 880 | 890) && (cycle || axis)
+            || matches!(b.mcode(9), Some(50..=53))
+            || matches!(b.mcode(5), Some(62..=66))
+            || user_m;
+        let q_ok = g10
+            || b.gcode(13) == Some(640)
+            || matches!(motion, 730 | 830) && (cycle || axis)
+            || matches!(b.mcode(5), Some(66..=68))
+            || b.mcode(6) == Some(61)
+            || user_m;
+        let l_ok =
+            g10 || cycle || (matches!(motion, 730 | 810..=890) && axis) || b.mcode(5) == Some(66);
+        let checks: [(u8, bool, &str); 10] = [
             (
                 b'i',
                 arc || g10 || motion == 870,
@@ -280,30 +299,14 @@ impl Interp<'_> {
                 b.gcode(8) == Some(430) || g10,
                 "H word with no G43 or G43.2 to use it",
             ),
+            (b'p', p_ok, "P word with no G2 G3 G4 G10 G64 G5 G5.2 G76 G82 G86 G88 G89 or M50 M51 M52 M53 M62 M63 M64 M65 M66 M98 or user M code to use it"),
+            (
+                b'q',
+                q_ok,
+                "Q word with no G5, G10, G64, G73, G83, M66, M67, M68, M61 or user M code that uses it",
+            ),
+            (b'l', l_ok, "L word with no G10, cycle, or M66 to use it"),
         ];
-        let p_ok = arc
-            || g0 == Some(40)
-            || g10
-            || b.gcode(13) == Some(640)
-            || matches!(motion, 820 | 860 | 880 | 890) && (cycle || axis)
-            || matches!(b.mcode(9), Some(50..=53))
-            || matches!(b.mcode(5), Some(62..=66))
-            || user_m;
-        checks.push((b'p', p_ok, "P word with no G2 G3 G4 G10 G64 G5 G5.2 G76 G82 G86 G88 G89 or M50 M51 M52 M53 M62 M63 M64 M65 M66 M98 or user M code to use it"));
-        let q_ok = g10
-            || b.gcode(13) == Some(640)
-            || matches!(motion, 730 | 830) && (cycle || axis)
-            || matches!(b.mcode(5), Some(66..=68))
-            || b.mcode(6) == Some(61)
-            || user_m;
-        checks.push((
-            b'q',
-            q_ok,
-            "Q word with no G5, G10, G64, G73, G83, M66, M67, M68, M61 or user M code that uses it",
-        ));
-        let l_ok =
-            g10 || cycle || (matches!(motion, 730 | 810..=890) && axis) || b.mcode(5) == Some(66);
-        checks.push((b'l', l_ok, "L word with no G10, cycle, or M66 to use it"));
         for (c, ok, msg) in checks {
             if b.has(c) && !ok {
                 return Err(self.err(col(c), msg));

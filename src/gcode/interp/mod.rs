@@ -40,6 +40,8 @@ pub(crate) struct Source {
     percent: bool,
     /// The closing `%` was found.
     closed: bool,
+    /// Per line: 0 plain, 1 O-word statement, 2 a `%` line.
+    kind: Vec<u8>,
     /// O-word statements by line.
     olines: HashMap<usize, OStmt>,
     /// Lines of each O label, in file order.
@@ -65,14 +67,11 @@ impl Source {
                 ),
             ));
         }
-        let mut lines = Vec::new();
+        let mut lines = Vec::with_capacity(text.len() / 24 + 1);
         let mut start = 0;
-        let bytes = text.as_bytes();
-        for (i, &b) in bytes.iter().enumerate() {
-            if b == b'\n' {
-                lines.push((start, i));
-                start = i + 1;
-            }
+        while let Some(i) = text[start..].find('\n') {
+            lines.push((start, start + i));
+            start += i + 1;
         }
         if start < text.len() {
             lines.push((start, text.len()));
@@ -95,9 +94,11 @@ impl Source {
             end: 0,
             percent: false,
             closed: false,
+            kind: Vec::new(),
             olines: HashMap::new(),
             by_label: HashMap::new(),
         };
+        src.kind = vec![0; src.lines.len()];
         src.end = src.lines.len();
         // `%` handling: a first non-blank line of `%` opens the program, the next closes it.
         let first = (0..src.lines.len()).find(|&i| !src.line(i).trim().is_empty());
@@ -111,7 +112,8 @@ impl Source {
             }
         }
         for i in 0..src.end {
-            let t = src.line(i);
+            let (a, b) = src.lines[i];
+            let t = &src.text[a..b];
             if t.len() > opts.limits.max_line_len {
                 return Err(mkerr(
                     i,
@@ -123,7 +125,10 @@ impl Source {
                     ),
                 ));
             }
-            if parser::starts_with_o(t) {
+            if t.trim() == "%" {
+                src.kind[i] = 2;
+            } else if parser::starts_with_o(t) {
+                src.kind[i] = 1;
                 let l = parser::parse_line(t, opts.limits.max_expr_depth)
                     .map_err(|(c, m)| mkerr(i, c, m))?;
                 if let Some(o) = l.o {
@@ -169,6 +174,8 @@ pub(crate) struct Interp<'a> {
     pub(crate) s: Settings,
     pub(crate) tools: ToolTable,
     files: Vec<Source>,
+    /// Scratch line reused by every plain block.
+    scratch: Line,
     subs: HashMap<Box<str>, (usize, usize)>,
     frames: Vec<Frame>,
     /// Repeat counters, keyed by (file, line of the `repeat`, call depth).
@@ -205,6 +212,7 @@ impl<'a> Interp<'a> {
             s,
             tools,
             files: Vec::new(),
+            scratch: Line::default(),
             subs: HashMap::new(),
             frames: Vec::new(),
             repeats: HashMap::new(),
@@ -247,6 +255,9 @@ impl<'a> Interp<'a> {
     pub(crate) fn run(&mut self, name: &str, text: String) -> Result<(), GcodeError> {
         let name: Arc<str> = Arc::from(name);
         let src = Source::new(name.clone(), text, self.opts)?;
+        // Most programs produce about one command per line.
+        self.out
+            .reserve((src.lines.len() + 32).min(self.opts.limits.max_canon));
         self.files.push(src);
         self.loc = SourceLoc {
             file: name,
@@ -305,11 +316,15 @@ impl<'a> Interp<'a> {
 
     /// Executes the line at (f, l) and advances the program counter.
     fn step(&mut self, f: usize, l: usize) -> Result<(), GcodeError> {
-        if self.files[f].percent && l == 0 || self.files[f].line_text(l).trim() == "%" {
+        let kind = self.files[f].kind.get(l).copied().unwrap_or(0);
+        if kind == 2 {
             self.pc = (f, l + 1);
             return Ok(());
         }
-        if let Some(o) = self.files[f].olines.get(&l).cloned() {
+        if kind == 1 {
+            let Some(o) = self.files[f].olines.get(&l).cloned() else {
+                return Err(self.err(1, "internal: O-word line not indexed"));
+            };
             let text = self.files[f].line_text(l).to_string();
             let line = parser::parse_line(&text, self.opts.limits.max_expr_depth)
                 .map_err(|(c, m)| self.err(c, m))?;
@@ -320,16 +335,19 @@ impl<'a> Interp<'a> {
             self.pc = (f, l + 1);
             return self.exec_o(f, l, &o, &line);
         }
-        let line = {
+        let mut line = std::mem::take(&mut self.scratch);
+        let parsed = {
             let text = self.files[f].line_text(l);
-            parser::parse_line(text, self.opts.limits.max_expr_depth)
-        }
-        .map_err(|(c, m)| self.err(c, m))?;
+            parser::parse_line_into(text, self.opts.limits.max_expr_depth, &mut line)
+        };
         self.pc = (f, l + 1);
-        if line.block_delete && self.opts.block_delete {
-            return Ok(());
-        }
-        self.exec_line(&line)
+        let r = match parsed {
+            Err((c, m)) => Err(self.err(c, m)),
+            Ok(()) if line.block_delete && self.opts.block_delete => Ok(()),
+            Ok(()) => self.exec_line(&line),
+        };
+        self.scratch = line;
+        r
     }
 
     fn exec_line(&mut self, line: &Line) -> Result<(), GcodeError> {
