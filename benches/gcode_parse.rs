@@ -2,6 +2,9 @@
 //! interpreter (`load_str`), and the rs274-format trace printer. The program is generated
 //! in memory in the style of CAM output (short G1 moves, arcs, canned drilling).
 
+// criterion_group! generates an undocumented function.
+#![allow(missing_docs)]
+
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use hytask::gcode::{canon_fmt, load_str, parser, InterpOptions};
 use std::fmt::Write as _;
