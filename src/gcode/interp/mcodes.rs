@@ -263,8 +263,12 @@ impl Interp<'_> {
             70 | 73 => {
                 let mut snap = self.s.clone();
                 snap.saved = Vec::new();
+                snap.auto_restore = Vec::new();
                 if let Some(slot) = self.s.saved.get_mut(level) {
                     *slot = Some(Box::new(snap));
+                }
+                if let Some(a) = self.s.auto_restore.get_mut(level) {
+                    *a = m == 73;
                 }
                 Ok(())
             }
@@ -277,7 +281,7 @@ impl Interp<'_> {
             _ => {
                 let snap = self.s.saved.get(level).cloned().flatten();
                 match snap {
-                    Some(s) => self.restore_modal(&s),
+                    Some(s) => self.restore_modal(&s, false),
                     None => Err(self.err(
                         self.loc.col,
                         "Cannot restore context from invalid stack frame - missing M70/M73?",
@@ -287,8 +291,14 @@ impl Interp<'_> {
         }
     }
 
-    /// Restores the modal state saved by M70/M73, reporting each change to canon.
-    pub(super) fn restore_modal(&mut self, s: &super::Settings) -> Result<(), GcodeError> {
+    /// Restores the modal state saved by M70/M73, reporting each change to canon. rs274
+    /// reports coolant before the distance mode when M73 restores on return, after it for
+    /// M72 (`coolant_first`).
+    pub(super) fn restore_modal(
+        &mut self,
+        s: &super::Settings,
+        coolant_first: bool,
+    ) -> Result<(), GcodeError> {
         use crate::gcode::canon::{LengthUnits, MotionControl};
         if s.units != self.s.units {
             self.set_units(if s.units == LengthUnits::Inches {
@@ -321,6 +331,9 @@ impl Interp<'_> {
                 _ => CanonCmd::StopSpindle,
             })?;
         }
+        if coolant_first {
+            self.restore_coolant(s)?;
+        }
         if s.absolute != self.s.absolute {
             self.s.absolute = s.absolute;
             self.emit(CanonCmd::Comment(
@@ -334,6 +347,24 @@ impl Interp<'_> {
         }
         self.s.ijk_absolute = s.ijk_absolute;
         self.s.retract_old_z = s.retract_old_z;
+        if !coolant_first {
+            self.restore_coolant(s)?;
+        }
+        if s.control != self.s.control || s.naive_tol != self.s.naive_tol {
+            self.s.control = s.control;
+            self.s.naive_tol = s.naive_tol;
+            self.emit(CanonCmd::SetMotionControl(s.control))?;
+            if matches!(s.control, MotionControl::Continuous { .. }) {
+                self.emit(CanonCmd::SetNaivecamTolerance(s.naive_tol))?;
+            }
+        }
+        if s.origin_index != self.s.origin_index {
+            self.select_coord_system(s.origin_index)?;
+        }
+        Ok(())
+    }
+
+    fn restore_coolant(&mut self, s: &super::Settings) -> Result<(), GcodeError> {
         if s.mist != self.s.mist || s.flood != self.s.flood {
             self.s.mist = s.mist;
             self.s.flood = s.flood;
@@ -348,17 +379,6 @@ impl Interp<'_> {
                     self.emit(CanonCmd::FloodOn)?;
                 }
             }
-        }
-        if s.control != self.s.control || s.naive_tol != self.s.naive_tol {
-            self.s.control = s.control;
-            self.s.naive_tol = s.naive_tol;
-            self.emit(CanonCmd::SetMotionControl(s.control))?;
-            if matches!(s.control, MotionControl::Continuous { .. }) {
-                self.emit(CanonCmd::SetNaivecamTolerance(s.naive_tol))?;
-            }
-        }
-        if s.origin_index != self.s.origin_index {
-            self.select_coord_system(s.origin_index)?;
         }
         Ok(())
     }

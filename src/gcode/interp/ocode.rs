@@ -101,14 +101,9 @@ impl Interp<'_> {
         o: &OStmt,
         line: &Line,
     ) -> Result<(), GcodeError> {
+        // Comments on O lines are not executed (as in LinuxCNC).
+        let _ = line;
         self.loc.col = o.col;
-        if let Some(c) = line.comments.last() {
-            // A comment on an O line is a comment like any other.
-            let text = c.text.to_string();
-            if !text.is_empty() {
-                self.emit(crate::gcode::canon::CanonCmd::Comment(text))?;
-            }
-        }
         let label = o.label.clone();
         let missing = |me: &Self, what: &str| me.err(o.col, format!("o<{label}> {what}"));
         match o.kind {
@@ -138,9 +133,17 @@ impl Interp<'_> {
                     }
                     None => self.s.value_returned = 0.0,
                 }
+                // M73 in this subroutine: its saved modal state comes back on return.
+                let level = self.frames.len();
+                if self.s.auto_restore.get(level).copied().unwrap_or(false) {
+                    if let Some(Some(saved)) = self.s.saved.get(level).cloned() {
+                        self.restore_modal(&saved, true)?;
+                    }
+                }
                 let Some(frame) = self.frames.pop() else {
                     return Ok(());
                 };
+                self.s.auto_restore.pop();
                 self.p.numbered[1..31].copy_from_slice(&frame.saved);
                 self.p.locals.pop();
                 self.s.saved.pop();
@@ -203,6 +206,7 @@ impl Interp<'_> {
                 });
                 self.p.locals.push(HashMap::new());
                 self.s.saved.push(None);
+                self.s.auto_restore.push(false);
                 self.pc = (target.0, target.1 + 1);
                 Ok(())
             }

@@ -87,6 +87,8 @@ pub(crate) struct Settings {
     pub value_returned: f64,
     /// M70/M73 saved state stack depth marker (states saved per call level).
     pub saved: Vec<Option<Box<Settings>>>,
+    /// Per call level: the saved state was taken by M73 and is restored on return.
+    pub auto_restore: Vec<bool>,
 }
 
 impl Settings {
@@ -131,6 +133,7 @@ impl Settings {
             value: 0.0,
             value_returned: 0.0,
             saved: vec![None],
+            auto_restore: vec![false],
         }
     }
 }
