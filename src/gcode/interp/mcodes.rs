@@ -63,9 +63,8 @@ impl Interp<'_> {
         if let Some((m, col)) = b.m[6] {
             self.loc.col = col;
             if m == 6 {
-                let Some((n, slot)) = self.s.selected else {
-                    return Err(self.err(col, "M6 with no tool prepared (no T word before it)"));
-                };
+                // Without a T word LinuxCNC changes to the empty slot 0.
+                let (n, slot) = self.s.selected.unwrap_or((0, 0));
                 self.emit(CanonCmd::StartChange)?;
                 self.emit(CanonCmd::StopSpindle)?;
                 self.s.spindle = 0;
@@ -245,9 +244,8 @@ impl Interp<'_> {
                     .get(b'e')
                     .and_then(int_word)
                     .ok_or_else(|| self.err(col, "Invalid or missing E word with M67/M68"))?;
-                let q = b
-                    .get(b'q')
-                    .ok_or_else(|| self.err(col, "Q word missing with M67/M68"))?;
+                // LinuxCNC's default for a missing Q word is -1.
+                let q = b.get(b'q').unwrap_or(-1.0);
                 self.emit(CanonCmd::AnalogOutput {
                     index: e,
                     value: q,
