@@ -218,12 +218,6 @@ impl Interp<'_> {
                     ));
                 }
             }
-            if g == 520 {
-                return Err(self.err(
-                    b.g[0].map(|x| x.1).unwrap_or(1),
-                    "G52 is not supported by hytask; use G92 or G10 L2",
-                ));
-            }
         }
         if axis && !g0.is_some_and(g0_uses_axes) && b.gcode(8) != Some(431) {
             match g1 {
@@ -251,7 +245,7 @@ impl Interp<'_> {
             || g0 == Some(40)
             || g10
             || b.gcode(13) == Some(640)
-            || matches!(motion, 820 | 860 | 880 | 890) && (cycle || axis)
+            || matches!(motion, 820 | 840 | 860 | 880 | 890) && (cycle || axis)
             || matches!(b.mcode(9), Some(50..=53))
             || matches!(b.mcode(5), Some(62..=66))
             || user_m;

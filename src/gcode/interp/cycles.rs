@@ -71,6 +71,12 @@ impl Interp<'_> {
         if m == 860 && self.s.spindle == 0 {
             return Err(self.err(col, "Spindle not turning in G86"));
         }
+        if m == 840 && self.s.spindle != 1 {
+            return Err(self.err(col, "Spindle not turning clockwise in G84"));
+        }
+        if m == 880 && self.s.spindle == 0 {
+            return Err(self.err(col, "Spindle not turning in G88"));
+        }
         // A series of contiguous cycles remembers the Z it started from (G98's "old Z").
         let first = !matches!(self.s.motion, 730 | 810..=890);
         let cur_z = self.s.pos[2];
@@ -170,6 +176,35 @@ impl Interp<'_> {
                     if clear != r {
                         self.cycle_move(false, x, y, clear)?;
                     }
+                }
+                840 => {
+                    // Right-hand tapping: overrides off, reverse at the bottom, feed out.
+                    let ov = |which, on| CanonCmd::OverrideEnable { which, on };
+                    use crate::gcode::canon::{OverrideKind, SpindleDir};
+                    self.emit(ov(OverrideKind::Feed, false))?;
+                    self.emit(ov(OverrideKind::Spindle, false))?;
+                    self.cycle_move(true, x, y, bottom)?;
+                    self.emit(CanonCmd::StopSpindle)?;
+                    self.emit(CanonCmd::StartSpindle(SpindleDir::CounterClockwise))?;
+                    self.emit(CanonCmd::Dwell(p))?;
+                    self.cycle_move(true, x, y, clear)?;
+                    self.emit(CanonCmd::StopSpindle)?;
+                    self.emit(CanonCmd::StartSpindle(SpindleDir::Clockwise))?;
+                    self.emit(ov(OverrideKind::Feed, true))?;
+                    self.emit(ov(OverrideKind::Spindle, true))?;
+                }
+                880 => {
+                    // Boring, manual retract: stop, wait for the operator, restart.
+                    self.cycle_move(true, x, y, bottom)?;
+                    self.emit(CanonCmd::Dwell(p))?;
+                    self.emit(CanonCmd::StopSpindle)?;
+                    self.emit(CanonCmd::ProgramStop)?;
+                    let dir = if self.s.spindle > 0 {
+                        crate::gcode::canon::SpindleDir::Clockwise
+                    } else {
+                        crate::gcode::canon::SpindleDir::CounterClockwise
+                    };
+                    self.emit(CanonCmd::StartSpindle(dir))?;
                 }
                 _ => {
                     // G86

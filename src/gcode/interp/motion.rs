@@ -39,7 +39,8 @@ impl Interp<'_> {
     /// Performs the motion of group 1 (explicit or modal), if the block calls for one.
     pub(super) fn motion(&mut self, b: &Block) -> Result<(), GcodeError> {
         let explicit = b.g[1];
-        let g0_axes = matches!(b.gcode(0), Some(100 | 280 | 300 | 920)) || b.gcode(8) == Some(431);
+        let g0_axes =
+            matches!(b.gcode(0), Some(100 | 280 | 300 | 520 | 920)) || b.gcode(8) == Some(431);
         let (m, col) = match explicit {
             Some((m, col)) => (m, col),
             None => {
@@ -60,7 +61,7 @@ impl Interp<'_> {
                     "interpreter: motion mode set to none".into(),
                 ))
             }
-            730 | 810 | 820 | 830 | 850 | 860 | 890 => self.cycle(m, b),
+            730 | 810 | 820 | 830 | 840 | 850 | 860 | 880 | 890 => self.cycle(m, b),
             _ => Err(self.err(col, format!("G{} is not supported by hytask", fmt_g(m)))),
         }
     }
@@ -283,6 +284,19 @@ impl Interp<'_> {
                             * lin(i, k);
                 }
                 Ok(())
+            }
+            520 => {
+                // G52: local offset, kept in the G92 offset as LinuxCNC does.
+                let k = 1.0 / self.s.k_mp();
+                for (i, &c) in AXES.iter().enumerate() {
+                    if let Some(v) = b.get(c) {
+                        self.s.pos[i] += self.s.g92[i] - v;
+                        self.s.g92[i] = v;
+                        self.p.numbered[params::G92_BASE + i] = v * lin(i, k);
+                    }
+                }
+                self.p.numbered[params::G92_ENABLED] = 1.0;
+                self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
             }
             920 => {
                 if !b.has_axis() {
