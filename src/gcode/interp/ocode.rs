@@ -196,8 +196,9 @@ impl Interp<'_> {
                 };
                 let mut saved = [0.0; 30];
                 saved.copy_from_slice(&self.p.numbered[1..31]);
-                for (i, v) in args.iter().enumerate() {
-                    self.p.numbered[1 + i] = *v;
+                // The callee sees its arguments in #1.. and 0 in the rest of #1-#30.
+                for i in 0..30 {
+                    self.p.numbered[1 + i] = args.get(i).copied().unwrap_or(0.0);
                 }
                 self.frames.push(Frame {
                     ret: self.pc,
