@@ -183,6 +183,8 @@ pub(crate) struct Interp<'a> {
     /// Loop iterations, keyed like `repeats`, for the iteration limit.
     loop_iters: HashMap<(usize, usize, usize), u64>,
     pc: (usize, usize),
+    /// Axis indices (first, second, drilling) of the canned cycle being generated.
+    cycle_axes: (usize, usize, usize),
     ended: bool,
     steps: u64,
 }
@@ -218,6 +220,7 @@ impl<'a> Interp<'a> {
             repeats: HashMap::new(),
             loop_iters: HashMap::new(),
             pc: (0, 0),
+            cycle_axes: (0, 1, 2),
             ended: false,
             steps: 0,
         })
