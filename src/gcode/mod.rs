@@ -6,6 +6,20 @@
 //! checked [`modal::Block`]) → `interp` (modal state, execution order, O-word flow) →
 //! [`canon`] commands. [`canon_fmt`] prints them in `rs274 -g` layout for differential
 //! testing against LinuxCNC.
+//!
+//! Conformance is measured, not assumed: `tests/gcode_differential.rs` diffs every program
+//! of `tests/gcode/corpus/` against LinuxCNC's `rs274` (stored goldens and, when installed,
+//! live), and `tests/gcode/DIFFERENCES.md` lists what differs on purpose.
+//!
+//! # How to add a G or M code
+//! 1. Give it its modal group in [`modal::g_group`]/[`modal::m_group`] (LinuxCNC's table).
+//! 2. Execute it at its place in LinuxCNC's order of execution: `interp/block.rs` calls the
+//!    steps in order; motion lives in `interp/motion.rs`, arcs in `arcs.rs`, canned cycles in
+//!    `cycles.rs`, M codes in `mcodes.rs`. Let the words it uses through `check_block`.
+//! 3. If rs274 prints a canon call hytask does not have, add a [`CanonCmd`] variant and its
+//!    text in [`canon_fmt::push_call`].
+//! 4. Add a corpus program (and an `err_*.ngc` for what it must reject), run
+//!    `tests/gcode/regen-golden.sh`, and make `cargo test --test gcode_differential` pass.
 
 pub mod canon;
 pub mod canon_fmt;

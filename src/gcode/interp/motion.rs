@@ -167,8 +167,8 @@ impl Interp<'_> {
             self.s.g5x[i] *= k;
             self.s.g92[i] *= k;
         }
-        for v in self.s.tool_offset.iter_mut() {
-            *v *= k;
+        for (i, v) in self.s.tool_offset.iter_mut().enumerate() {
+            *v *= lin9(i, k);
         }
         // Stored offsets (parameters) stay in machine units, as in LinuxCNC.
         Ok(())
@@ -206,8 +206,8 @@ impl Interp<'_> {
                     None => self.s.spindle_tool.clone(),
                 };
                 if let Some(t) = entry {
-                    for (o, v) in off.iter_mut().zip(t.offset.iter()) {
-                        *o = v * k;
+                    for (i, (o, v)) in off.iter_mut().zip(t.offset.iter()).enumerate() {
+                        *o = v * lin9(i, k);
                     }
                 }
             }
@@ -435,6 +435,15 @@ impl super::Settings {
     /// Factor from machine units (stored parameters, tool table) to program units.
     pub(crate) fn k_mp(&self) -> f64 {
         self.machine_units.mm_per_unit() / self.units.mm_per_unit()
+    }
+}
+
+/// Like [`lin`] for a 9-axis pose: X Y Z and U V W are linear, A B C rotary.
+pub(crate) fn lin9(i: usize, k: f64) -> f64 {
+    if (3..6).contains(&i) {
+        1.0
+    } else {
+        k
     }
 }
 
