@@ -78,6 +78,9 @@ impl Interp<'_> {
         if matches!(m, 730 | 830) && q <= 0.0 {
             return Err(self.err(col, "Q word missing or not positive with G73 or G83"));
         }
+        if matches!(m, 820 | 860 | 880 | 890) && !b.has(b'p') && !same {
+            return Err(self.err(col, format!("Dwell time p word missing with g{}", m / 10)));
+        }
         let p = b.get(b'p').unwrap_or(self.s.cycle_p);
         if p < 0.0 {
             return Err(self.err(b.col_of(b'p'), "Negative dwell time with canned cycle"));
@@ -193,7 +196,9 @@ impl Interp<'_> {
                         self.emit(CanonCmd::Dwell(p))?;
                     }
                     self.cycle_move(true, x, y, r)?;
-                    if clear != r {
+                    // rs274 2.9: G85 always ends with a rapid to the clearance height,
+                    // G89 only when it differs from R.
+                    if m == 850 || clear != r {
                         self.cycle_move(false, x, y, clear)?;
                     }
                 }
@@ -251,10 +256,9 @@ impl Interp<'_> {
         self.s.cycle_p = p;
         self.s.motion = m;
         if saved != MotionControl::ExactPath {
+            // rs274 restores the mode and then the naive-CAM tolerance, whatever the mode.
             self.emit(CanonCmd::SetMotionControl(saved))?;
-            if matches!(saved, MotionControl::Continuous { .. }) {
-                self.emit(CanonCmd::SetNaivecamTolerance(self.s.naive_tol))?;
-            }
+            self.emit(CanonCmd::SetNaivecamTolerance(self.s.naive_tol))?;
         }
         Ok(())
     }

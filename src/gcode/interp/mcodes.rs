@@ -74,6 +74,7 @@ impl Interp<'_> {
                 self.s.tool = n;
                 self.s.tool_slot = slot;
                 self.load_tool_params(true);
+                self.s.synch_pending = true;
             } else {
                 let q = b
                     .get(b'q')

@@ -237,6 +237,15 @@ impl<'a> Interp<'a> {
                 ),
             ));
         }
+        if matches!(
+            cmd,
+            CanonCmd::StraightTraverse(_)
+                | CanonCmd::StraightFeed(_)
+                | CanonCmd::ArcFeed { .. }
+                | CanonCmd::StraightProbe { .. }
+        ) {
+            self.s.tlo_at_motion = self.s.tool_offset;
+        }
         self.out.push(Canon {
             loc: self.loc.clone(),
             cmd,
@@ -319,6 +328,9 @@ impl<'a> Interp<'a> {
 
     /// Executes the line at (f, l) and advances the program counter.
     fn step(&mut self, f: usize, l: usize) -> Result<(), GcodeError> {
+        if self.s.synch_pending {
+            self.synch();
+        }
         let kind = self.files[f].kind.get(l).copied().unwrap_or(0);
         if kind == 2 {
             self.pc = (f, l + 1);
@@ -394,6 +406,17 @@ impl<'a> Interp<'a> {
         }
         self.loc.col = 1;
         self.exec_block(&b, line)
+    }
+
+    /// LinuxCNC re-reads the machine position after a tool change, before the next block:
+    /// the position becomes the end of the last move as canon saw it, so a tool length
+    /// offset applied since that move no longer shifts the program position.
+    fn synch(&mut self) {
+        for i in 0..6 {
+            self.s.pos[i] += self.s.tool_offset[i] - self.s.tlo_at_motion[i];
+        }
+        self.s.tlo_at_motion = self.s.tool_offset;
+        self.s.synch_pending = false;
     }
 
     /// Loads (once) the file that defines subroutine `label` from the search path.

@@ -120,13 +120,14 @@ impl Interp<'_> {
         if self.s.feed_mode == FeedMode::InverseTime {
             return Err(self.err(self.loc.col, "Cannot probe in inverse time feed mode"));
         }
+        if self.s.feed_mode == FeedMode::UnitsPerRevolution {
+            return Err(self.err(self.loc.col, "Cannot probe with feed per rev mode"));
+        }
         if self.s.feed_rate == 0.0 {
             return Err(self.err(self.loc.col, "Cannot probe with zero feed rate"));
         }
         let end = self.find_ends(b);
-        if (3..6).any(|i| end[i] != self.s.pos[i]) {
-            return Err(self.err(self.loc.col, "Cannot move rotary axes during probing"));
-        }
+
         let kind = match m {
             382 => ProbeKind::TowardErr,
             383 => ProbeKind::Toward,
@@ -140,12 +141,24 @@ impl Interp<'_> {
             kind,
         })?;
         self.emit(CanonCmd::Probe { on: false })?;
-        // Without a machine the probe ends at the programmed end without tripping, as in rs274.
+        // Without a machine, rs274's canon reports the probe position as the programmed end
+        // and leaves the tool 0.01 inch short of it, back toward the start; the interpreter
+        // then continues from there. hytask reproduces that model.
         for (i, v) in end.iter().enumerate() {
             self.p.numbered[5061 + i] = *v;
         }
         self.p.numbered[5070] = 0.0;
-        self.s.pos = end;
+        let start = self.s.pos;
+        let d = [end[0] - start[0], end[1] - start[1], end[2] - start[2]];
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let mut stop = end;
+        if len > 0.0 {
+            let back = 0.01 * 25.4 / self.s.units.mm_per_unit();
+            for i in 0..3 {
+                stop[i] = end[i] - back * d[i] / len;
+            }
+        }
+        self.s.pos = stop;
         Ok(())
     }
 
@@ -168,6 +181,9 @@ impl Interp<'_> {
             self.s.g92[i] *= k;
         }
         for (i, v) in self.s.tool_offset.iter_mut().enumerate() {
+            *v *= lin9(i, k);
+        }
+        for (i, v) in self.s.tlo_at_motion.iter_mut().enumerate() {
             *v *= lin9(i, k);
         }
         // Stored offsets (parameters) stay in machine units, as in LinuxCNC.

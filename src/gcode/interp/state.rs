@@ -38,6 +38,10 @@ pub(crate) struct Settings {
     pub rotation: f64,
     /// Tool length offset X Y Z A B C U V W.
     pub tool_offset: Pose,
+    /// Tool length offset when the last move was sent to canon (see `Interp::synch`).
+    pub tlo_at_motion: Pose,
+    /// A tool change happened: re-read the position before the next block.
+    pub synch_pending: bool,
     /// G98 (true, back to the old Z) / G99 (R plane).
     pub retract_old_z: bool,
     /// G61/G61.1/G64.
@@ -109,6 +113,8 @@ impl Settings {
             g92: [0.0; 6],
             rotation: 0.0,
             tool_offset: [0.0; 9],
+            tlo_at_motion: [0.0; 9],
+            synch_pending: false,
             retract_old_z: true,
             control: MotionControl::Continuous { tolerance: 0.0 },
             naive_tol: 0.0,
