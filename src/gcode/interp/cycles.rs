@@ -115,7 +115,13 @@ impl Interp<'_> {
                 z,
             )
         } else {
-            let r = r_word + old_z;
+            // A sticky R (not on this block) is the R plane already computed, not added
+            // to the current height again (observed rs274 2.9 behaviour).
+            let r = if b.has(b'r') {
+                r_word + old_z
+            } else {
+                self.s.cycle_r_abs
+            };
             (
                 self.s.pos[ax.0],
                 self.s.pos[ax.1],
@@ -195,11 +201,13 @@ impl Interp<'_> {
                     if m == 890 {
                         self.emit(CanonCmd::Dwell(p))?;
                     }
-                    self.cycle_move(true, x, y, r)?;
-                    // rs274 2.9: G85 always ends with a rapid to the clearance height,
-                    // G89 only when it differs from R.
-                    if m == 850 || clear != r {
+                    // rs274 2.9: G85 feeds out to R then rapids to the clearance height;
+                    // G89 feeds out straight to the clearance height.
+                    if m == 850 {
+                        self.cycle_move(true, x, y, r)?;
                         self.cycle_move(false, x, y, clear)?;
+                    } else {
+                        self.cycle_move(true, x, y, clear)?;
                     }
                 }
                 840 => {
@@ -252,6 +260,7 @@ impl Interp<'_> {
         self.s.pos[ax.2] = clear;
         self.s.cycle_z = z;
         self.s.cycle_r = r_word;
+        self.s.cycle_r_abs = r;
         self.s.cycle_q = q;
         self.s.cycle_p = p;
         self.s.motion = m;

@@ -95,6 +95,7 @@ impl Interp<'_> {
                 self.s.tool = n;
                 self.s.tool_slot = slot;
                 self.load_tool_params(false);
+                self.s.synch_pending = true;
             }
         }
         // spindle

@@ -128,6 +128,12 @@ impl Interp<'_> {
         }
         let end = self.find_ends(b);
 
+        // The probe starts where canon last put the tool: a tool length offset applied
+        // since the last move has not moved it.
+        let mut start = self.s.pos;
+        for (i, v) in start.iter_mut().enumerate() {
+            *v += self.s.tool_offset[i] - self.s.tlo_at_motion[i];
+        }
         let kind = match m {
             382 => ProbeKind::TowardErr,
             383 => ProbeKind::Toward,
@@ -148,7 +154,6 @@ impl Interp<'_> {
             self.p.numbered[5061 + i] = *v;
         }
         self.p.numbered[5070] = 0.0;
-        let start = self.s.pos;
         let d = [end[0] - start[0], end[1] - start[1], end[2] - start[2]];
         let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let mut stop = end;
@@ -180,12 +185,8 @@ impl Interp<'_> {
             self.s.g5x[i] *= k;
             self.s.g92[i] *= k;
         }
-        for (i, v) in self.s.tool_offset.iter_mut().enumerate() {
-            *v *= lin9(i, k);
-        }
-        for (i, v) in self.s.tlo_at_motion.iter_mut().enumerate() {
-            *v *= lin9(i, k);
-        }
+        // LinuxCNC 2.9 keeps the tool length offset's number unchanged across G20/G21 (it
+        // is not converted until the next G43); hytask reproduces that.
         // Stored offsets (parameters) stay in machine units, as in LinuxCNC.
         Ok(())
     }
@@ -228,6 +229,8 @@ impl Interp<'_> {
                 }
             }
             431 => {
+                // Axes not named keep their current offset.
+                off = self.s.tool_offset;
                 for (i, &c) in AXES.iter().enumerate() {
                     if let Some(v) = b.get(c) {
                         off[i] = v;

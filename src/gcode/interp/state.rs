@@ -77,6 +77,8 @@ pub(crate) struct Settings {
     pub selected: Option<(u32, usize)>,
     /// Canned cycle: Z before the current series of contiguous cycles (G98 retracts to it).
     pub cycle_start_z: f64,
+    /// Canned cycle: the R plane height of the last cycle block (absolute).
+    pub cycle_r_abs: f64,
     /// Canned cycle: Z of the last cycle block (sticky).
     pub cycle_z: f64,
     /// Canned cycle: R of the last cycle block (sticky).
@@ -133,6 +135,7 @@ impl Settings {
             selected: None,
             cycle_start_z: 0.0,
             cycle_z: 0.0,
+            cycle_r_abs: 0.0,
             cycle_r: 0.0,
             cycle_q: 0.0,
             cycle_p: 0.0,
