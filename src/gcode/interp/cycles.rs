@@ -223,8 +223,13 @@ impl Interp<'_> {
                     self.cycle_move(true, x, y, clear)?;
                     self.emit(CanonCmd::StopSpindle)?;
                     self.emit(CanonCmd::StartSpindle(SpindleDir::Clockwise))?;
-                    self.emit(ov(OverrideKind::Feed, true))?;
-                    self.emit(ov(OverrideKind::Spindle, true))?;
+                    // Overrides come back only if they were on before the cycle.
+                    if self.s.feed_override {
+                        self.emit(ov(OverrideKind::Feed, true))?;
+                    }
+                    if self.s.speed_override {
+                        self.emit(ov(OverrideKind::Spindle, true))?;
+                    }
                 }
                 880 => {
                     // Boring, manual retract: stop, wait for the operator, restart.
