@@ -151,12 +151,23 @@ pub fn eval(e: &Expr, src: &dyn ParamSource) -> Result<f64, String> {
             let x = eval(x, src)?;
             Ok(y.atan2(x).to_degrees())
         }
-        Expr::Call(f, a) => call(*f, eval(a, src)?),
+        Expr::Call(f, a) => finite(call(*f, eval(a, src)?)?),
         Expr::Bin(op, a, b) => {
             let a = eval(a, src)?;
             let b = eval(b, src)?;
-            binary(*op, a, b)
+            finite(binary(*op, a, b)?)
         }
+    }
+}
+
+/// LinuxCNC refuses a calculation whose result is not a finite number.
+fn finite(v: f64) -> Result<f64, String> {
+    if v.is_nan() {
+        Err("Calculation resulted in 'not a number'".into())
+    } else if v.is_infinite() {
+        Err("Calculation resulted in 'infinity'".into())
+    } else {
+        Ok(v)
     }
 }
 
@@ -252,6 +263,30 @@ mod tests {
         assert_eq!(binary(BinOp::Ne, 1.0, 1.001), Ok(1.0));
         assert!(binary(BinOp::Div, 1.0, 0.0).is_err());
         assert!(binary(BinOp::Pow, -2.0, 0.5).is_err());
+    }
+
+    #[test]
+    fn non_finite_results_are_errors() {
+        struct NoParams;
+        impl ParamSource for NoParams {
+            fn numbered(&self, _: f64) -> Result<f64, String> {
+                Ok(0.0)
+            }
+            fn named(&self, _: &str) -> Option<f64> {
+                None
+            }
+        }
+        let e = Expr::Bin(
+            BinOp::Pow,
+            Box::new(Expr::Num(0.0)),
+            Box::new(Expr::Num(-1.0)),
+        );
+        assert_eq!(
+            eval(&e, &NoParams),
+            Err("Calculation resulted in 'infinity'".into())
+        );
+        let e = Expr::Call(Func::Exp, Box::new(Expr::Num(1e6)));
+        assert!(eval(&e, &NoParams).is_err());
     }
 
     #[test]

@@ -139,7 +139,7 @@ impl Interp<'_> {
         }
         // The preliminary rapid to the R plane and the retract height follow rs274 2.9
         // (observed behaviour, see tests/gcode/corpus/cycles_*.ngc).
-        let pre = if first { cur_z < r } else { start_z <= r };
+        let pre = if first { cur_z < r } else { start_z < r };
         if cur_z < r {
             old_z = if !first && self.s.retract_old_z {
                 start_z.max(r)
