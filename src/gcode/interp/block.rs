@@ -9,6 +9,17 @@ use crate::gcode::modal::Block;
 use crate::gcode::parser::Line;
 use crate::gcode::GcodeError;
 
+/// A `(DEBUG,…)` value: `%f`, `-0` shown as `0`, and `######` when it does not fit
+/// LinuxCNC's 29-character field.
+fn push_debug_value(out: &mut String, v: f64) {
+    let s = format!("{:.6}", v + 0.0);
+    if s.len() > 29 {
+        out.push_str("######");
+    } else {
+        out.push_str(&s);
+    }
+}
+
 /// Group-0 codes that consume axis words.
 fn g0_uses_axes(g: u16) -> bool {
     matches!(g, 100 | 280 | 300 | 520 | 920)
@@ -345,7 +356,7 @@ impl Interp<'_> {
                             .collect();
                         match ParamSource::named(self, &name) {
                             // LinuxCNC prints -0 as 0 here.
-                            Some(v) => out.push_str(&format!("{:.6}", v + 0.0)),
+                            Some(v) => push_debug_value(&mut out, v),
                             None => out.push_str("######"),
                         }
                         i += 2 + end + 1;
@@ -362,7 +373,7 @@ impl Interp<'_> {
                             .ok()
                             .and_then(|n| ParamSource::numbered(self, n).ok());
                         match v {
-                            Some(v) => out.push_str(&format!("{:.6}", v + 0.0)),
+                            Some(v) => push_debug_value(&mut out, v),
                             None => out.push_str("######"),
                         }
                         i += 1 + digits.len();

@@ -112,6 +112,16 @@ impl Interp<'_> {
                 let end = self
                     .find_next(f, l, &label, &[OKind::EndSub])
                     .ok_or_else(|| missing(self, "sub has no matching endsub"))?;
+                // rs274 evaluates the endsub value while skipping the definition.
+                if let Some(e) = self.files[f]
+                    .olines
+                    .get(&end)
+                    .and_then(|o| o.args.first().cloned())
+                {
+                    let v = expr::eval(&e, self).map_err(|m| self.err(o.col, m))?;
+                    self.s.value = v;
+                    self.s.value_returned = 1.0;
+                }
                 self.pc = (f, end + 1);
                 Ok(())
             }
@@ -240,7 +250,11 @@ impl Interp<'_> {
                 }
             }
             OKind::ElseIf | OKind::Else => {
-                // Reached by falling out of a taken branch: skip to endif.
+                // Reached by falling out of a taken branch: skip to endif. rs274 still
+                // evaluates an elseif condition here (its errors count).
+                if o.kind == OKind::ElseIf {
+                    self.cond(o)?;
+                }
                 let end = self
                     .find_next(f, l, &label, &[OKind::EndIf])
                     .ok_or_else(|| missing(self, "else/elseif has no matching endif"))?;
