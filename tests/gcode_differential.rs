@@ -212,3 +212,21 @@ fn goldens_are_stripped_consistently() {
     let s = strip("    7 N..... COMMENT(\"a\")\n   12 N10    G\n hi\n");
     assert_eq!(s, vec!["COMMENT(\"a\")", "G", " hi"]);
 }
+
+#[test]
+fn streaming_trace_equals_program_trace() {
+    // `trace_file` (the CLI's fast path) and `load_file` + `write_trace` must agree.
+    for p in programs() {
+        let direct = hytask::gcode::trace_file(&p, &options());
+        let via_program = load_file(&p, &options()).map(|prog| {
+            let mut s = Vec::new();
+            canon_fmt::write_trace(&mut s, &prog.canon);
+            s
+        });
+        match (direct, via_program) {
+            (Ok(a), Ok(b)) => assert!(a == b, "{}: traces differ", p.display()),
+            (Err(a), Err(b)) => assert_eq!(a, b),
+            (a, b) => panic!("{}: {:?} vs {:?}", p.display(), a.is_ok(), b.is_ok()),
+        }
+    }
+}

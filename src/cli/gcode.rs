@@ -1,7 +1,7 @@
 //! `hytask gcode`: G-code tools. `canon` prints the canonical trace in `rs274 -g` layout so
 //! it can be diffed against LinuxCNC; `check` only validates a program.
 
-use crate::gcode::{canon_fmt, load_file, InterpOptions, LengthUnits};
+use crate::gcode::{load_file, trace_file, InterpOptions, LengthUnits};
 use anyhow::Context as _;
 use std::io::Write as _;
 use std::path::PathBuf;
@@ -65,20 +65,12 @@ pub enum GcodeCommand {
 pub fn run(args: GcodeArgs) -> anyhow::Result<ExitCode> {
     match args.command {
         GcodeCommand::Canon(a) => {
-            let prog = load_file(&a.file, &a.options()?)?;
-            // Formatted and written in chunks: the trace of a long program is large.
+            // Formatted while interpreting; printed only once the whole program is valid.
+            let trace = trace_file(&a.file, &a.options()?)?;
             let stdout = std::io::stdout();
             let mut lock = stdout.lock();
-            let mut buf = Vec::with_capacity(1 << 17);
-            let mut seq = 0u64;
-            for chunk in prog.canon.chunks(1024) {
-                buf.clear();
-                seq = canon_fmt::write_trace_from(&mut buf, chunk, seq);
-                lock.write_all(&buf).context("writing the trace")?;
-            }
+            lock.write_all(&trace).context("writing the trace")?;
             lock.flush().context("writing the trace")?;
-            // The process ends here: skip freeing the program piece by piece.
-            std::mem::forget(prog);
             Ok(ExitCode::SUCCESS)
         }
         GcodeCommand::Check(a) => {

@@ -349,27 +349,33 @@ pub fn write_trace(out: &mut Vec<u8>, canon: &[Canon]) {
 /// number of calls already printed); returns the new count.
 pub fn write_trace_from(out: &mut Vec<u8>, canon: &[Canon], mut seq: u64) -> u64 {
     for c in canon {
-        if let CanonCmd::Print(m) = &c.cmd {
-            push_str(out, m);
-            out.push(b'\n');
-            continue;
-        }
-        let mark = out.len();
-        seq += 1;
-        let digits = seq.checked_ilog10().unwrap_or(0) + 1;
-        for _ in digits..5 {
-            out.push(b' ');
-        }
-        push_u64(out, seq);
-        push_str(out, " N..... ");
-        if push_call(out, &c.cmd) {
-            out.push(b'\n');
-        } else {
-            out.truncate(mark);
-            seq -= 1;
-        }
+        write_call(out, &c.cmd, &mut seq);
     }
     seq
+}
+
+/// Appends one command as a trace line (numbered `seq + 1` unless it is a bare `PRINT` line
+/// or prints nothing) and advances `seq`.
+pub fn write_call(out: &mut Vec<u8>, cmd: &CanonCmd, seq: &mut u64) {
+    if let CanonCmd::Print(m) = cmd {
+        push_str(out, m);
+        out.push(b'\n');
+        return;
+    }
+    let mark = out.len();
+    let n = *seq + 1;
+    let digits = n.checked_ilog10().unwrap_or(0) + 1;
+    for _ in digits..5 {
+        out.push(b' ');
+    }
+    push_u64(out, n);
+    push_str(out, " N..... ");
+    if push_call(out, cmd) {
+        out.push(b'\n');
+        *seq = n;
+    } else {
+        out.truncate(mark);
+    }
 }
 
 #[cfg(test)]

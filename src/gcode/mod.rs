@@ -130,6 +130,24 @@ pub struct GcodeError {
 
 /// Interprets a program file. Subroutine files are also searched in the program's directory.
 pub fn load_file(path: &Path, opts: &InterpOptions) -> Result<Program, GcodeError> {
+    let (name, text, o) = read_program(path, opts)?;
+    let canon = interp::interpret(&name, text, &o)?;
+    Ok(Program { canon })
+}
+
+/// Interprets a program file and returns its canonical trace in `rs274 -g` layout (see
+/// [`canon_fmt`]), formatting each command as it is produced instead of collecting a
+/// [`Program`]: the fast path of `hytask gcode canon`. Like [`load_file`], a program with
+/// an error yields only the error.
+pub fn trace_file(path: &Path, opts: &InterpOptions) -> Result<Vec<u8>, GcodeError> {
+    let (name, text, o) = read_program(path, opts)?;
+    interp::interpret_trace(&name, text, &o)
+}
+
+fn read_program(
+    path: &Path,
+    opts: &InterpOptions,
+) -> Result<(String, String, InterpOptions), GcodeError> {
     let text = std::fs::read(path).map_err(|e| GcodeError {
         file: path.display().to_string(),
         line: 1,
@@ -144,8 +162,7 @@ pub fn load_file(path: &Path, opts: &InterpOptions) -> Result<Program, GcodeErro
     if o.program_dir.is_none() {
         o.program_dir = path.parent().map(Path::to_path_buf);
     }
-    let canon = interp::interpret(&path.display().to_string(), text, &o)?;
-    Ok(Program { canon })
+    Ok((path.display().to_string(), text, o))
 }
 
 /// Interprets program text; `name` is used as the file name in locations and errors.

@@ -154,6 +154,20 @@ impl Source {
     }
 }
 
+/// Where emitted commands go: a program (the library API) or directly the rs274-format
+/// trace (`hytask gcode canon`, which then never holds the whole `Vec<Canon>`).
+pub(crate) enum Sink {
+    /// Collect the commands.
+    Canon(Vec<Canon>),
+    /// Format each command as it is emitted.
+    Trace {
+        /// The text so far.
+        buf: Vec<u8>,
+        /// Calls printed so far.
+        seq: u64,
+    },
+}
+
 /// A subroutine call in progress.
 #[derive(Debug)]
 pub(crate) struct Frame {
@@ -168,7 +182,9 @@ pub(crate) struct Frame {
 /// The interpreter.
 pub(crate) struct Interp<'a> {
     pub(crate) opts: &'a InterpOptions,
-    pub(crate) out: Vec<Canon>,
+    pub(crate) out: Sink,
+    /// Commands emitted so far.
+    count: usize,
     pub(crate) loc: SourceLoc,
     pub(crate) p: Params,
     pub(crate) s: Settings,
@@ -204,7 +220,8 @@ impl<'a> Interp<'a> {
         s.units = opts.initial_units;
         Ok(Interp {
             opts,
-            out: Vec::new(),
+            out: Sink::Canon(Vec::new()),
+            count: 0,
             loc: SourceLoc {
                 file: Arc::from(""),
                 line: 0,
@@ -228,7 +245,7 @@ impl<'a> Interp<'a> {
 
     /// Emits one canonical command at the current location.
     pub(crate) fn emit(&mut self, cmd: CanonCmd) -> Result<(), GcodeError> {
-        if self.out.len() >= self.opts.limits.max_canon {
+        if self.count >= self.opts.limits.max_canon {
             return Err(self.err(
                 1,
                 format!(
@@ -246,10 +263,14 @@ impl<'a> Interp<'a> {
         ) {
             self.s.tlo_at_motion = self.s.tool_offset;
         }
-        self.out.push(Canon {
-            loc: self.loc.clone(),
-            cmd,
-        });
+        self.count += 1;
+        match &mut self.out {
+            Sink::Canon(v) => v.push(Canon {
+                loc: self.loc.clone(),
+                cmd,
+            }),
+            Sink::Trace { buf, seq } => crate::gcode::canon_fmt::write_call(buf, &cmd, seq),
+        }
         Ok(())
     }
 
@@ -268,8 +289,11 @@ impl<'a> Interp<'a> {
         let name: Arc<str> = Arc::from(name);
         let src = Source::new(name.clone(), text, self.opts)?;
         // Most programs produce about one command per line.
-        self.out
-            .reserve((src.lines.len() + 32).min(self.opts.limits.max_canon));
+        let expect = (src.lines.len() + 32).min(self.opts.limits.max_canon);
+        match &mut self.out {
+            Sink::Canon(v) => v.reserve(expect),
+            Sink::Trace { buf, .. } => buf.reserve(expect * 64),
+        }
         self.files.push(src);
         self.loc = SourceLoc {
             file: name,
@@ -493,5 +517,26 @@ pub(crate) fn interpret(
 ) -> Result<Vec<Canon>, GcodeError> {
     let mut it = Interp::new(opts)?;
     it.run(name, text)?;
-    Ok(it.out)
+    match it.out {
+        Sink::Canon(v) => Ok(v),
+        Sink::Trace { .. } => Ok(Vec::new()),
+    }
+}
+
+/// Runs a whole program and returns its rs274-format trace (nothing on error).
+pub(crate) fn interpret_trace(
+    name: &str,
+    text: String,
+    opts: &InterpOptions,
+) -> Result<Vec<u8>, GcodeError> {
+    let mut it = Interp::new(opts)?;
+    it.out = Sink::Trace {
+        buf: Vec::new(),
+        seq: 0,
+    };
+    it.run(name, text)?;
+    match it.out {
+        Sink::Trace { buf, .. } => Ok(buf),
+        Sink::Canon(_) => Ok(Vec::new()),
+    }
 }
