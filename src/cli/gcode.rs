@@ -1,7 +1,7 @@
 //! `hytask gcode`: G-code tools. `canon` prints the canonical trace in `rs274 -g` layout so
 //! it can be diffed against LinuxCNC; `check` only validates a program.
 
-use crate::gcode::{canon_fmt, load_file, InterpOptions, LengthUnits};
+use crate::gcode::{load_file, trace_file, InterpOptions, LengthUnits};
 use anyhow::Context as _;
 use std::io::Write as _;
 use std::path::PathBuf;
@@ -65,13 +65,11 @@ pub enum GcodeCommand {
 pub fn run(args: GcodeArgs) -> anyhow::Result<ExitCode> {
     match args.command {
         GcodeCommand::Canon(a) => {
-            let prog = load_file(&a.file, &a.options()?)?;
-            let mut out = String::with_capacity(prog.canon.len() * 64);
-            canon_fmt::write_trace(&mut out, &prog.canon);
+            // Formatted while interpreting; printed only once the whole program is valid.
+            let trace = trace_file(&a.file, &a.options()?)?;
             let stdout = std::io::stdout();
             let mut lock = stdout.lock();
-            lock.write_all(out.as_bytes())
-                .context("writing the trace")?;
+            lock.write_all(&trace).context("writing the trace")?;
             lock.flush().context("writing the trace")?;
             Ok(ExitCode::SUCCESS)
         }

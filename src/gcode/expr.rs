@@ -149,14 +149,50 @@ pub fn eval(e: &Expr, src: &dyn ParamSource) -> Result<f64, String> {
         Expr::Atan(y, x) => {
             let y = eval(y, src)?;
             let x = eval(x, src)?;
-            Ok(y.atan2(x).to_degrees())
+            Ok(rad2deg(y.atan2(x)))
         }
-        Expr::Call(f, a) => call(*f, eval(a, src)?),
+        Expr::Call(f, a) => finite(call(*f, eval(a, src)?)?),
         Expr::Bin(op, a, b) => {
             let a = eval(a, src)?;
             let b = eval(b, src)?;
-            binary(*op, a, b)
+            finite(binary(*op, a, b)?)
         }
+    }
+}
+
+/// pi as a double-double (high part is `f64::consts::PI`).
+const PI_LO: f64 = 1.224_646_799_147_353_2e-16;
+
+/// `x * pi / 180` rounded once. LinuxCNC computes it in long double (`M_PIl`), so the
+/// double result is (almost always) the correctly rounded one; `f64::to_radians` is not,
+/// and the difference shows at tan(90°) and friends.
+pub fn deg2rad(x: f64) -> f64 {
+    use std::f64::consts::PI;
+    let p = x * PI;
+    let e = x.mul_add(PI, -p) + x * PI_LO;
+    let q = p / 180.0;
+    let rem = (-q).mul_add(180.0, p) + e;
+    q + rem / 180.0
+}
+
+/// `r * 180 / pi` rounded once (see [`deg2rad`]).
+pub fn rad2deg(r: f64) -> f64 {
+    use std::f64::consts::PI;
+    let t = r * 180.0;
+    let te = r.mul_add(180.0, -t);
+    let q = t / PI;
+    let rem = (-q).mul_add(PI, t) + te - q * PI_LO;
+    q + rem / PI
+}
+
+/// LinuxCNC refuses a calculation whose result is not a finite number.
+fn finite(v: f64) -> Result<f64, String> {
+    if v.is_nan() {
+        Err("Calculation resulted in 'not a number'".into())
+    } else if v.is_infinite() {
+        Err("Calculation resulted in 'infinity'".into())
+    } else {
+        Ok(v)
     }
 }
 
@@ -167,15 +203,15 @@ fn call(f: Func, v: f64) -> Result<f64, String> {
             if !(-1.0..=1.0).contains(&v) {
                 return Err("Argument to acos out of range".into());
             }
-            v.acos().to_degrees()
+            rad2deg(v.acos())
         }
         Func::Asin => {
             if !(-1.0..=1.0).contains(&v) {
                 return Err("Argument to asin out of range".into());
             }
-            v.asin().to_degrees()
+            rad2deg(v.asin())
         }
-        Func::Cos => v.to_radians().cos(),
+        Func::Cos => deg2rad(v).cos(),
         Func::Exp => v.exp(),
         Func::Fix => v.floor(),
         Func::Fup => v.ceil(),
@@ -186,17 +222,22 @@ fn call(f: Func, v: f64) -> Result<f64, String> {
             v.ln()
         }
         Func::Round => {
-            let r = v + if v < 0.0 { -0.5 } else { 0.5 };
-            r.trunc()
+            // LinuxCNC rounds through a C `int` cast: out of range gives INT_MIN on x86.
+            let r = (v + if v < 0.0 { -0.5 } else { 0.5 }).trunc();
+            if (-2_147_483_648.0..=2_147_483_647.0).contains(&r) {
+                r
+            } else {
+                -2_147_483_648.0
+            }
         }
-        Func::Sin => v.to_radians().sin(),
+        Func::Sin => deg2rad(v).sin(),
         Func::Sqrt => {
             if v < 0.0 {
                 return Err("Negative argument to sqrt".into());
             }
             v.sqrt()
         }
-        Func::Tan => v.to_radians().tan(),
+        Func::Tan => deg2rad(v).tan(),
     })
 }
 
@@ -252,6 +293,30 @@ mod tests {
         assert_eq!(binary(BinOp::Ne, 1.0, 1.001), Ok(1.0));
         assert!(binary(BinOp::Div, 1.0, 0.0).is_err());
         assert!(binary(BinOp::Pow, -2.0, 0.5).is_err());
+    }
+
+    #[test]
+    fn non_finite_results_are_errors() {
+        struct NoParams;
+        impl ParamSource for NoParams {
+            fn numbered(&self, _: f64) -> Result<f64, String> {
+                Ok(0.0)
+            }
+            fn named(&self, _: &str) -> Option<f64> {
+                None
+            }
+        }
+        let e = Expr::Bin(
+            BinOp::Pow,
+            Box::new(Expr::Num(0.0)),
+            Box::new(Expr::Num(-1.0)),
+        );
+        assert_eq!(
+            eval(&e, &NoParams),
+            Err("Calculation resulted in 'infinity'".into())
+        );
+        let e = Expr::Call(Func::Exp, Box::new(Expr::Num(1e6)));
+        assert!(eval(&e, &NoParams).is_err());
     }
 
     #[test]

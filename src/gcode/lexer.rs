@@ -60,6 +60,41 @@ impl<'a> Cursor<'a> {
         u32::try_from(self.pos + 1).unwrap_or(u32::MAX)
     }
 
+    /// 1-based column of the current position, without skipping blanks (after a `peek`).
+    pub fn col_here(&self) -> u32 {
+        u32::try_from(self.pos + 1).unwrap_or(u32::MAX)
+    }
+
+    /// Consumes one byte unconditionally (after a `peek` has shown it).
+    pub fn bump(&mut self) {
+        self.pos += 1;
+    }
+
+    /// Fast path for a word value: an optionally signed plain number. None (position
+    /// unchanged) when the value is anything else or needs the general reader.
+    pub fn signed_number_fast(&mut self) -> Option<f64> {
+        self.skip_blanks();
+        let save = self.pos;
+        let neg = match self.bytes.get(self.pos) {
+            Some(b'-') => {
+                self.pos += 1;
+                true
+            }
+            Some(b'+') => {
+                self.pos += 1;
+                false
+            }
+            _ => false,
+        };
+        match self.number_fast() {
+            Some(v) => Some(if neg { -v } else { v }),
+            None => {
+                self.pos = save;
+                None
+            }
+        }
+    }
+
     /// True when only blanks remain.
     pub fn at_end(&mut self) -> bool {
         self.peek().is_none()
@@ -84,6 +119,67 @@ impl<'a> Cursor<'a> {
     /// Reads an unsigned decimal number with blanks allowed between its characters
     /// (`1 2 . 5`). None when no digit was found.
     pub fn number(&mut self) -> Option<f64> {
+        if let Some(v) = self.number_fast() {
+            return Some(v);
+        }
+        self.number_general()
+    }
+
+    /// The common case, a number written without inner blanks and with few digits, read
+    /// straight from the bytes. None (position unchanged) hands over to the general reader.
+    fn number_fast(&mut self) -> Option<f64> {
+        self.skip_blanks();
+        let b = self.bytes;
+        let start = self.pos;
+        let mut i = start;
+        let mut m: u64 = 0;
+        let mut digits = 0u32;
+        while i < b.len() && b[i].is_ascii_digit() {
+            m = m * 10 + u64::from(b[i] - b'0');
+            digits += 1;
+            i += 1;
+            if digits > 15 {
+                return None;
+            }
+        }
+        let mut frac_digits = 0u32;
+        if i < b.len() && b[i] == b'.' {
+            i += 1;
+            while i < b.len() && b[i].is_ascii_digit() {
+                m = m * 10 + u64::from(b[i] - b'0');
+                digits += 1;
+                frac_digits += 1;
+                i += 1;
+                if digits > 15 {
+                    return None;
+                }
+            }
+        }
+        if digits == 0 {
+            return None;
+        }
+        // A blank followed by more of the number needs the general reader.
+        let mut j = i;
+        while j < b.len() && (b[j] == b' ' || b[j] == b'\t' || b[j] == b'\r') {
+            j += 1;
+        }
+        if j > i && j < b.len() && (b[j].is_ascii_digit() || b[j] == b'.') {
+            return None;
+        }
+        self.pos = i;
+        const POW10: [f64; 16] = [
+            1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+        ];
+        // m < 10^16 < 2^53·2: m is exact when < 2^53, and one division by an exact power of
+        // ten rounds correctly, as strtod does.
+        if m >= (1u64 << 53) {
+            self.pos = start;
+            return None;
+        }
+        Some(m as f64 / POW10[frac_digits as usize])
+    }
+
+    fn number_general(&mut self) -> Option<f64> {
         let mut int: u64 = 0;
         let mut digits = 0usize;
         let mut big = false;

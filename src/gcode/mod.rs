@@ -6,6 +6,20 @@
 //! checked [`modal::Block`]) → `interp` (modal state, execution order, O-word flow) →
 //! [`canon`] commands. [`canon_fmt`] prints them in `rs274 -g` layout for differential
 //! testing against LinuxCNC.
+//!
+//! Conformance is measured, not assumed: `tests/gcode_differential.rs` diffs every program
+//! of `tests/gcode/corpus/` against LinuxCNC's `rs274` (stored goldens and, when installed,
+//! live), and `tests/gcode/DIFFERENCES.md` lists what differs on purpose.
+//!
+//! # How to add a G or M code
+//! 1. Give it its modal group in [`modal::g_group`]/[`modal::m_group`] (LinuxCNC's table).
+//! 2. Execute it at its place in LinuxCNC's order of execution: `interp/block.rs` calls the
+//!    steps in order; motion lives in `interp/motion.rs`, arcs in `arcs.rs`, canned cycles in
+//!    `cycles.rs`, M codes in `mcodes.rs`. Let the words it uses through `check_block`.
+//! 3. If rs274 prints a canon call hytask does not have, add a [`CanonCmd`] variant and its
+//!    text in [`canon_fmt::push_call`].
+//! 4. Add a corpus program (and an `err_*.ngc` for what it must reject), run
+//!    `tests/gcode/regen-golden.sh`, and make `cargo test --test gcode_differential` pass.
 
 pub mod canon;
 pub mod canon_fmt;
@@ -116,19 +130,39 @@ pub struct GcodeError {
 
 /// Interprets a program file. Subroutine files are also searched in the program's directory.
 pub fn load_file(path: &Path, opts: &InterpOptions) -> Result<Program, GcodeError> {
+    let (name, text, o) = read_program(path, opts)?;
+    let canon = interp::interpret(&name, text, &o)?;
+    Ok(Program { canon })
+}
+
+/// Interprets a program file and returns its canonical trace in `rs274 -g` layout (see
+/// [`canon_fmt`]), formatting each command as it is produced instead of collecting a
+/// [`Program`]: the fast path of `hytask gcode canon`. Like [`load_file`], a program with
+/// an error yields only the error.
+pub fn trace_file(path: &Path, opts: &InterpOptions) -> Result<Vec<u8>, GcodeError> {
+    let (name, text, o) = read_program(path, opts)?;
+    interp::interpret_trace(&name, text, &o)
+}
+
+fn read_program(
+    path: &Path,
+    opts: &InterpOptions,
+) -> Result<(String, String, InterpOptions), GcodeError> {
     let text = std::fs::read(path).map_err(|e| GcodeError {
         file: path.display().to_string(),
         line: 1,
         col: 1,
         message: format!("Unable to open file: {e}"),
     })?;
-    let text = String::from_utf8_lossy(&text).into_owned();
+    let text = match String::from_utf8(text) {
+        Ok(t) => t,
+        Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
+    };
     let mut o = opts.clone();
     if o.program_dir.is_none() {
         o.program_dir = path.parent().map(Path::to_path_buf);
     }
-    let canon = interp::interpret(&path.display().to_string(), text, &o)?;
-    Ok(Program { canon })
+    Ok((path.display().to_string(), text, o))
 }
 
 /// Interprets program text; `name` is used as the file name in locations and errors.

@@ -8,6 +8,9 @@
 use super::expr::{BinOp, Expr, Func};
 use super::lexer::Cursor;
 
+/// Most operands in one bracketed expression.
+const MAX_OPERANDS: usize = 256;
+
 /// A syntax error: column and message.
 pub type ParseError = (u32, String);
 
@@ -139,11 +142,24 @@ pub struct Line {
 
 /// Parses one line (without its terminator). `max_depth` bounds expression nesting.
 pub fn parse_line(text: &str, max_depth: usize) -> Result<Line, ParseError> {
+    let mut line = Line::default();
+    parse_line_into(text, max_depth, &mut line)?;
+    Ok(line)
+}
+
+/// Like [`parse_line`], reusing `line`'s buffers (the interpreter's hot path parses every
+/// line into the same scratch `Line`, so plain blocks cost no allocation).
+pub fn parse_line_into(text: &str, max_depth: usize, line: &mut Line) -> Result<(), ParseError> {
+    line.block_delete = false;
+    line.o = None;
+    line.words.clear();
+    line.assigns.clear();
+    line.comments.clear();
     let mut p = Parser {
         c: Cursor::new(text),
         max_depth,
     };
-    p.line()
+    p.line(line)
 }
 
 /// Cheap test used when indexing a file: does this line hold an O-word statement?
@@ -166,8 +182,7 @@ fn err<T>(col: u32, msg: impl Into<String>) -> Result<T, ParseError> {
 }
 
 impl Parser<'_> {
-    fn line(&mut self) -> Result<Line, ParseError> {
-        let mut line = Line::default();
+    fn line(&mut self, line: &mut Line) -> Result<(), ParseError> {
         if self.c.eat(b'/') {
             line.block_delete = true;
         }
@@ -181,9 +196,8 @@ impl Parser<'_> {
         if self.c.peek() == Some(b'o') {
             line.o = Some(self.ostmt()?);
         }
-        loop {
-            let col = self.c.col();
-            let Some(ch) = self.c.peek() else { break };
+        while let Some(ch) = self.c.peek() {
+            let col = self.c.col_here();
             match ch {
                 b'(' => {
                     self.c.next_char();
@@ -222,8 +236,11 @@ impl Parser<'_> {
                     line.assigns.push(Assign { target, value, col });
                 }
                 b'a'..=b'm' | b'p'..=b't' | b'x'..=b'z' => {
-                    self.c.next_char();
-                    let value = self.value(0)?;
+                    self.c.bump();
+                    let value = match self.c.signed_number_fast() {
+                        Some(v) => Expr::Num(v),
+                        None => self.value(0)?,
+                    };
                     line.words.push(Word {
                         letter: ch,
                         value,
@@ -238,7 +255,7 @@ impl Parser<'_> {
                 }
             }
         }
-        Ok(line)
+        Ok(())
     }
 
     fn name(&mut self, col: u32) -> Result<Box<str>, ParseError> {
@@ -440,6 +457,7 @@ impl Parser<'_> {
         }
         let mut vals = vec![self.value(depth + 1)?];
         let mut ops: Vec<BinOp> = Vec::new();
+        let mut n_ops = 0usize;
         while let Some(op) = self.binop()? {
             while let Some(&top) = ops.last() {
                 if top.precedence() >= op.precedence() {
@@ -450,13 +468,13 @@ impl Parser<'_> {
             }
             ops.push(op);
             vals.push(self.value(depth + 1)?);
-            if ops.len() > self.max_depth {
+            // Left-associative chains build trees as deep as they are long; bound them so
+            // evaluation cannot exhaust the stack.
+            n_ops += 1;
+            if ops.len() > self.max_depth || n_ops >= MAX_OPERANDS {
                 return err(
                     col,
-                    format!(
-                        "Expression too long (limit {} operators pending)",
-                        self.max_depth
-                    ),
+                    format!("Expression too long (limit {MAX_OPERANDS} operands)"),
                 );
             }
         }

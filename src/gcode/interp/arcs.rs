@@ -92,7 +92,8 @@ impl Interp<'_> {
                 "K word given for arc in XY plane",
             ),
         };
-        if !b.has(words.0) && !b.has(words.1) {
+        // LinuxCNC 2.9 accepts an arc with only the helix axis (a full-circle helix).
+        if !b.has(words.0) && !b.has(words.1) && !b.has_axis() {
             return Err(self.err(col, msg_missing));
         }
         if b.has(forbidden) {
@@ -235,19 +236,23 @@ fn arc_data_ijk(
     let radius = (center_x - cur.0).hypot(center_y - cur.1);
     let radius2 = (center_x - end.0).hypot(center_y - end.1);
     let (a, bn) = names;
-    let where_ = format!(
-        "start=({a}{:.4},{bn}{:.4}) center=({a}{:.4},{bn}{:.4}) end=({a}{:.4},{bn}{:.4}) r1={:.4} r2={:.4}",
-        cur.0, cur.1, center_x, center_y, end.0, end.1, radius, radius2
-    );
+    // Built only on error: arcs are on the hot path.
+    let where_ = || {
+        format!(
+            "start=({a}{:.4},{bn}{:.4}) center=({a}{:.4},{bn}{:.4}) end=({a}{:.4},{bn}{:.4}) r1={:.4} r2={:.4}",
+            cur.0, cur.1, center_x, center_y, end.0, end.1, radius, radius2
+        )
+    };
     if radius < radius_tol || radius2 < radius_tol {
-        return Err(format!("Zero-radius arc: {where_}"));
+        return Err(format!("Zero-radius arc: {}", where_()));
     }
     let abs_err = (radius - radius2).abs();
     let rel_err = abs_err / radius.max(radius2);
     if abs_err > spiral_abs * 100.0 || (rel_err > SPIRAL_RELATIVE_TOLERANCE && abs_err > spiral_abs)
     {
         return Err(format!(
-            "Radius to end of arc differs from radius to start: {where_} abs_err={abs_err:.4e} rel_err={:.4}%",
+            "Radius to end of arc differs from radius to start: {} abs_err={abs_err:.4e} rel_err={:.4}%",
+            where_(),
             rel_err * 100.0
         ));
     }

@@ -9,6 +9,17 @@ use crate::gcode::modal::Block;
 use crate::gcode::parser::Line;
 use crate::gcode::GcodeError;
 
+/// A `(DEBUG,…)` value: `%f`, `-0` shown as `0`, and `######` when it does not fit
+/// LinuxCNC's 29-character field.
+fn push_debug_value(out: &mut String, v: f64) {
+    let s = format!("{:.6}", v + 0.0);
+    if s.len() > 29 {
+        out.push_str("######");
+    } else {
+        out.push_str(&s);
+    }
+}
+
 /// Group-0 codes that consume axis words.
 fn g0_uses_axes(g: u16) -> bool {
     matches!(g, 100 | 280 | 300 | 520 | 920)
@@ -218,12 +229,6 @@ impl Interp<'_> {
                     ));
                 }
             }
-            if g == 520 {
-                return Err(self.err(
-                    b.g[0].map(|x| x.1).unwrap_or(1),
-                    "G52 is not supported by hytask; use G92 or G10 L2",
-                ));
-            }
         }
         if axis && !g0.is_some_and(g0_uses_axes) && b.gcode(8) != Some(431) {
             match g1 {
@@ -244,7 +249,26 @@ impl Interp<'_> {
         let cycle = matches!(g1, Some(730 | 810..=890));
         let g10 = g0 == Some(100);
         let user_m = b.m[10].is_some();
-        let mut checks: Vec<(u8, bool, &str)> = vec![
+        if !b"ijkredhpql".iter().any(|&c| b.has(c)) {
+            return Ok(());
+        }
+        let p_ok = arc
+            || g0 == Some(40)
+            || g10
+            || b.gcode(13) == Some(640)
+            || matches!(motion, 820 | 840 | 860 | 880 | 890) && (cycle || axis)
+            || matches!(b.mcode(9), Some(50..=53))
+            || matches!(b.mcode(5), Some(62..=66))
+            || user_m;
+        let q_ok = g10
+            || b.gcode(13) == Some(640)
+            || matches!(motion, 730 | 830) && (cycle || axis)
+            || matches!(b.mcode(5), Some(66..=68))
+            || b.mcode(6) == Some(61)
+            || user_m;
+        let l_ok =
+            g10 || cycle || (matches!(motion, 730 | 810..=890) && axis) || b.mcode(5) == Some(66);
+        let checks: [(u8, bool, &str); 10] = [
             (
                 b'i',
                 arc || g10 || motion == 870,
@@ -272,7 +296,7 @@ impl Interp<'_> {
             ),
             (
                 b'd',
-                b.gcode(14) == Some(960),
+                b.gcode(14) == Some(960) || matches!(b.gcode(7), Some(410 | 411 | 420 | 421)),
                 "D word with no G41, G41.1, G42, G42.1 or G96 to use it",
             ),
             (
@@ -280,30 +304,14 @@ impl Interp<'_> {
                 b.gcode(8) == Some(430) || g10,
                 "H word with no G43 or G43.2 to use it",
             ),
+            (b'p', p_ok, "P word with no G2 G3 G4 G10 G64 G5 G5.2 G76 G82 G86 G88 G89 or M50 M51 M52 M53 M62 M63 M64 M65 M66 M98 or user M code to use it"),
+            (
+                b'q',
+                q_ok,
+                "Q word with no G5, G10, G64, G73, G83, M66, M67, M68, M61 or user M code that uses it",
+            ),
+            (b'l', l_ok, "L word with no G10, cycle, or M66 to use it"),
         ];
-        let p_ok = arc
-            || g0 == Some(40)
-            || g10
-            || b.gcode(13) == Some(640)
-            || matches!(motion, 820 | 860 | 880 | 890) && (cycle || axis)
-            || matches!(b.mcode(9), Some(50..=53))
-            || matches!(b.mcode(5), Some(62..=66))
-            || user_m;
-        checks.push((b'p', p_ok, "P word with no G2 G3 G4 G10 G64 G5 G5.2 G76 G82 G86 G88 G89 or M50 M51 M52 M53 M62 M63 M64 M65 M66 M98 or user M code to use it"));
-        let q_ok = g10
-            || b.gcode(13) == Some(640)
-            || matches!(motion, 730 | 830) && (cycle || axis)
-            || matches!(b.mcode(5), Some(66..=68))
-            || b.mcode(6) == Some(61)
-            || user_m;
-        checks.push((
-            b'q',
-            q_ok,
-            "Q word with no G5, G10, G64, G73, G83, M66, M67, M68, M61 or user M code that uses it",
-        ));
-        let l_ok =
-            g10 || cycle || (matches!(motion, 730 | 810..=890) && axis) || b.mcode(5) == Some(66);
-        checks.push((b'l', l_ok, "L word with no G10, cycle, or M66 to use it"));
         for (c, ok, msg) in checks {
             if b.has(c) && !ok {
                 return Err(self.err(col(c), msg));
@@ -347,7 +355,8 @@ impl Interp<'_> {
                             .map(|c| c.to_ascii_lowercase())
                             .collect();
                         match ParamSource::named(self, &name) {
-                            Some(v) => out.push_str(&format!("{v:.6}")),
+                            // LinuxCNC prints -0 as 0 here.
+                            Some(v) => push_debug_value(&mut out, v),
                             None => out.push_str("######"),
                         }
                         i += 2 + end + 1;
@@ -364,7 +373,7 @@ impl Interp<'_> {
                             .ok()
                             .and_then(|n| ParamSource::numbered(self, n).ok());
                         match v {
-                            Some(v) => out.push_str(&format!("{v:.6}")),
+                            Some(v) => push_debug_value(&mut out, v),
                             None => out.push_str("######"),
                         }
                         i += 1 + digits.len();
@@ -431,11 +440,9 @@ impl Interp<'_> {
                 self.emit(CanonCmd::SetMotionControl(MotionControl::ExactStop))
             }
             _ => {
-                let p = b.get(b'p').unwrap_or(0.0);
-                let q = b.get(b'q').unwrap_or(p);
-                if p < 0.0 || q < 0.0 {
-                    return Err(self.err(self.loc.col, "G64 P and Q must not be negative"));
-                }
+                // LinuxCNC treats negative tolerances as 0 (no tolerance).
+                let p = b.get(b'p').unwrap_or(0.0).max(0.0);
+                let q = b.get(b'q').unwrap_or(p).max(0.0);
                 self.s.control = MotionControl::Continuous { tolerance: p };
                 self.s.naive_tol = q;
                 self.emit(CanonCmd::SetMotionControl(self.s.control))?;

@@ -1,4 +1,5 @@
-//! Canned cycles in the XY plane: G73, G81, G82, G83, G85, G86, G89 with G98/G99 retract,
+//! Canned cycles in the XY, XZ and YZ planes (drilling along Z, Y and X): G73, G81–G86,
+//! G88, G89 with G98/G99 retract,
 //! sticky R/Z/Q/P values, L repeats and incremental mode, generated exactly as LinuxCNC's
 //! `convert_cycle_xy` does (including its switch to exact-path mode around the cycle).
 
@@ -9,11 +10,14 @@ use crate::gcode::modal::Block;
 use crate::gcode::GcodeError;
 
 impl Interp<'_> {
+    /// A cycle move to plane coordinates (`x`, `y`) and drilling-axis height `z`, mapped to
+    /// the real axes by `ax` (indices of the plane's first, second and normal axis).
     fn cycle_move(&mut self, feed: bool, x: f64, y: f64, z: f64) -> Result<(), GcodeError> {
+        let ax = self.cycle_axes;
         let mut p = self.s.pos;
-        p[0] = x;
-        p[1] = y;
-        p[2] = z;
+        p[ax.0] = x;
+        p[ax.1] = y;
+        p[ax.2] = z;
         self.s.pos = p;
         let pose = pose6(&p);
         self.emit(if feed {
@@ -25,20 +29,33 @@ impl Interp<'_> {
 
     pub(super) fn cycle(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
         let col = self.loc.col;
-        if self.s.plane != Plane::Xy {
-            return Err(self.err(
-                col,
-                "Canned cycles are supported in the XY plane (G17) only by hytask",
-            ));
-        }
+        // LinuxCNC convert_cycle_xy / _zx / _yz: (first, second, drilling) axes.
+        let (ax, letters, plane_name): ((usize, usize, usize), [u8; 3], &str) = match self.s.plane {
+            Plane::Xy => ((0, 1, 2), *b"xyz", "XY"),
+            Plane::Xz => ((2, 0, 1), *b"zxy", "XZ"),
+            Plane::Yz => ((1, 2, 0), *b"yzx", "YZ"),
+            _ => {
+                return Err(self.err(
+                    col,
+                    "Canned cycles are not supported in the UVW planes by hytask",
+                ))
+            }
+        };
+        self.cycle_axes = ax;
+        let depth_name = (letters[2] as char).to_ascii_uppercase();
         if b.has(b'a') || b.has(b'b') || b.has(b'c') {
             return Err(self.err(col, "Cannot put an A, B, or C in a canned cycle"));
         }
         let same = self.s.motion == m;
-        let z = match b.get(b'z') {
+        let z = match b.get(letters[2]) {
             Some(z) => z,
             None if same => self.s.cycle_z,
-            None => return Err(self.err(col, "Z value unspecified in canned cycle")),
+            None => {
+                return Err(self.err(
+                    col,
+                    format!("{depth_name} value unspecified in canned cycle"),
+                ))
+            }
         };
         let r_word = match b.get(b'r') {
             Some(r) => r,
@@ -61,6 +78,9 @@ impl Interp<'_> {
         if matches!(m, 730 | 830) && q <= 0.0 {
             return Err(self.err(col, "Q word missing or not positive with G73 or G83"));
         }
+        if matches!(m, 820 | 860 | 880 | 890) && !b.has(b'p') && !same {
+            return Err(self.err(col, format!("Dwell time p word missing with g{}", m / 10)));
+        }
         let p = b.get(b'p').unwrap_or(self.s.cycle_p);
         if p < 0.0 {
             return Err(self.err(b.col_of(b'p'), "Negative dwell time with canned cycle"));
@@ -71,36 +91,72 @@ impl Interp<'_> {
         if m == 860 && self.s.spindle == 0 {
             return Err(self.err(col, "Spindle not turning in G86"));
         }
-        let mut old_z = self.s.pos[2];
+        if m == 840 && self.s.spindle != 1 {
+            return Err(self.err(col, "Spindle not turning clockwise in G84"));
+        }
+        if m == 880 && self.s.spindle == 0 {
+            return Err(self.err(col, "Spindle not turning in G88"));
+        }
+        // A series of contiguous cycles remembers the Z it started from (G98's "old Z").
+        let first = !matches!(self.s.motion, 730 | 810..=890);
+        let cur_z = self.s.pos[ax.2];
+        if first {
+            self.s.cycle_start_z = cur_z;
+        }
+        let start_z = self.s.cycle_start_z;
+        let mut old_z = cur_z;
         let (mut x, mut y, dx, dy, r, bottom) = if self.s.absolute {
             (
-                b.get(b'x').unwrap_or(self.s.pos[0]),
-                b.get(b'y').unwrap_or(self.s.pos[1]),
+                b.get(letters[0]).unwrap_or(self.s.pos[ax.0]),
+                b.get(letters[1]).unwrap_or(self.s.pos[ax.1]),
                 0.0,
                 0.0,
                 r_word,
                 z,
             )
         } else {
-            let r = r_word + old_z;
+            // A sticky R (not on this block) is the R plane already computed, not added
+            // to the current height again (observed rs274 2.9 behaviour).
+            let r = if b.has(b'r') {
+                r_word + old_z
+            } else {
+                self.s.cycle_r_abs
+            };
             (
-                self.s.pos[0],
-                self.s.pos[1],
-                b.get(b'x').unwrap_or(0.0),
-                b.get(b'y').unwrap_or(0.0),
+                self.s.pos[ax.0],
+                self.s.pos[ax.1],
+                b.get(letters[0]).unwrap_or(0.0),
+                b.get(letters[1]).unwrap_or(0.0),
                 r,
                 r + z,
             )
         };
         if r < bottom {
-            return Err(self.err(col, "R less than Z in cycle in XY plane"));
+            return Err(self.err(
+                col,
+                format!("R less than {depth_name} in cycle in {plane_name} plane"),
+            ));
         }
-        if old_z < r {
-            old_z = r;
+        // The preliminary rapid to the R plane and the retract height follow rs274 2.9
+        // (observed behaviour, see tests/gcode/corpus/cycles_*.ngc).
+        let pre = if first { cur_z < r } else { start_z < r };
+        if cur_z < r {
+            old_z = if !first && self.s.retract_old_z {
+                start_z.max(r)
+            } else {
+                r
+            };
         }
-        let (cx, cy) = (self.s.pos[0], self.s.pos[1]);
-        self.cycle_move(false, cx, cy, old_z)?;
-        let clear = if self.s.retract_old_z { old_z } else { r };
+        if pre {
+            let (cx, cy) = (self.s.pos[ax.0], self.s.pos[ax.1]);
+            self.cycle_move(false, cx, cy, r)?;
+        }
+        let clear = if self.s.retract_old_z {
+            start_z.max(r)
+        } else {
+            r
+        };
+
         let saved = self.s.control;
         if saved != MotionControl::ExactPath {
             self.emit(CanonCmd::SetMotionControl(MotionControl::ExactPath))?;
@@ -145,10 +201,48 @@ impl Interp<'_> {
                     if m == 890 {
                         self.emit(CanonCmd::Dwell(p))?;
                     }
-                    self.cycle_move(true, x, y, r)?;
-                    if clear != r {
+                    // rs274 2.9: G85 feeds out to R then rapids to the clearance height;
+                    // G89 feeds out straight to the clearance height.
+                    if m == 850 {
+                        self.cycle_move(true, x, y, r)?;
                         self.cycle_move(false, x, y, clear)?;
+                    } else {
+                        self.cycle_move(true, x, y, clear)?;
                     }
+                }
+                840 => {
+                    // Right-hand tapping: overrides off, reverse at the bottom, feed out.
+                    let ov = |which, on| CanonCmd::OverrideEnable { which, on };
+                    use crate::gcode::canon::{OverrideKind, SpindleDir};
+                    self.emit(ov(OverrideKind::Feed, false))?;
+                    self.emit(ov(OverrideKind::Spindle, false))?;
+                    self.cycle_move(true, x, y, bottom)?;
+                    self.emit(CanonCmd::StopSpindle)?;
+                    self.emit(CanonCmd::StartSpindle(SpindleDir::CounterClockwise))?;
+                    self.emit(CanonCmd::Dwell(p))?;
+                    self.cycle_move(true, x, y, clear)?;
+                    self.emit(CanonCmd::StopSpindle)?;
+                    self.emit(CanonCmd::StartSpindle(SpindleDir::Clockwise))?;
+                    // Overrides come back only if they were on before the cycle.
+                    if self.s.feed_override {
+                        self.emit(ov(OverrideKind::Feed, true))?;
+                    }
+                    if self.s.speed_override {
+                        self.emit(ov(OverrideKind::Spindle, true))?;
+                    }
+                }
+                880 => {
+                    // Boring, manual retract: stop, wait for the operator, restart.
+                    self.cycle_move(true, x, y, bottom)?;
+                    self.emit(CanonCmd::Dwell(p))?;
+                    self.emit(CanonCmd::StopSpindle)?;
+                    self.emit(CanonCmd::ProgramStop)?;
+                    let dir = if self.s.spindle > 0 {
+                        crate::gcode::canon::SpindleDir::Clockwise
+                    } else {
+                        crate::gcode::canon::SpindleDir::CounterClockwise
+                    };
+                    self.emit(CanonCmd::StartSpindle(dir))?;
                 }
                 _ => {
                     // G86
@@ -166,19 +260,19 @@ impl Interp<'_> {
             }
             old_z = clear;
         }
-        self.s.pos[0] = x;
-        self.s.pos[1] = y;
-        self.s.pos[2] = clear;
+        self.s.pos[ax.0] = x;
+        self.s.pos[ax.1] = y;
+        self.s.pos[ax.2] = clear;
         self.s.cycle_z = z;
         self.s.cycle_r = r_word;
+        self.s.cycle_r_abs = r;
         self.s.cycle_q = q;
         self.s.cycle_p = p;
         self.s.motion = m;
         if saved != MotionControl::ExactPath {
+            // rs274 restores the mode and then the naive-CAM tolerance, whatever the mode.
             self.emit(CanonCmd::SetMotionControl(saved))?;
-            if matches!(saved, MotionControl::Continuous { .. }) {
-                self.emit(CanonCmd::SetNaivecamTolerance(self.s.naive_tol))?;
-            }
+            self.emit(CanonCmd::SetNaivecamTolerance(self.s.naive_tol))?;
         }
         Ok(())
     }

@@ -40,15 +40,17 @@ impl Interp<'_> {
         self.emit(CanonCmd::SelectTool(n))
     }
 
-    fn load_tool_params(&mut self) {
+    fn load_tool_params(&mut self, copy_to_spindle: bool) {
+        // Tool parameters are in machine units, as the table.
         self.p.numbered[params::TOOL_NUMBER] = f64::from(self.s.tool);
-        let k = self.s.machine_units.mm_per_unit() / self.s.units.mm_per_unit();
         let t = self.tools.at_slot(self.s.tool_slot).cloned();
         for i in 0..9 {
-            self.p.numbered[params::TOOL_BASE + i] =
-                t.as_ref().map(|t| t.offset[i] * k).unwrap_or(0.0);
+            self.p.numbered[params::TOOL_BASE + i] = t.as_ref().map(|t| t.offset[i]).unwrap_or(0.0);
         }
-        self.p.numbered[params::TOOL_BASE + 9] = t.as_ref().map(|t| t.diameter * k).unwrap_or(0.0);
+        self.p.numbered[params::TOOL_BASE + 9] = t.as_ref().map(|t| t.diameter).unwrap_or(0.0);
+        if copy_to_spindle {
+            self.s.spindle_tool = t;
+        }
     }
 
     pub(super) fn exec_mcodes_before_motion(&mut self, b: &Block) -> Result<(), GcodeError> {
@@ -61,9 +63,8 @@ impl Interp<'_> {
         if let Some((m, col)) = b.m[6] {
             self.loc.col = col;
             if m == 6 {
-                let Some((n, slot)) = self.s.selected else {
-                    return Err(self.err(col, "M6 with no tool prepared (no T word before it)"));
-                };
+                // Without a T word LinuxCNC changes to the empty slot 0.
+                let (n, slot) = self.s.selected.unwrap_or((0, 0));
                 self.emit(CanonCmd::StartChange)?;
                 self.emit(CanonCmd::StopSpindle)?;
                 self.s.spindle = 0;
@@ -72,7 +73,8 @@ impl Interp<'_> {
                 ))?;
                 self.s.tool = n;
                 self.s.tool_slot = slot;
-                self.load_tool_params();
+                self.load_tool_params(true);
+                self.s.synch_pending = true;
             } else {
                 let q = b
                     .get(b'q')
@@ -92,7 +94,8 @@ impl Interp<'_> {
                 ))?;
                 self.s.tool = n;
                 self.s.tool_slot = slot;
-                self.load_tool_params();
+                self.load_tool_params(false);
+                self.s.synch_pending = true;
             }
         }
         // spindle
@@ -243,9 +246,8 @@ impl Interp<'_> {
                     .get(b'e')
                     .and_then(int_word)
                     .ok_or_else(|| self.err(col, "Invalid or missing E word with M67/M68"))?;
-                let q = b
-                    .get(b'q')
-                    .ok_or_else(|| self.err(col, "Q word missing with M67/M68"))?;
+                // LinuxCNC's default for a missing Q word is -1.
+                let q = b.get(b'q').unwrap_or(-1.0);
                 self.emit(CanonCmd::AnalogOutput {
                     index: e,
                     value: q,
@@ -261,8 +263,12 @@ impl Interp<'_> {
             70 | 73 => {
                 let mut snap = self.s.clone();
                 snap.saved = Vec::new();
+                snap.auto_restore = Vec::new();
                 if let Some(slot) = self.s.saved.get_mut(level) {
                     *slot = Some(Box::new(snap));
+                }
+                if let Some(a) = self.s.auto_restore.get_mut(level) {
+                    *a = m == 73;
                 }
                 Ok(())
             }
@@ -275,7 +281,7 @@ impl Interp<'_> {
             _ => {
                 let snap = self.s.saved.get(level).cloned().flatten();
                 match snap {
-                    Some(s) => self.restore_modal(&s),
+                    Some(s) => self.restore_modal(&s, false),
                     None => Err(self.err(
                         self.loc.col,
                         "Cannot restore context from invalid stack frame - missing M70/M73?",
@@ -285,10 +291,17 @@ impl Interp<'_> {
         }
     }
 
-    /// Restores the modal state saved by M70/M73, reporting each change to canon.
-    pub(super) fn restore_modal(&mut self, s: &super::Settings) -> Result<(), GcodeError> {
+    /// Restores the modal state saved by M70/M73, reporting each change to canon. rs274
+    /// reports coolant before the distance mode when M73 restores on return, after it for
+    /// M72 (`coolant_first`).
+    pub(super) fn restore_modal(
+        &mut self,
+        s: &super::Settings,
+        coolant_first: bool,
+    ) -> Result<(), GcodeError> {
+        use crate::gcode::canon::{LengthUnits, MotionControl};
         if s.units != self.s.units {
-            self.set_units(if s.units == crate::gcode::canon::LengthUnits::Inches {
+            self.set_units(if s.units == LengthUnits::Inches {
                 200
             } else {
                 210
@@ -298,9 +311,6 @@ impl Interp<'_> {
             self.s.plane = s.plane;
             self.emit(CanonCmd::SelectPlane(s.plane))?;
         }
-        self.s.absolute = s.absolute;
-        self.s.ijk_absolute = s.ijk_absolute;
-        self.s.retract_old_z = s.retract_old_z;
         if s.feed_mode != self.s.feed_mode {
             self.s.feed_mode = s.feed_mode;
             self.emit(CanonCmd::SetFeedMode(s.feed_mode))?;
@@ -321,33 +331,54 @@ impl Interp<'_> {
                 _ => CanonCmd::StopSpindle,
             })?;
         }
-        if s.mist != self.s.mist || s.flood != self.s.flood {
-            self.s.mist = s.mist;
-            self.s.flood = s.flood;
-            self.emit(if s.mist {
-                CanonCmd::MistOn
-            } else {
-                CanonCmd::MistOff
-            })?;
-            self.emit(if s.flood {
-                CanonCmd::FloodOn
-            } else {
-                CanonCmd::FloodOff
-            })?;
+        if coolant_first {
+            self.restore_coolant(s)?;
+        }
+        if s.absolute != self.s.absolute {
+            self.s.absolute = s.absolute;
+            self.emit(CanonCmd::Comment(
+                if s.absolute {
+                    "interpreter: distance mode changed to absolute"
+                } else {
+                    "interpreter: distance mode changed to incremental"
+                }
+                .into(),
+            ))?;
+        }
+        self.s.ijk_absolute = s.ijk_absolute;
+        self.s.retract_old_z = s.retract_old_z;
+        if !coolant_first {
+            self.restore_coolant(s)?;
         }
         if s.control != self.s.control || s.naive_tol != self.s.naive_tol {
             self.s.control = s.control;
             self.s.naive_tol = s.naive_tol;
             self.emit(CanonCmd::SetMotionControl(s.control))?;
-            if matches!(
-                s.control,
-                crate::gcode::canon::MotionControl::Continuous { .. }
-            ) {
+            if matches!(s.control, MotionControl::Continuous { .. }) {
                 self.emit(CanonCmd::SetNaivecamTolerance(s.naive_tol))?;
             }
         }
         if s.origin_index != self.s.origin_index {
             self.select_coord_system(s.origin_index)?;
+        }
+        Ok(())
+    }
+
+    fn restore_coolant(&mut self, s: &super::Settings) -> Result<(), GcodeError> {
+        if s.mist != self.s.mist || s.flood != self.s.flood {
+            self.s.mist = s.mist;
+            self.s.flood = s.flood;
+            if !s.mist && !s.flood {
+                self.emit(CanonCmd::MistOff)?;
+                self.emit(CanonCmd::FloodOff)?;
+            } else {
+                if s.mist {
+                    self.emit(CanonCmd::MistOn)?;
+                }
+                if s.flood {
+                    self.emit(CanonCmd::FloodOn)?;
+                }
+            }
         }
         Ok(())
     }
@@ -364,8 +395,11 @@ impl Interp<'_> {
             _ => {
                 // LinuxCNC's reset on program end.
                 let base = g5x_base(1);
+                let k = self.s.k_mp();
                 let mut o = [0.0; 6];
-                o.copy_from_slice(&self.p.numbered[base..base + 6]);
+                for (i, v) in o.iter_mut().enumerate() {
+                    *v = self.p.numbered[base + i] * super::motion::lin(i, k);
+                }
                 for (i, v) in o.iter().enumerate() {
                     self.s.pos[i] += self.s.g5x[i] - v;
                 }

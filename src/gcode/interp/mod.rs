@@ -40,6 +40,8 @@ pub(crate) struct Source {
     percent: bool,
     /// The closing `%` was found.
     closed: bool,
+    /// Per line: 0 plain, 1 O-word statement, 2 a `%` line.
+    kind: Vec<u8>,
     /// O-word statements by line.
     olines: HashMap<usize, OStmt>,
     /// Lines of each O label, in file order.
@@ -65,14 +67,11 @@ impl Source {
                 ),
             ));
         }
-        let mut lines = Vec::new();
+        let mut lines = Vec::with_capacity(text.len() / 24 + 1);
         let mut start = 0;
-        let bytes = text.as_bytes();
-        for (i, &b) in bytes.iter().enumerate() {
-            if b == b'\n' {
-                lines.push((start, i));
-                start = i + 1;
-            }
+        while let Some(i) = text[start..].find('\n') {
+            lines.push((start, start + i));
+            start += i + 1;
         }
         if start < text.len() {
             lines.push((start, text.len()));
@@ -95,9 +94,11 @@ impl Source {
             end: 0,
             percent: false,
             closed: false,
+            kind: Vec::new(),
             olines: HashMap::new(),
             by_label: HashMap::new(),
         };
+        src.kind = vec![0; src.lines.len()];
         src.end = src.lines.len();
         // `%` handling: a first non-blank line of `%` opens the program, the next closes it.
         let first = (0..src.lines.len()).find(|&i| !src.line(i).trim().is_empty());
@@ -111,7 +112,8 @@ impl Source {
             }
         }
         for i in 0..src.end {
-            let t = src.line(i);
+            let (a, b) = src.lines[i];
+            let t = &src.text[a..b];
             if t.len() > opts.limits.max_line_len {
                 return Err(mkerr(
                     i,
@@ -123,7 +125,10 @@ impl Source {
                     ),
                 ));
             }
-            if parser::starts_with_o(t) {
+            if t.trim() == "%" {
+                src.kind[i] = 2;
+            } else if parser::starts_with_o(t) {
+                src.kind[i] = 1;
                 let l = parser::parse_line(t, opts.limits.max_expr_depth)
                     .map_err(|(c, m)| mkerr(i, c, m))?;
                 if let Some(o) = l.o {
@@ -149,6 +154,20 @@ impl Source {
     }
 }
 
+/// Where emitted commands go: a program (the library API) or directly the rs274-format
+/// trace (`hytask gcode canon`, which then never holds the whole `Vec<Canon>`).
+pub(crate) enum Sink {
+    /// Collect the commands.
+    Canon(Vec<Canon>),
+    /// Format each command as it is emitted.
+    Trace {
+        /// The text so far.
+        buf: Vec<u8>,
+        /// Calls printed so far.
+        seq: u64,
+    },
+}
+
 /// A subroutine call in progress.
 #[derive(Debug)]
 pub(crate) struct Frame {
@@ -163,12 +182,16 @@ pub(crate) struct Frame {
 /// The interpreter.
 pub(crate) struct Interp<'a> {
     pub(crate) opts: &'a InterpOptions,
-    pub(crate) out: Vec<Canon>,
+    pub(crate) out: Sink,
+    /// Commands emitted so far.
+    count: usize,
     pub(crate) loc: SourceLoc,
     pub(crate) p: Params,
     pub(crate) s: Settings,
     pub(crate) tools: ToolTable,
     files: Vec<Source>,
+    /// Scratch line reused by every plain block.
+    scratch: Line,
     subs: HashMap<Box<str>, (usize, usize)>,
     frames: Vec<Frame>,
     /// Repeat counters, keyed by (file, line of the `repeat`, call depth).
@@ -176,6 +199,8 @@ pub(crate) struct Interp<'a> {
     /// Loop iterations, keyed like `repeats`, for the iteration limit.
     loop_iters: HashMap<(usize, usize, usize), u64>,
     pc: (usize, usize),
+    /// Axis indices (first, second, drilling) of the canned cycle being generated.
+    cycle_axes: (usize, usize, usize),
     ended: bool,
     steps: u64,
 }
@@ -195,7 +220,8 @@ impl<'a> Interp<'a> {
         s.units = opts.initial_units;
         Ok(Interp {
             opts,
-            out: Vec::new(),
+            out: Sink::Canon(Vec::new()),
+            count: 0,
             loc: SourceLoc {
                 file: Arc::from(""),
                 line: 0,
@@ -205,11 +231,13 @@ impl<'a> Interp<'a> {
             s,
             tools,
             files: Vec::new(),
+            scratch: Line::default(),
             subs: HashMap::new(),
             frames: Vec::new(),
             repeats: HashMap::new(),
             loop_iters: HashMap::new(),
             pc: (0, 0),
+            cycle_axes: (0, 1, 2),
             ended: false,
             steps: 0,
         })
@@ -217,7 +245,7 @@ impl<'a> Interp<'a> {
 
     /// Emits one canonical command at the current location.
     pub(crate) fn emit(&mut self, cmd: CanonCmd) -> Result<(), GcodeError> {
-        if self.out.len() >= self.opts.limits.max_canon {
+        if self.count >= self.opts.limits.max_canon {
             return Err(self.err(
                 1,
                 format!(
@@ -226,10 +254,23 @@ impl<'a> Interp<'a> {
                 ),
             ));
         }
-        self.out.push(Canon {
-            loc: self.loc.clone(),
+        if matches!(
             cmd,
-        });
+            CanonCmd::StraightTraverse(_)
+                | CanonCmd::StraightFeed(_)
+                | CanonCmd::ArcFeed { .. }
+                | CanonCmd::StraightProbe { .. }
+        ) {
+            self.s.tlo_at_motion = self.s.tool_offset;
+        }
+        self.count += 1;
+        match &mut self.out {
+            Sink::Canon(v) => v.push(Canon {
+                loc: self.loc.clone(),
+                cmd,
+            }),
+            Sink::Trace { buf, seq } => crate::gcode::canon_fmt::write_call(buf, &cmd, seq),
+        }
         Ok(())
     }
 
@@ -247,6 +288,12 @@ impl<'a> Interp<'a> {
     pub(crate) fn run(&mut self, name: &str, text: String) -> Result<(), GcodeError> {
         let name: Arc<str> = Arc::from(name);
         let src = Source::new(name.clone(), text, self.opts)?;
+        // Most programs produce about one command per line.
+        let expect = (src.lines.len() + 32).min(self.opts.limits.max_canon);
+        match &mut self.out {
+            Sink::Canon(v) => v.reserve(expect),
+            Sink::Trace { buf, .. } => buf.reserve(expect * 64),
+        }
         self.files.push(src);
         self.loc = SourceLoc {
             file: name,
@@ -257,6 +304,9 @@ impl<'a> Interp<'a> {
         self.pc = (0, 0);
         while !self.ended {
             let (f, l) = self.pc;
+            if !Arc::ptr_eq(&self.loc.file, &self.files[f].name) {
+                self.loc.file = self.files[f].name.clone();
+            }
             self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
             self.loc.col = 1;
             if l >= self.files[f].end {
@@ -302,11 +352,18 @@ impl<'a> Interp<'a> {
 
     /// Executes the line at (f, l) and advances the program counter.
     fn step(&mut self, f: usize, l: usize) -> Result<(), GcodeError> {
-        if self.files[f].percent && l == 0 || self.files[f].line_text(l).trim() == "%" {
+        if self.s.synch_pending {
+            self.synch();
+        }
+        let kind = self.files[f].kind.get(l).copied().unwrap_or(0);
+        if kind == 2 {
             self.pc = (f, l + 1);
             return Ok(());
         }
-        if let Some(o) = self.files[f].olines.get(&l).cloned() {
+        if kind == 1 {
+            let Some(o) = self.files[f].olines.get(&l).cloned() else {
+                return Err(self.err(1, "internal: O-word line not indexed"));
+            };
             let text = self.files[f].line_text(l).to_string();
             let line = parser::parse_line(&text, self.opts.limits.max_expr_depth)
                 .map_err(|(c, m)| self.err(c, m))?;
@@ -317,16 +374,19 @@ impl<'a> Interp<'a> {
             self.pc = (f, l + 1);
             return self.exec_o(f, l, &o, &line);
         }
-        let line = {
+        let mut line = std::mem::take(&mut self.scratch);
+        let parsed = {
             let text = self.files[f].line_text(l);
-            parser::parse_line(text, self.opts.limits.max_expr_depth)
-        }
-        .map_err(|(c, m)| self.err(c, m))?;
+            parser::parse_line_into(text, self.opts.limits.max_expr_depth, &mut line)
+        };
         self.pc = (f, l + 1);
-        if line.block_delete && self.opts.block_delete {
-            return Ok(());
-        }
-        self.exec_line(&line)
+        let r = match parsed {
+            Err((c, m)) => Err(self.err(c, m)),
+            Ok(()) if line.block_delete && self.opts.block_delete => Ok(()),
+            Ok(()) => self.exec_line(&line),
+        };
+        self.scratch = line;
+        r
     }
 
     fn exec_line(&mut self, line: &Line) -> Result<(), GcodeError> {
@@ -370,6 +430,17 @@ impl<'a> Interp<'a> {
         }
         self.loc.col = 1;
         self.exec_block(&b, line)
+    }
+
+    /// LinuxCNC re-reads the machine position after a tool change, before the next block:
+    /// the position becomes the end of the last move as canon saw it, so a tool length
+    /// offset applied since that move no longer shifts the program position.
+    fn synch(&mut self) {
+        for i in 0..6 {
+            self.s.pos[i] += self.s.tool_offset[i] - self.s.tlo_at_motion[i];
+        }
+        self.s.tlo_at_motion = self.s.tool_offset;
+        self.s.synch_pending = false;
     }
 
     /// Loads (once) the file that defines subroutine `label` from the search path.
@@ -446,5 +517,26 @@ pub(crate) fn interpret(
 ) -> Result<Vec<Canon>, GcodeError> {
     let mut it = Interp::new(opts)?;
     it.run(name, text)?;
-    Ok(it.out)
+    match it.out {
+        Sink::Canon(v) => Ok(v),
+        Sink::Trace { .. } => Ok(Vec::new()),
+    }
+}
+
+/// Runs a whole program and returns its rs274-format trace (nothing on error).
+pub(crate) fn interpret_trace(
+    name: &str,
+    text: String,
+    opts: &InterpOptions,
+) -> Result<Vec<u8>, GcodeError> {
+    let mut it = Interp::new(opts)?;
+    it.out = Sink::Trace {
+        buf: Vec::new(),
+        seq: 0,
+    };
+    it.run(name, text)?;
+    match it.out {
+        Sink::Trace { buf, .. } => Ok(buf),
+        Sink::Canon(_) => Ok(Vec::new()),
+    }
 }

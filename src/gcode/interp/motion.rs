@@ -39,7 +39,8 @@ impl Interp<'_> {
     /// Performs the motion of group 1 (explicit or modal), if the block calls for one.
     pub(super) fn motion(&mut self, b: &Block) -> Result<(), GcodeError> {
         let explicit = b.g[1];
-        let g0_axes = matches!(b.gcode(0), Some(100 | 280 | 300 | 920)) || b.gcode(8) == Some(431);
+        let g0_axes =
+            matches!(b.gcode(0), Some(100 | 280 | 300 | 520 | 920)) || b.gcode(8) == Some(431);
         let (m, col) = match explicit {
             Some((m, col)) => (m, col),
             None => {
@@ -60,7 +61,7 @@ impl Interp<'_> {
                     "interpreter: motion mode set to none".into(),
                 ))
             }
-            730 | 810 | 820 | 830 | 850 | 860 | 890 => self.cycle(m, b),
+            730 | 810 | 820 | 830 | 840 | 850 | 860 | 880 | 890 => self.cycle(m, b),
             _ => Err(self.err(col, format!("G{} is not supported by hytask", fmt_g(m)))),
         }
     }
@@ -119,23 +120,19 @@ impl Interp<'_> {
         if self.s.feed_mode == FeedMode::InverseTime {
             return Err(self.err(self.loc.col, "Cannot probe in inverse time feed mode"));
         }
+        if self.s.feed_mode == FeedMode::UnitsPerRevolution {
+            return Err(self.err(self.loc.col, "Cannot probe with feed per rev mode"));
+        }
         if self.s.feed_rate == 0.0 {
             return Err(self.err(self.loc.col, "Cannot probe with zero feed rate"));
         }
         let end = self.find_ends(b);
-        if (3..6).any(|i| end[i] != self.s.pos[i]) {
-            return Err(self.err(self.loc.col, "Cannot move rotary axes during probing"));
-        }
-        let d = ((end[0] - self.s.pos[0]).powi(2)
-            + (end[1] - self.s.pos[1]).powi(2)
-            + (end[2] - self.s.pos[2]).powi(2))
-        .sqrt();
-        let min = 0.01 * self.s.units_per_inch();
-        if d < min {
-            return Err(self.err(
-                self.loc.col,
-                "Start of probe move is within 0.01 inch of target",
-            ));
+
+        // The probe starts where canon last put the tool: a tool length offset applied
+        // since the last move has not moved it.
+        let mut start = self.s.pos;
+        for (i, v) in start.iter_mut().enumerate() {
+            *v += self.s.tool_offset[i] - self.s.tlo_at_motion[i];
         }
         let kind = match m {
             382 => ProbeKind::TowardErr,
@@ -150,12 +147,23 @@ impl Interp<'_> {
             kind,
         })?;
         self.emit(CanonCmd::Probe { on: false })?;
-        // Without a machine the probe "trips" at the programmed end, as in rs274.
+        // Without a machine, rs274's canon reports the probe position as the programmed end
+        // and leaves the tool 0.01 inch short of it, back toward the start; the interpreter
+        // then continues from there. hytask reproduces that model.
         for (i, v) in end.iter().enumerate() {
             self.p.numbered[5061 + i] = *v;
         }
-        self.p.numbered[5070] = 1.0;
-        self.s.pos = end;
+        self.p.numbered[5070] = 0.0;
+        let d = [end[0] - start[0], end[1] - start[1], end[2] - start[2]];
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let mut stop = end;
+        if len > 0.0 {
+            let back = 0.01 * 25.4 / self.s.units.mm_per_unit();
+            for i in 0..3 {
+                stop[i] = end[i] - back * d[i] / len;
+            }
+        }
+        self.s.pos = stop;
         Ok(())
     }
 
@@ -177,17 +185,9 @@ impl Interp<'_> {
             self.s.g5x[i] *= k;
             self.s.g92[i] *= k;
         }
-        for v in self.s.tool_offset.iter_mut() {
-            *v *= k;
-        }
-        // Stored offsets: G28, G30, G92 and all nine coordinate systems (linear axes).
-        let mut bases = vec![params::G28_BASE, params::G30_BASE, params::G92_BASE];
-        bases.extend((1..=9).map(g5x_base));
-        for base in bases {
-            for i in 0..3 {
-                self.p.numbered[base + i] *= k;
-            }
-        }
+        // LinuxCNC 2.9 keeps the tool length offset's number unchanged across G20/G21 (it
+        // is not converted until the next G43); hytask reproduces that.
+        // Stored offsets (parameters) stay in machine units, as in LinuxCNC.
         Ok(())
     }
 
@@ -196,7 +196,8 @@ impl Interp<'_> {
         let mut off: Pose = [0.0; 9];
         match g {
             430 => {
-                let tool = match b.get(b'h') {
+                let k = self.s.k_mp();
+                let entry = match b.get(b'h') {
                     Some(h) => {
                         if h < 0.0 || h.fract() != 0.0 {
                             return Err(self.err(
@@ -204,26 +205,32 @@ impl Interp<'_> {
                                 "Negative H word tool length offset index used",
                             ));
                         }
-                        h as u32
-                    }
-                    None => self.s.tool,
-                };
-                if tool != 0 {
-                    let Some(slot) = self.tools.slot_of(tool) else {
-                        return Err(self.err(
-                            self.loc.col,
-                            format!("Invalid tool number {tool} in G43 (not in the tool table)"),
-                        ));
-                    };
-                    let k = self.s.machine_units.mm_per_unit() / self.s.units.mm_per_unit();
-                    if let Some(t) = self.tools.at_slot(slot) {
-                        for (o, v) in off.iter_mut().zip(t.offset.iter()) {
-                            *o = v * k;
+                        let tool = h as u32;
+                        if tool == 0 {
+                            None
+                        } else {
+                            let slot = self.tools.slot_of(tool).ok_or_else(|| {
+                                self.err(
+                                    self.loc.col,
+                                    format!(
+                                        "Invalid tool number {tool} in G43 (not in the tool table)"
+                                    ),
+                                )
+                            })?;
+                            self.tools.at_slot(slot).cloned()
                         }
+                    }
+                    None => self.s.spindle_tool.clone(),
+                };
+                if let Some(t) = entry {
+                    for (i, (o, v)) in off.iter_mut().zip(t.offset.iter()).enumerate() {
+                        *o = v * lin9(i, k);
                     }
                 }
             }
             431 => {
+                // Axes not named keep their current offset.
+                off = self.s.tool_offset;
                 for (i, &c) in AXES.iter().enumerate() {
                     if let Some(v) = b.get(c) {
                         off[i] = v;
@@ -242,8 +249,11 @@ impl Interp<'_> {
 
     fn load_g5x(&self, index: u8) -> ([f64; 6], f64) {
         let base = g5x_base(index);
+        let k = self.s.k_mp();
         let mut o = [0.0; 6];
-        o.copy_from_slice(&self.p.numbered[base..base + 6]);
+        for (i, v) in o.iter_mut().enumerate() {
+            *v = self.p.numbered[base + i] * lin(i, k);
+        }
         (o, self.p.numbered[base + 9])
     }
 
@@ -286,11 +296,26 @@ impl Interp<'_> {
                 } else {
                     params::G30_BASE
                 };
+                let k = 1.0 / self.s.k_mp();
                 for i in 0..6 {
                     self.p.numbered[base + i] =
-                        self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i];
+                        (self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i])
+                            * lin(i, k);
                 }
                 Ok(())
+            }
+            520 => {
+                // G52: local offset, kept in the G92 offset as LinuxCNC does.
+                let k = 1.0 / self.s.k_mp();
+                for (i, &c) in AXES.iter().enumerate() {
+                    if let Some(v) = b.get(c) {
+                        self.s.pos[i] += self.s.g92[i] - v;
+                        self.s.g92[i] = v;
+                        self.p.numbered[params::G92_BASE + i] = v * lin(i, k);
+                    }
+                }
+                self.p.numbered[params::G92_ENABLED] = 1.0;
+                self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
             }
             920 => {
                 if !b.has_axis() {
@@ -303,8 +328,9 @@ impl Interp<'_> {
                         self.s.g92[i] = new;
                     }
                 }
+                let k = 1.0 / self.s.k_mp();
                 for i in 0..6 {
-                    self.p.numbered[params::G92_BASE + i] = self.s.g92[i];
+                    self.p.numbered[params::G92_BASE + i] = self.s.g92[i] * lin(i, k);
                 }
                 self.p.numbered[params::G92_ENABLED] = 1.0;
                 self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
@@ -322,7 +348,7 @@ impl Interp<'_> {
             }
             923 => {
                 for i in 0..6 {
-                    let v = self.p.numbered[params::G92_BASE + i];
+                    let v = self.p.numbered[params::G92_BASE + i] * lin(i, self.s.k_mp());
                     self.s.pos[i] += self.s.g92[i] - v;
                     self.s.g92[i] = v;
                 }
@@ -346,7 +372,7 @@ impl Interp<'_> {
         let mut end = mid;
         for (i, &c) in AXES.iter().enumerate() {
             if !any || b.has(c) {
-                end[i] = self.p.numbered[base + i]
+                end[i] = self.p.numbered[base + i] * lin(i, self.s.k_mp())
                     - self.s.g5x[i]
                     - self.s.g92[i]
                     - self.s.tool_offset[i];
@@ -387,11 +413,12 @@ impl Interp<'_> {
                 let base = g5x_base(index);
                 for (i, &c) in AXES.iter().enumerate() {
                     if let Some(v) = b.get(c) {
-                        self.p.numbered[base + i] = if l == 2 {
+                        let prog = if l == 2 {
                             v
                         } else {
                             self.s.pos[i] + self.s.g5x[i] - v
                         };
+                        self.p.numbered[base + i] = prog * lin(i, 1.0 / self.s.k_mp());
                     }
                 }
                 if let Some(r) = b.get(b'r') {
@@ -424,8 +451,26 @@ fn fmt_g(m: u16) -> String {
 }
 
 impl super::Settings {
-    /// Current units per inch (for LinuxCNC's inch-denominated tolerances).
-    pub(crate) fn units_per_inch(&self) -> f64 {
-        25.4 / self.units.mm_per_unit()
+    /// Factor from machine units (stored parameters, tool table) to program units.
+    pub(crate) fn k_mp(&self) -> f64 {
+        self.machine_units.mm_per_unit() / self.units.mm_per_unit()
+    }
+}
+
+/// Like [`lin`] for a 9-axis pose: X Y Z and U V W are linear, A B C rotary.
+pub(crate) fn lin9(i: usize, k: f64) -> f64 {
+    if (3..6).contains(&i) {
+        1.0
+    } else {
+        k
+    }
+}
+
+/// Scale factor for axis `i` between unit systems: linear axes scale, rotary do not.
+pub(crate) fn lin(i: usize, k: f64) -> f64 {
+    if i < 3 {
+        k
+    } else {
+        1.0
     }
 }

@@ -101,14 +101,9 @@ impl Interp<'_> {
         o: &OStmt,
         line: &Line,
     ) -> Result<(), GcodeError> {
+        // Comments on O lines are not executed (as in LinuxCNC).
+        let _ = line;
         self.loc.col = o.col;
-        if let Some(c) = line.comments.last() {
-            // A comment on an O line is a comment like any other.
-            let text = c.text.to_string();
-            if !text.is_empty() {
-                self.emit(crate::gcode::canon::CanonCmd::Comment(text))?;
-            }
-        }
         let label = o.label.clone();
         let missing = |me: &Self, what: &str| me.err(o.col, format!("o<{label}> {what}"));
         match o.kind {
@@ -117,6 +112,16 @@ impl Interp<'_> {
                 let end = self
                     .find_next(f, l, &label, &[OKind::EndSub])
                     .ok_or_else(|| missing(self, "sub has no matching endsub"))?;
+                // rs274 evaluates the endsub value while skipping the definition.
+                if let Some(e) = self.files[f]
+                    .olines
+                    .get(&end)
+                    .and_then(|o| o.args.first().cloned())
+                {
+                    let v = expr::eval(&e, self).map_err(|m| self.err(o.col, m))?;
+                    self.s.value = v;
+                    self.s.value_returned = 1.0;
+                }
                 self.pc = (f, end + 1);
                 Ok(())
             }
@@ -138,9 +143,17 @@ impl Interp<'_> {
                     }
                     None => self.s.value_returned = 0.0,
                 }
+                // M73 in this subroutine: its saved modal state comes back on return.
+                let level = self.frames.len();
+                if self.s.auto_restore.get(level).copied().unwrap_or(false) {
+                    if let Some(Some(saved)) = self.s.saved.get(level).cloned() {
+                        self.restore_modal(&saved, true)?;
+                    }
+                }
                 let Some(frame) = self.frames.pop() else {
                     return Ok(());
                 };
+                self.s.auto_restore.pop();
                 self.p.numbered[1..31].copy_from_slice(&frame.saved);
                 self.p.locals.pop();
                 self.s.saved.pop();
@@ -193,8 +206,9 @@ impl Interp<'_> {
                 };
                 let mut saved = [0.0; 30];
                 saved.copy_from_slice(&self.p.numbered[1..31]);
-                for (i, v) in args.iter().enumerate() {
-                    self.p.numbered[1 + i] = *v;
+                // The callee sees its arguments in #1.. and 0 in the rest of #1-#30.
+                for i in 0..30 {
+                    self.p.numbered[1 + i] = args.get(i).copied().unwrap_or(0.0);
                 }
                 self.frames.push(Frame {
                     ret: self.pc,
@@ -203,6 +217,7 @@ impl Interp<'_> {
                 });
                 self.p.locals.push(HashMap::new());
                 self.s.saved.push(None);
+                self.s.auto_restore.push(false);
                 self.pc = (target.0, target.1 + 1);
                 Ok(())
             }
@@ -235,7 +250,11 @@ impl Interp<'_> {
                 }
             }
             OKind::ElseIf | OKind::Else => {
-                // Reached by falling out of a taken branch: skip to endif.
+                // Reached by falling out of a taken branch: skip to endif. rs274 still
+                // evaluates an elseif condition here (its errors count).
+                if o.kind == OKind::ElseIf {
+                    self.cond(o)?;
+                }
                 let end = self
                     .find_next(f, l, &label, &[OKind::EndIf])
                     .ok_or_else(|| missing(self, "else/elseif has no matching endif"))?;

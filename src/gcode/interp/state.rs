@@ -38,6 +38,10 @@ pub(crate) struct Settings {
     pub rotation: f64,
     /// Tool length offset X Y Z A B C U V W.
     pub tool_offset: Pose,
+    /// Tool length offset when the last move was sent to canon (see `Interp::synch`).
+    pub tlo_at_motion: Pose,
+    /// A tool change happened: re-read the position before the next block.
+    pub synch_pending: bool,
     /// G98 (true, back to the old Z) / G99 (R plane).
     pub retract_old_z: bool,
     /// G61/G61.1/G64.
@@ -66,8 +70,15 @@ pub(crate) struct Settings {
     pub tool: u32,
     /// Slot of the tool in the spindle.
     pub tool_slot: usize,
+    /// Copy of the table entry of the tool loaded by M6 (LinuxCNC's pocket 0). M61 changes
+    /// the tool number but not this copy, and G43 without H reads it.
+    pub spindle_tool: Option<crate::gcode::tooltable::Tool>,
     /// T word: prepared tool number and slot.
     pub selected: Option<(u32, usize)>,
+    /// Canned cycle: Z before the current series of contiguous cycles (G98 retracts to it).
+    pub cycle_start_z: f64,
+    /// Canned cycle: the R plane height of the last cycle block (absolute).
+    pub cycle_r_abs: f64,
     /// Canned cycle: Z of the last cycle block (sticky).
     pub cycle_z: f64,
     /// Canned cycle: R of the last cycle block (sticky).
@@ -82,6 +93,8 @@ pub(crate) struct Settings {
     pub value_returned: f64,
     /// M70/M73 saved state stack depth marker (states saved per call level).
     pub saved: Vec<Option<Box<Settings>>>,
+    /// Per call level: the saved state was taken by M73 and is restored on return.
+    pub auto_restore: Vec<bool>,
 }
 
 impl Settings {
@@ -102,6 +115,8 @@ impl Settings {
             g92: [0.0; 6],
             rotation: 0.0,
             tool_offset: [0.0; 9],
+            tlo_at_motion: [0.0; 9],
+            synch_pending: false,
             retract_old_z: true,
             control: MotionControl::Continuous { tolerance: 0.0 },
             naive_tol: 0.0,
@@ -116,14 +131,18 @@ impl Settings {
             feed_hold: true,
             tool: 0,
             tool_slot: 0,
+            spindle_tool: None,
             selected: None,
+            cycle_start_z: 0.0,
             cycle_z: 0.0,
+            cycle_r_abs: 0.0,
             cycle_r: 0.0,
             cycle_q: 0.0,
             cycle_p: 0.0,
             value: 0.0,
             value_returned: 0.0,
             saved: vec![None],
+            auto_restore: vec![false],
         }
     }
 }

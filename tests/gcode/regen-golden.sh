@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Regenerates tests/gcode/golden/*.canon (and *.err for programs rs274 rejects) from
+# LinuxCNC's rs274 (Debian package linuxcnc-uspace). Run from anywhere; needs rs274 on PATH.
+# Every corpus program runs with the corpus tool table, from the corpus directory (so
+# `o<name> call` finds name.ngc there, as it does for hytask).
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+cd "$here/corpus"
+mkdir -p "$here/golden"
+rm -f "$here"/golden/*.canon "$here"/golden/*.err
+for f in *.ngc; do
+    name="${f%.ngc}"
+    set +e
+    rs274 -t tool.tbl -g "$f" >"$here/golden/$name.canon" 2>"$here/golden/$name.stderr"
+    rc=$?
+    set -e
+    if [ "$rc" -ne 0 ]; then
+        grep -v '^executing$' "$here/golden/$name.stderr" >"$here/golden/$name.err" || true
+    fi
+    rm -f "$here/golden/$name.stderr"
+done
+echo "regenerated $(ls "$here"/golden/*.canon | wc -l) goldens, $(ls "$here"/golden/*.err 2>/dev/null | wc -l) rejections"
