@@ -342,3 +342,30 @@ fn expressions_use_linuxcnc_precedence_and_functions() {
     assert_eq!(feeds(&p), vec![[3.0, 45.0, -3.0]]);
     assert!(err("#1=[1/0]\nM2\n").message.contains("divide by zero"));
 }
+
+#[test]
+fn initial_position_is_where_the_program_starts() {
+    let opts = InterpOptions {
+        initial_position: Some([25.4, 50.8, -12.7, 90.0, 0.0, 0.0]),
+        initial_units: hytask::gcode::LengthUnits::Inches,
+        ..InterpOptions::default()
+    };
+    let p = load_str("start.ngc", "G91 G1 X1 F10\nG90 G0 Z0\nM2\n", &opts).unwrap();
+    let moves: Vec<[f64; 9]> = p
+        .canon
+        .iter()
+        .filter_map(|c| match c.cmd {
+            CanonCmd::StraightFeed(e) | CanonCmd::StraightTraverse(e) => Some(e),
+            _ => None,
+        })
+        .collect();
+    // In inches: start (1, 2, -0.5), A stays 90 deg; G91 X1 ends at X2, then Z0.
+    assert_eq!(&moves[0][..4], &[2.0, 2.0, -0.5, 90.0]);
+    assert_eq!(&moves[1][..4], &[2.0, 2.0, 0.0, 90.0]);
+    // Without it, rs274's behaviour: the program starts at 0.
+    let p = load_str("zero.ngc", "G91 G1 X1 F10\nM2\n", &InterpOptions::default()).unwrap();
+    assert!(p
+        .canon
+        .iter()
+        .any(|c| matches!(c.cmd, CanonCmd::StraightFeed(e) if e[0] == 1.0 && e[1] == 0.0)));
+}

@@ -88,6 +88,12 @@ pub struct InterpOptions {
     pub machine_units: LengthUnits,
     /// Program units at start (before any G20/G21).
     pub initial_units: LengthUnits,
+    /// Where the machine is when the program starts: X Y Z (mm) and A B C (deg), machine
+    /// frame. LinuxCNC's interpreter reads this from the machine at start
+    /// (`GET_EXTERNAL_POSITION`) so that a first move naming only some axes leaves the
+    /// others where they are, and incremental moves and arcs start from the real position.
+    /// `None` starts at 0, as `rs274` does standalone (the differential tests use that).
+    pub initial_position: Option<[f64; 6]>,
     /// Resource limits.
     pub limits: Limits,
 }
@@ -101,6 +107,7 @@ impl Default for InterpOptions {
             block_delete: false,
             machine_units: LengthUnits::Millimeters,
             initial_units: LengthUnits::Millimeters,
+            initial_position: None,
             limits: Limits::default(),
         }
     }

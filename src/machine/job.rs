@@ -84,6 +84,16 @@ pub fn interp_options(cfg: &MachineConfig) -> InterpOptions {
     }
 }
 
+/// The interpreter starts where the machine is, so that a first move naming only some axes
+/// leaves the others alone and incremental moves start from the real position.
+fn starting_at(opts: &InterpOptions, start_mm: [f64; NUM_AXES]) -> InterpOptions {
+    let mut o = opts.clone();
+    let mut p = [0.0; 6];
+    p.copy_from_slice(&start_mm[..6]);
+    o.initial_position = Some(p);
+    o
+}
+
 /// Interprets and plans a job from a file or inline text, starting at machine pose
 /// `start_mm`.
 pub fn prepare(
@@ -108,6 +118,7 @@ pub fn prepare(
             ))
         }
     };
+    let opts = &starting_at(opts, start_mm);
     let program = match &src.path {
         Some(p) => gcode::load_file(Path::new(p), opts),
         None => gcode::load_str(&name, &text, opts),
@@ -137,10 +148,11 @@ pub fn prepare_mdi(
     start_mm: [f64; NUM_AXES],
 ) -> Result<PreparedJob, ApiError> {
     let text = format!("%\n{line}\n%\n");
-    let program = gcode::load_str("mdi", &text, opts).map_err(|mut e| {
-        e.line = e.line.saturating_sub(1).max(1);
-        ApiError::Gcode(e.to_string())
-    })?;
+    let program =
+        gcode::load_str("mdi", &text, &starting_at(opts, start_mm)).map_err(|mut e| {
+            e.line = e.line.saturating_sub(1).max(1);
+            ApiError::Gcode(e.to_string())
+        })?;
     let plan = motion::plan_from(&program.canon, motion, start_mm)
         .map_err(|e| ApiError::Gcode(format!("mdi: {e}")))?;
     Ok(PreparedJob {
@@ -224,6 +236,40 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("mdi:1:"), "{e}");
+    }
+
+    #[test]
+    fn a_job_starts_from_the_machine_position() {
+        // After homing the sim mill is at X300 Y300 Z0. A first move naming only Z must not
+        // move X and Y (LinuxCNC reads the start position from the machine too).
+        let cfg = sim();
+        let start = [300.0, 300.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let src = JobSource {
+            path: None,
+            text: Some("G21 G90\nG0 Z-5\nG91 G1 X-10 F600\nM2\n".into()),
+            name: None,
+        };
+        let j = prepare(&src, &interp_options(&cfg), &motion_config(&cfg), start).expect("plans");
+        let mut moves = j.plan.items.iter().filter_map(|i| match i {
+            crate::motion::Item::Segment(s) => Some(s.end_mm),
+            _ => None,
+        });
+        let first = moves.next().expect("a segment");
+        assert_eq!(
+            (first[0], first[1]),
+            (300.0, 300.0),
+            "X/Y moved on a Z-only move"
+        );
+        assert_eq!(&j.plan.end_mm[..3], &[290.0, 300.0, -5.0]);
+        // MDI too: an incremental move from where the machine is.
+        let m = prepare_mdi(
+            "G91 G0 Y-7",
+            &interp_options(&cfg),
+            &motion_config(&cfg),
+            j.plan.end_mm,
+        )
+        .expect("plans");
+        assert_eq!(&m.plan.end_mm[..3], &[290.0, 293.0, -5.0]);
     }
 
     #[test]

@@ -218,6 +218,14 @@ impl<'a> Interp<'a> {
         };
         let mut s = Settings::new(opts);
         s.units = opts.initial_units;
+        if let Some(p) = opts.initial_position {
+            // Offsets are zero at start: the program frame is the machine frame, in the
+            // program's units for the linear axes.
+            let per_unit = s.units.mm_per_unit();
+            for (i, v) in p.iter().enumerate() {
+                s.pos[i] = if i < 3 { v / per_unit } else { *v };
+            }
+        }
         Ok(Interp {
             opts,
             out: Sink::Canon(Vec::new()),
