@@ -117,6 +117,16 @@ pub enum ClientCommand {
 /// Runs a client subcommand.
 pub fn run(cmd: ClientCommand) -> anyhow::Result<ExitCode> {
     use ClientCommand as C;
+    // A client printing into a closed pipe (`hytask status | head -1`) should end quietly,
+    // as other command-line tools do, instead of panicking on EPIPE. Only the client does
+    // this: the daemon keeps ignoring SIGPIPE and handles broken sockets as errors.
+    // SAFETY: restoring the default disposition installs no handler code.
+    let _ = unsafe {
+        nix::sys::signal::signal(
+            nix::sys::signal::Signal::SIGPIPE,
+            nix::sys::signal::SigHandler::SigDfl,
+        )
+    };
     let (sock, method, params) = match cmd {
         C::Status(s) => (s, "status", Value::Null),
         C::Estop { reset, sock } => (
