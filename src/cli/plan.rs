@@ -18,16 +18,21 @@ pub struct PlanArgs {
     pub motion: MotionArgs,
 }
 
-/// Motion configuration from an optional TOML file, then command-line overrides (shared by
-/// `plan` and `plot`). Until the machine TOML is mapped onto `MotionConfig`, the file holds
-/// the keys of [`MotionOverrides`].
+/// Motion configuration (shared by `plan` and `plot`): a machine description (`--config`,
+/// the same TOML `hytask serve` runs) or generic limits, then an optional motion-only TOML
+/// file of [`MotionOverrides`] (`--motion`), then command-line overrides.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct MotionArgs {
-    /// TOML file with motion settings (keys: max_vel_mm_s, max_acc_mm_s2, max_jerk_mm_s3,
-    /// servo_period_s, default_tolerance_mm, lookahead_moves, merge_fraction,
-    /// override_reserve, min_mm, max_mm).
+    /// Machine description (TOML, as for `hytask serve`): plan with its axis limits, soft
+    /// limits, servo period, lookahead and kinematics. Without it: generic limits (50 mm/s,
+    /// 500 mm/s², 50,000 mm/s³ per axis, 1 ms servo period).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// TOML file with motion settings applied on top (keys: max_vel_mm_s, max_acc_mm_s2,
+    /// max_jerk_mm_s3, servo_period_s, default_tolerance_mm, lookahead_moves,
+    /// merge_fraction, override_reserve, min_mm, max_mm).
+    #[arg(long = "motion")]
+    pub motion_file: Option<PathBuf>,
     /// Velocity limit of X Y Z, mm/s.
     #[arg(long)]
     pub max_vel: Option<f64>,
@@ -80,7 +85,7 @@ pub struct MotionOverrides {
 impl MotionArgs {
     /// The resulting configuration.
     pub fn config(&self) -> anyhow::Result<MotionConfig> {
-        let mut o = match &self.config {
+        let mut o = match &self.motion_file {
             Some(p) => {
                 let text = std::fs::read_to_string(p)
                     .with_context(|| format!("reading {}", p.display()))?;
@@ -99,7 +104,10 @@ impl MotionArgs {
         o.default_tolerance_mm = self.tolerance.or(o.default_tolerance_mm);
         o.lookahead_moves = self.lookahead.or(o.lookahead_moves);
         o.merge_fraction = self.merge_fraction.or(o.merge_fraction);
-        let mut cfg = MotionConfig::default();
+        let mut cfg = match &self.config {
+            Some(p) => crate::machine::job::motion_config(&crate::config::load(p)?),
+            None => MotionConfig::default(),
+        };
         for a in &mut cfg.axes[0..3] {
             a.max_vel_mm_s = o.max_vel_mm_s.unwrap_or(a.max_vel_mm_s);
             a.max_acc_mm_s2 = o.max_acc_mm_s2.unwrap_or(a.max_acc_mm_s2);
@@ -237,6 +245,18 @@ mod tests {
     use std::io::Write;
 
     #[test]
+    fn a_machine_description_gives_its_limits() {
+        let args = MotionArgs {
+            config: Some(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim.toml")),
+            ..MotionArgs::default()
+        };
+        let cfg = args.config().unwrap();
+        assert_eq!(cfg.axes[0].max_vel_mm_s, 100.0);
+        assert_eq!(cfg.axes[2].max_vel_mm_s, 50.0);
+        assert_eq!((cfg.axes[2].min_mm, cfg.axes[2].max_mm), (-100.0, 0.0));
+    }
+
+    #[test]
     fn config_file_then_flags_override_defaults() {
         let mut f = tempfile::NamedTempFile::new().unwrap();
         writeln!(
@@ -245,7 +265,7 @@ mod tests {
         )
         .unwrap();
         let args = MotionArgs {
-            config: Some(f.path().into()),
+            motion_file: Some(f.path().into()),
             max_acc: Some(700.0),
             ..Default::default()
         };
@@ -293,7 +313,7 @@ mod tests {
         let mut f = tempfile::NamedTempFile::new().unwrap();
         writeln!(f, "max_velocity = 80.0").unwrap();
         let args = MotionArgs {
-            config: Some(f.path().into()),
+            motion_file: Some(f.path().into()),
             ..Default::default()
         };
         assert!(args.config().is_err());
