@@ -186,32 +186,11 @@ fn follow_job(mut c: Client, job: &std::path::Path, feed: Option<f64>) -> anyhow
         "distance:   {:.1} mm",
         job_status["distance_mm"].as_f64().unwrap_or(0.0)
     );
-    let ferr: Vec<String> = status["axes"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .map(|a| {
-            format!(
-                "{} {:.4}",
-                a["name"].as_str().unwrap_or("?"),
-                a["max_following_error"].as_f64().unwrap_or(f64::NAN)
-            )
-        })
-        .collect();
-    println!("max following error (mm): {}", ferr.join("  "));
-    let pos: Vec<String> = status["axes"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .map(|a| {
-            format!(
-                "{} {:.4}",
-                a["name"].as_str().unwrap_or("?"),
-                a["actual"].as_f64().unwrap_or(f64::NAN)
-            )
-        })
-        .collect();
-    println!("final position (machine): {}", pos.join("  "));
+    println!(
+        "max following error (mm): {}",
+        per_axis(&status, "max_following_error")
+    );
+    println!("final position (machine): {}", per_axis(&status, "actual"));
     for f in status["faults"].as_array().into_iter().flatten() {
         println!("fault:      {}", f.as_str().unwrap_or(""));
     }
@@ -220,6 +199,23 @@ fn follow_job(mut c: Client, job: &std::path::Path, feed: Option<f64>) -> anyhow
     } else {
         ExitCode::FAILURE
     })
+}
+
+/// `X 1.2345  Y ...`: one field of every axis of a status reply.
+fn per_axis(status: &Value, field: &str) -> String {
+    status["axes"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|a| {
+            format!(
+                "{} {:.4}",
+                a["name"].as_str().unwrap_or("?"),
+                a[field].as_f64().unwrap_or(f64::NAN)
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("  ")
 }
 
 fn wait_for_mode(c: &mut Client, mode: &str, timeout: Duration) -> anyhow::Result<()> {

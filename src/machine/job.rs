@@ -171,6 +171,19 @@ mod tests {
         crate::config::builtin_sim().expect("built-in config")
     }
 
+    const START: [f64; NUM_AXES] = [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+
+    /// Prepares inline `text` named `name` on the built-in mill, starting at [`START`].
+    fn prepare_text(name: Option<&str>, text: &str) -> Result<PreparedJob, ApiError> {
+        let cfg = sim();
+        let src = JobSource {
+            path: None,
+            text: Some(text.into()),
+            name: name.map(str::to_string),
+        };
+        prepare(&src, &interp_options(&cfg), &motion_config(&cfg), START)
+    }
+
     #[test]
     fn motion_config_takes_axis_limits_and_servo_period() {
         let m = motion_config(&sim());
@@ -184,19 +197,8 @@ mod tests {
 
     #[test]
     fn a_job_with_a_gcode_error_is_refused_with_its_location() {
-        let cfg = sim();
-        let src = JobSource {
-            path: None,
-            text: Some("G21 G90\nG0 X10 Y10 Z-5\nG1 X20 F600 G0\n".into()),
-            name: Some("bad.ngc".into()),
-        };
-        let e = prepare(
-            &src,
-            &interp_options(&cfg),
-            &motion_config(&cfg),
-            [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        )
-        .unwrap_err();
+        let e =
+            prepare_text(Some("bad.ngc"), "G21 G90\nG0 X10 Y10 Z-5\nG1 X20 F600 G0\n").unwrap_err();
         let ApiError::Gcode(msg) = e else {
             panic!("{e:?}")
         };
@@ -205,17 +207,9 @@ mod tests {
 
     #[test]
     fn a_job_leaving_the_soft_limits_is_refused_before_motion() {
-        let cfg = sim();
-        let src = JobSource {
-            path: None,
-            text: Some("G21 G90\nG0 X10 Y10 Z-5\nG1 X400 F600\nM2\n".into()),
-            name: Some("far.ngc".into()),
-        };
-        let e = prepare(
-            &src,
-            &interp_options(&cfg),
-            &motion_config(&cfg),
-            [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        let e = prepare_text(
+            Some("far.ngc"),
+            "G21 G90\nG0 X10 Y10 Z-5\nG1 X400 F600\nM2\n",
         )
         .unwrap_err();
         let msg = e.to_string();
@@ -274,19 +268,7 @@ mod tests {
 
     #[test]
     fn a_good_job_is_planned_in_full() {
-        let cfg = sim();
-        let src = JobSource {
-            path: None,
-            text: Some("G21 G90\nG0 X10 Y10 Z-5\nG1 X20 F600\nM2\n".into()),
-            name: None,
-        };
-        let j = prepare(
-            &src,
-            &interp_options(&cfg),
-            &motion_config(&cfg),
-            [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        )
-        .expect("plans");
+        let j = prepare_text(None, "G21 G90\nG0 X10 Y10 Z-5\nG1 X20 F600\nM2\n").expect("plans");
         assert_eq!(j.name, "inline");
         assert_eq!(j.total_lines, 4);
         assert!(
