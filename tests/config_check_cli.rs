@@ -27,7 +27,7 @@ fn a_valid_file_prints_the_resolved_machine_and_exits_zero() {
         stdout.contains("quick_stop_deceleration = 2000.0"),
         "{stdout}"
     );
-    assert!(stdout.contains("max_feed_override = 1.5"), "{stdout}");
+    assert!(stdout.contains("max_feed_override = 2.0"), "{stdout}");
     assert!(
         stderr.contains("config/sim.toml: OK: machine \"sim-mill\", axes XYZ"),
         "{stderr}"

@@ -95,7 +95,7 @@ fn defaults_are_filled_in_when_resolving() {
     let x = m.drive("x").unwrap().sim.clone().unwrap();
     // Not in the file: twice the axis' max_acceleration.
     assert_eq!(x.quick_stop_deceleration, Some(2000.0));
-    assert_eq!(m.motion.max_feed_override, 1.5);
+    assert_eq!(m.motion.max_feed_override, 2.0);
     let text = m.to_toml().unwrap();
     assert!(text.contains("quick_stop_deceleration = 2000.0"), "{text}");
     assert!(text.contains("spin_up_s = 1.0"), "{text}");

@@ -144,7 +144,7 @@ fn default_rapid_override() -> f64 {
     1.0
 }
 fn default_max_feed_override() -> f64 {
-    1.5
+    2.0
 }
 
 impl Default for MotionConfig {
