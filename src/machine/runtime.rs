@@ -110,6 +110,7 @@ pub struct Machine {
     bridge: Mutex<Option<std::thread::JoinHandle<()>>>,
     step_pending: AtomicBool,
     step_line: AtomicU32,
+    receivers: Mutex<Option<Receivers>>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -395,12 +396,17 @@ impl Machine {
             bridge: Mutex::new(None),
             step_pending: AtomicBool::new(false),
             step_line: AtomicU32::new(0),
+            receivers: Mutex::new(Some(Receivers {
+                mode: mode_rx,
+                job: job_rx,
+                fault: fault_rx,
+            })),
         });
         let weak = Arc::downgrade(&m);
         let stop = m.bridge_stop.clone();
         let bridge = std::thread::Builder::new()
             .name("event-bridge".into())
-            .spawn(move || bridge_loop(weak, stop, mode_rx, job_rx, fault_rx))
+            .spawn(move || bridge_loop(weak, stop))
             .map_err(|e| DeployError::Invalid(format!("cannot start the event bridge: {e}")))?;
         *lock(&m.bridge) = Some(bridge);
         Ok(m)
@@ -425,13 +431,30 @@ impl Machine {
             .machine
             .send(cmd)
             .map_err(|e| ApiError::Rejected(e.to_string()))?;
-        match h.wait_accepted(ACCEPT_TIMEOUT) {
+        let status = h.wait_accepted(ACCEPT_TIMEOUT);
+        self.wait_for_cycle_end();
+        match status {
             CommandStatus::Rejected(r) => Err(ApiError::Rejected(r.to_string())),
             CommandStatus::Failed(why) => Err(ApiError::Failed(why.into())),
             CommandStatus::Pending => Err(ApiError::Timeout(
                 "the machine task did not take the command".into(),
             )),
             _ => Ok(h),
+        }
+    }
+
+    /// Waits until the servo cycle running now has finished (the next one has started). A
+    /// command is accepted in the middle of a cycle and the machine task publishes its state
+    /// at the end of it: waiting makes a command's effect visible in `status` by the time
+    /// the operator's call returns. At most one servo period.
+    fn wait_for_cycle_end(&self) {
+        let now = self.servo.stats.wakeup.summary().count;
+        let t0 = Instant::now();
+        while self.servo.stats.wakeup.summary().count <= now
+            && self.servo.running()
+            && t0.elapsed() < Duration::from_millis(100)
+        {
+            std::thread::sleep(Duration::from_micros(100));
         }
     }
 
@@ -588,38 +611,53 @@ fn feed(queue: BufferWriter<QueueItem>, items: &[motion::Item], job: u32, cancel
 }
 
 /// Forwards realtime events to subscribers, keeps the job book, publishes progress.
-fn bridge_loop(
-    machine: std::sync::Weak<Machine>,
-    stop: Arc<AtomicBool>,
-    mut mode_rx: EventReceiver<ModeEvent>,
-    mut job_rx: EventReceiver<JobEvent>,
-    mut fault_rx: EventReceiver<FaultEvent>,
-) {
+/// The realtime side's event receivers, drained by the bridge thread and by `status`.
+struct Receivers {
+    mode: EventReceiver<ModeEvent>,
+    job: EventReceiver<JobEvent>,
+    fault: EventReceiver<FaultEvent>,
+}
+
+impl Machine {
+    /// Applies and forwards every pending realtime event. Called by the bridge every few
+    /// milliseconds, and by `status` after it read the snapshot: the machine task emits a
+    /// job's end in the same cycle as the mode change, so a status never shows the new mode
+    /// with the old job state.
+    fn pump_events(&self) {
+        let mut guard = lock(&self.receivers);
+        let Some(rx) = guard.as_mut() else {
+            return;
+        };
+        while let Some(e) = rx.mode.pop() {
+            let mode = serde_json::to_value(e.mode).unwrap_or(Value::Null);
+            tracing::info!("mode: {mode}");
+            self.publish("mode", json!({ "mode": mode }));
+        }
+        while let Some(f) = rx.fault.pop() {
+            let msg = describe_trip(&f.trip, f.line);
+            tracing::error!("fault: {msg}");
+            let mut book = lock(&self.book);
+            if book.faults.len() == FAULT_HISTORY {
+                book.faults.pop_front();
+            }
+            book.faults.push_back(msg);
+            drop(book);
+            self.publish("fault", trip_json(&f.trip, f.line));
+        }
+        while let Some(e) = rx.job.pop() {
+            handle_job_event(self, e);
+        }
+    }
+}
+
+fn bridge_loop(machine: std::sync::Weak<Machine>, stop: Arc<AtomicBool>) {
     let mut last_progress = Instant::now();
     while !stop.load(Ordering::Acquire) {
         std::thread::sleep(Duration::from_millis(5));
         let Some(m) = machine.upgrade() else {
             return;
         };
-        while let Some(e) = mode_rx.pop() {
-            let mode = serde_json::to_value(e.mode).unwrap_or(Value::Null);
-            tracing::info!("mode: {mode}");
-            m.publish("mode", json!({ "mode": mode }));
-        }
-        while let Some(f) = fault_rx.pop() {
-            let msg = describe_trip(&f.trip, f.line);
-            tracing::error!("fault: {msg}");
-            let mut book = lock(&m.book);
-            if book.faults.len() == FAULT_HISTORY {
-                book.faults.pop_front();
-            }
-            book.faults.push_back(msg);
-            drop(book);
-            m.publish("fault", trip_json(&f.trip, f.line));
-        }
-        while let Some(e) = job_rx.pop() {
-            handle_job_event(&m, e);
-        }
+        m.pump_events();
         if m.step_pending.load(Ordering::Acquire) {
             let (snap, sp, _, _) = m.snapshot();
             if snap.mode == Mode::Running && sp.line != 0 {
@@ -725,6 +763,7 @@ fn handle_job_event(m: &Machine, e: JobEvent) {
 impl MachineApi for Machine {
     fn status(&self) -> Status {
         let (snap, sp, mon, fb) = self.snapshot();
+        self.pump_events();
         let axes = fb
             .iter()
             .map(|&(c, i, f)| AxisStatus {
