@@ -830,10 +830,8 @@ impl Deployment {
             activities.push(PeriodicActivity::spawn(g)?);
         }
         Ok(Runtime {
-            reg: self.reg,
-            tasks: self.tasks,
+            core: RuntimeCore::from(self),
             activities,
-            policy: self.policy,
         })
     }
 
@@ -846,11 +844,9 @@ impl Deployment {
             .map(|g| SteppedActivity::new(g, clock.clone()))
             .collect();
         Ok(SteppedRuntime {
-            reg: self.reg,
-            tasks: self.tasks,
+            core: RuntimeCore::from(self),
             activities,
             clock,
-            policy: self.policy,
         })
     }
 
@@ -912,22 +908,72 @@ fn task_status(tasks: &[TaskInfo]) -> Vec<TaskStatus> {
         .collect()
 }
 
-/// Tasks running on periodic threads.
-pub struct Runtime {
+/// What both runtimes share: the registry of ports and events, the tasks and the overrun
+/// policy. The runtimes differ only in how their threads are driven.
+struct RuntimeCore {
     reg: Registry,
     tasks: Vec<TaskInfo>,
-    activities: Vec<PeriodicActivity>,
     policy: OverrunPolicy,
+}
+
+impl From<Deployment> for RuntimeCore {
+    fn from(d: Deployment) -> Self {
+        RuntimeCore {
+            reg: d.reg,
+            tasks: d.tasks,
+            policy: d.policy,
+        }
+    }
+}
+
+impl RuntimeCore {
+    fn task(&self, name: &str) -> Option<&TaskInfo> {
+        self.tasks.iter().find(|t| t.name() == name)
+    }
+
+    /// Status as data; `simulated` threads never count as realtime.
+    fn status(&self, threads: &[Arc<ThreadInfo>], simulated: bool) -> RuntimeStatus {
+        let rt = |t: &ThreadInfo| !simulated && t.realtime();
+        RuntimeStatus {
+            realtime: threads.iter().all(|t| rt(t)),
+            threads: threads
+                .iter()
+                .map(|t| ThreadStatus {
+                    spec: t.spec.clone(),
+                    realtime: rt(t),
+                    timing: t.stats.summary(),
+                })
+                .collect(),
+            tasks: task_status(&self.tasks),
+        }
+    }
+
+    /// Back to a configured deployment holding the stopped `groups`.
+    fn into_deployment(self, groups: Vec<TaskGroup>) -> Deployment {
+        Deployment {
+            reg: self.reg,
+            groups,
+            tasks: self.tasks,
+            configured: true,
+            policy: self.policy,
+        }
+    }
+}
+
+/// Tasks running on periodic threads.
+pub struct Runtime {
+    core: RuntimeCore,
+    activities: Vec<PeriodicActivity>,
 }
 
 impl Runtime {
     /// Every task, in the order added.
     pub fn tasks(&self) -> &[TaskInfo] {
-        &self.tasks
+        &self.core.tasks
     }
     /// A task by name.
     pub fn task(&self, name: &str) -> Option<&TaskInfo> {
-        self.tasks.iter().find(|t| t.name() == name)
+        self.core.task(name)
     }
     /// The threads.
     pub fn threads(&self) -> Vec<Arc<ThreadInfo>> {
@@ -939,57 +985,37 @@ impl Runtime {
     }
     /// Status of threads and tasks, as data.
     pub fn status(&self) -> RuntimeStatus {
-        RuntimeStatus {
-            realtime: self.realtime(),
-            threads: self
-                .activities
-                .iter()
-                .map(|a| ThreadStatus {
-                    spec: a.info().spec.clone(),
-                    realtime: a.info().realtime(),
-                    timing: a.info().stats.summary(),
-                })
-                .collect(),
-            tasks: task_status(&self.tasks),
-        }
+        self.core.status(&self.threads(), false)
     }
     /// A new reader of data object `name`.
     pub fn reader<T: Clone + Default + Send + Sync + 'static>(
         &self,
         name: &str,
     ) -> Result<DataReader<T>, DeployError> {
-        self.reg.reader(name)
+        self.core.reg.reader(name)
     }
     /// Event `name`: a non-realtime consumer may subscribe (its queue is picked up by the
     /// emitter at its next emit, without blocking it).
     pub fn event<T: Clone + Send + 'static>(&self, name: &str) -> Result<Event<T>, DeployError> {
-        self.reg.find_event(name)
+        self.core.reg.find_event(name)
     }
     /// Stops every thread (tasks' `stop` hooks run on their threads) and returns the
     /// configured deployment, which can be started again or cleaned up.
-    pub fn stop(mut self) -> Deployment {
+    pub fn stop(self) -> Deployment {
         let groups = self
             .activities
-            .drain(..)
+            .into_iter()
             .filter_map(PeriodicActivity::stop)
             .collect();
-        Deployment {
-            reg: std::mem::take(&mut self.reg),
-            groups,
-            tasks: std::mem::take(&mut self.tasks),
-            configured: true,
-            policy: self.policy,
-        }
+        self.core.into_deployment(groups)
     }
 }
 
 /// Tasks stepped on the caller's thread against a simulated clock.
 pub struct SteppedRuntime {
-    reg: Registry,
-    tasks: Vec<TaskInfo>,
+    core: RuntimeCore,
     activities: Vec<SteppedActivity>,
     clock: SimClock,
-    policy: OverrunPolicy,
 }
 
 impl SteppedRuntime {
@@ -1035,11 +1061,11 @@ impl SteppedRuntime {
     }
     /// Every task.
     pub fn tasks(&self) -> &[TaskInfo] {
-        &self.tasks
+        &self.core.tasks
     }
     /// A task by name.
     pub fn task(&self, name: &str) -> Option<&TaskInfo> {
-        self.tasks.iter().find(|t| t.name() == name)
+        self.core.task(name)
     }
     /// The threads' information.
     pub fn threads(&self) -> Vec<Arc<ThreadInfo>> {
@@ -1050,45 +1076,27 @@ impl SteppedRuntime {
     }
     /// Status as data (`realtime` is always false: simulated time).
     pub fn status(&self) -> RuntimeStatus {
-        RuntimeStatus {
-            realtime: false,
-            threads: self
-                .activities
-                .iter()
-                .map(|a| ThreadStatus {
-                    spec: a.group().info().spec.clone(),
-                    realtime: false,
-                    timing: a.group().info().stats.summary(),
-                })
-                .collect(),
-            tasks: task_status(&self.tasks),
-        }
+        self.core.status(&self.threads(), true)
     }
     /// A new reader of data object `name`.
     pub fn reader<T: Clone + Default + Send + Sync + 'static>(
         &self,
         name: &str,
     ) -> Result<DataReader<T>, DeployError> {
-        self.reg.reader(name)
+        self.core.reg.reader(name)
     }
     /// Event `name`.
     pub fn event<T: Clone + Send + 'static>(&self, name: &str) -> Result<Event<T>, DeployError> {
-        self.reg.find_event(name)
+        self.core.reg.find_event(name)
     }
     /// Stops every task and returns the deployment.
-    pub fn stop(mut self) -> Deployment {
+    pub fn stop(self) -> Deployment {
         let groups = self
             .activities
-            .drain(..)
+            .into_iter()
             .map(SteppedActivity::stop)
             .collect();
-        Deployment {
-            reg: std::mem::take(&mut self.reg),
-            groups,
-            tasks: std::mem::take(&mut self.tasks),
-            configured: true,
-            policy: self.policy,
-        }
+        self.core.into_deployment(groups)
     }
 }
 
