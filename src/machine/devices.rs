@@ -100,37 +100,40 @@ pub struct IoMap {
 impl IoMap {
     /// Numbers the channels of `cfg`; fails when there are more than the servo data can carry.
     pub fn new(cfg: &MachineConfig) -> Result<IoMap, String> {
-        let mut m = IoMap::default();
-        for (d, io) in cfg.io.iter().enumerate() {
-            for (c, p) in io.digital_inputs.iter().enumerate() {
-                m.di.push(DigitalChannel {
-                    device: d,
-                    channel: c,
-                    point: p.clone(),
-                });
-            }
-            for (c, p) in io.digital_outputs.iter().enumerate() {
-                m.dout.push(DigitalChannel {
-                    device: d,
-                    channel: c,
-                    point: p.clone(),
-                });
-            }
-            for (c, p) in io.analog_inputs.iter().enumerate() {
-                m.ai.push(AnalogChannel {
-                    device: d,
-                    channel: c,
-                    point: p.clone(),
-                });
-            }
-            for (c, p) in io.analog_outputs.iter().enumerate() {
-                m.ao.push(AnalogChannel {
-                    device: d,
-                    channel: c,
-                    point: p.clone(),
-                });
-            }
+        // Machine-wide numbering: configuration order across devices, channel order within.
+        fn number<P: Clone, C>(
+            cfg: &MachineConfig,
+            points: impl Fn(&crate::config::IoConfig) -> &[P],
+            make: impl Fn(usize, usize, P) -> C,
+        ) -> Vec<C> {
+            cfg.io
+                .iter()
+                .enumerate()
+                .flat_map(|(d, io)| {
+                    points(io)
+                        .iter()
+                        .enumerate()
+                        .map(|(c, p)| make(d, c, p.clone()))
+                        .collect::<Vec<_>>()
+                })
+                .collect()
         }
+        let digital = |device, channel, point| DigitalChannel {
+            device,
+            channel,
+            point,
+        };
+        let analog = |device, channel, point| AnalogChannel {
+            device,
+            channel,
+            point,
+        };
+        let m = IoMap {
+            di: number(cfg, |io| &io.digital_inputs, digital),
+            dout: number(cfg, |io| &io.digital_outputs, digital),
+            ai: number(cfg, |io| &io.analog_inputs, analog),
+            ao: number(cfg, |io| &io.analog_outputs, analog),
+        };
         if m.di.len() > MAX_DIGITAL || m.dout.len() > MAX_DIGITAL {
             return Err(format!(
                 "io: at most {MAX_DIGITAL} digital inputs and {MAX_DIGITAL} outputs per machine"

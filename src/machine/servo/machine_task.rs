@@ -526,26 +526,8 @@ impl MachineTask {
                 }
             }
             AuxKind::SpindleStop => self.spindle_stop(),
-            AuxKind::Flood(on) => {
-                if let Some(o) = self.setup.flood_output {
-                    self.outputs.set_do(o, on);
-                }
-                if !on {
-                    if let Some(o) = self.setup.mist_output {
-                        self.outputs.set_do(o, false);
-                    }
-                }
-            }
-            AuxKind::Mist(on) => {
-                if let Some(o) = self.setup.mist_output {
-                    self.outputs.set_do(o, on);
-                }
-                if !on {
-                    if let Some(o) = self.setup.flood_output {
-                        self.outputs.set_do(o, false);
-                    }
-                }
-            }
+            AuxKind::Flood(on) => self.coolant(self.setup.flood_output, self.setup.mist_output, on),
+            AuxKind::Mist(on) => self.coolant(self.setup.mist_output, self.setup.flood_output, on),
             AuxKind::SelectTool(_) | AuxKind::StartToolChange => {}
             AuxKind::ChangeTool(t) | AuxKind::ChangeToolNumber(t) => self.snap.tool = t,
             AuxKind::DigitalOutput { index, on, .. } => self.outputs.set_do(index as usize, on),
@@ -585,16 +567,21 @@ impl MachineTask {
             AuxKind::OptionalProgramStop => {}
             AuxKind::ProgramEnd => {
                 self.spindle_stop();
-                if let Some(o) = self.setup.flood_output {
-                    self.outputs.set_do(o, false);
-                }
-                if let Some(o) = self.setup.mist_output {
-                    self.outputs.set_do(o, false);
-                }
+                self.coolant(self.setup.flood_output, self.setup.mist_output, false);
             }
         }
         if done && kind.is_barrier() {
             self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
+        }
+    }
+
+    /// M7/M8 switch one coolant on; M9 (`on` false) switches both off, as LinuxCNC does.
+    fn coolant(&mut self, this: Option<usize>, other: Option<usize>, on: bool) {
+        if let Some(o) = this {
+            self.outputs.set_do(o, on);
+        }
+        if let (Some(o), false) = (other, on) {
+            self.outputs.set_do(o, false);
         }
     }
 
