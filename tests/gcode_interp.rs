@@ -369,3 +369,26 @@ fn initial_position_is_where_the_program_starts() {
         .iter()
         .any(|c| matches!(c.cmd, CanonCmd::StraightFeed(e) if e[0] == 1.0 && e[1] == 0.0)));
 }
+
+#[test]
+fn mdi_mode_needs_no_program_end_and_keeps_modes() {
+    let mdi = InterpOptions {
+        mdi: true,
+        ..InterpOptions::default()
+    };
+    let p = load_str("mdi", "G91 G1 X2 F100\n", &mdi).unwrap();
+    assert!(p
+        .canon
+        .iter()
+        .any(|c| matches!(c.cmd, CanonCmd::StraightFeed(e) if e[0] == 2.0)));
+    // No M2 side effects: the spindle is not stopped, the feed rate not reset.
+    assert!(!p
+        .canon
+        .iter()
+        .any(|c| matches!(c.cmd, CanonCmd::StopSpindle | CanonCmd::ProgramEnd)));
+    // A program (not MDI) still needs its end.
+    let e = err("G1 X2 F100\n");
+    assert!(e.message.contains("program end"), "{e}");
+    let e = err_with("G1 X1 G0\n", &mdi);
+    assert_eq!((e.file.as_str(), e.line), ("t.ngc", 1));
+}

@@ -94,6 +94,10 @@ pub struct InterpOptions {
     /// others where they are, and incremental moves and arcs start from the real position.
     /// `None` starts at 0, as `rs274` does standalone (the differential tests use that).
     pub initial_position: Option<[f64; 6]>,
+    /// MDI: the text is a block (or a few) typed by an operator, not a program. It ends at the
+    /// end of the text, with no `%` or M2 needed and none of M2's resets, as in LinuxCNC's
+    /// MDI mode.
+    pub mdi: bool,
     /// Resource limits.
     pub limits: Limits,
 }
@@ -108,6 +112,7 @@ impl Default for InterpOptions {
             machine_units: LengthUnits::Millimeters,
             initial_units: LengthUnits::Millimeters,
             initial_position: None,
+            mdi: false,
             limits: Limits::default(),
         }
     }

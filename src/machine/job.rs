@@ -138,21 +138,18 @@ pub fn prepare(
     })
 }
 
-/// Interprets and plans one MDI line. The line runs as a `%`-delimited program, which the
-/// interpreter ends without the side effects of M2 (no reset of spindle, coolant or modes),
-/// as LinuxCNC's MDI does; errors are reported against the line itself (`mdi:1:col`).
+/// Interprets and plans one MDI line (the interpreter's MDI mode: no program end needed, none
+/// of M2's resets); errors name `mdi:1:col`.
 pub fn prepare_mdi(
     line: &str,
     opts: &InterpOptions,
     motion: &MotionConfig,
     start_mm: [f64; NUM_AXES],
 ) -> Result<PreparedJob, ApiError> {
-    let text = format!("%\n{line}\n%\n");
-    let program =
-        gcode::load_str("mdi", &text, &starting_at(opts, start_mm)).map_err(|mut e| {
-            e.line = e.line.saturating_sub(1).max(1);
-            ApiError::Gcode(e.to_string())
-        })?;
+    let mut opts = starting_at(opts, start_mm);
+    opts.mdi = true;
+    let program = gcode::load_str("mdi", &format!("{line}\n"), &opts)
+        .map_err(|e| ApiError::Gcode(e.to_string()))?;
     let plan = motion::plan_from(&program.canon, motion, start_mm)
         .map_err(|e| ApiError::Gcode(format!("mdi: {e}")))?;
     Ok(PreparedJob {

@@ -318,7 +318,8 @@ impl<'a> Interp<'a> {
             self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
             self.loc.col = 1;
             if l >= self.files[f].end {
-                if f == 0 && self.files[0].closed && self.frames.is_empty() {
+                let ended = self.files[0].closed || self.opts.mdi;
+                if f == 0 && ended && self.frames.is_empty() {
                     self.emit(CanonCmd::Finish)?;
                     self.emit(CanonCmd::OnReset)?;
                     self.emit(CanonCmd::OnReset)?;
