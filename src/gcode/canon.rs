@@ -139,6 +139,29 @@ pub enum ProbeKind {
     Away,
 }
 
+impl ProbeKind {
+    /// G38.2/G38.3 stop when the probe input becomes active; G38.4/G38.5 when it becomes
+    /// inactive.
+    pub fn toward(self) -> bool {
+        matches!(self, ProbeKind::TowardErr | ProbeKind::Toward)
+    }
+
+    /// G38.2/G38.4: a move that ends without the expected change is an error.
+    pub fn needs_contact(self) -> bool {
+        matches!(self, ProbeKind::TowardErr | ProbeKind::AwayErr)
+    }
+
+    /// The G code, for messages.
+    pub fn gcode(self) -> &'static str {
+        match self {
+            ProbeKind::TowardErr => "G38.2",
+            ProbeKind::Toward => "G38.3",
+            ProbeKind::AwayErr => "G38.4",
+            ProbeKind::Away => "G38.5",
+        }
+    }
+}
+
 /// One canonical machining command. Variants mirror LinuxCNC canon calls; the doc comment of
 /// each names the call `rs274 -g` prints for it.
 #[derive(Debug, Clone, PartialEq)]

@@ -29,9 +29,11 @@ pub mod lexer;
 pub mod modal;
 pub mod params;
 pub mod parser;
+pub mod session;
 pub mod tooltable;
 
-pub use canon::{Canon, CanonCmd, LengthUnits, Pose, SourceLoc, NUM_AXES};
+pub use canon::{Canon, CanonCmd, LengthUnits, Pose, ProbeKind, SourceLoc, NUM_AXES};
+pub use session::{PieceEnd, ProbeResult, Session};
 
 use std::path::{Path, PathBuf};
 

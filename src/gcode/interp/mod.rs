@@ -20,6 +20,7 @@ use super::params::{self, Params};
 use super::parser::{self, Line, OKind, OStmt, Target};
 use super::tooltable::ToolTable;
 use super::{GcodeError, InterpOptions};
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -181,7 +182,8 @@ pub(crate) struct Frame {
 
 /// The interpreter.
 pub(crate) struct Interp<'a> {
-    pub(crate) opts: &'a InterpOptions,
+    /// Borrowed for a one-shot run, owned by a [`crate::gcode::Session`].
+    pub(crate) opts: Cow<'a, InterpOptions>,
     pub(crate) out: Sink,
     /// Commands emitted so far.
     count: usize,
@@ -203,10 +205,25 @@ pub(crate) struct Interp<'a> {
     cycle_axes: (usize, usize, usize),
     ended: bool,
     steps: u64,
+    /// Probing is live (a [`crate::gcode::Session`]): a G38.x line ends the piece and the
+    /// interpreter waits for the machine's result. Otherwise the probe is simulated as
+    /// `rs274` does (it trips at the programmed end).
+    pub(crate) live_probe: bool,
+    /// The probe of the line just executed, waiting for its result (live probing only).
+    pub(crate) pending_probe: Option<PendingProbe>,
+}
+
+/// A probe move the interpreter has emitted and whose result it needs before going on.
+#[derive(Debug, Clone)]
+pub(crate) struct PendingProbe {
+    /// G38.2 .. G38.5.
+    pub kind: crate::gcode::canon::ProbeKind,
+    /// Where the G38 word is.
+    pub loc: SourceLoc,
 }
 
 impl<'a> Interp<'a> {
-    pub(crate) fn new(opts: &'a InterpOptions) -> Result<Self, GcodeError> {
+    pub(crate) fn new(opts: Cow<'a, InterpOptions>) -> Result<Self, GcodeError> {
         let tools = match &opts.tool_table {
             Some(p) => ToolTable::load(p).map_err(|(line, message)| GcodeError {
                 file: p.display().to_string(),
@@ -216,7 +233,7 @@ impl<'a> Interp<'a> {
             })?,
             None => ToolTable::default(),
         };
-        let mut s = Settings::new(opts);
+        let mut s = Settings::new(&opts);
         s.units = opts.initial_units;
         if let Some(p) = opts.initial_position {
             // Offsets are zero at start: the program frame is the machine frame, in the
@@ -248,6 +265,8 @@ impl<'a> Interp<'a> {
             cycle_axes: (0, 1, 2),
             ended: false,
             steps: 0,
+            live_probe: false,
+            pending_probe: None,
         })
     }
 
@@ -292,10 +311,16 @@ impl<'a> Interp<'a> {
         }
     }
 
-    /// Runs the program in `text`.
+    /// Runs the program in `text` to its end.
     pub(crate) fn run(&mut self, name: &str, text: String) -> Result<(), GcodeError> {
+        self.load(name, text)?;
+        self.resume()
+    }
+
+    /// Loads the program in `text` and emits the start-up calls.
+    pub(crate) fn load(&mut self, name: &str, text: String) -> Result<(), GcodeError> {
         let name: Arc<str> = Arc::from(name);
-        let src = Source::new(name.clone(), text, self.opts)?;
+        let src = Source::new(name.clone(), text, &self.opts)?;
         // Most programs produce about one command per line.
         let expect = (src.lines.len() + 32).min(self.opts.limits.max_canon);
         match &mut self.out {
@@ -310,6 +335,17 @@ impl<'a> Interp<'a> {
         };
         self.preamble()?;
         self.pc = (0, 0);
+        Ok(())
+    }
+
+    /// True once the program has ended (M2/M30, closing `%`, end of MDI text).
+    pub(crate) fn ended(&self) -> bool {
+        self.ended
+    }
+
+    /// Executes lines until the program ends or, with live probing, until a line that
+    /// probes has been executed (then [`Self::pending_probe`] is set).
+    pub(crate) fn resume(&mut self) -> Result<(), GcodeError> {
         while !self.ended {
             let (f, l) = self.pc;
             if !Arc::ptr_eq(&self.loc.file, &self.files[f].name) {
@@ -323,6 +359,7 @@ impl<'a> Interp<'a> {
                     self.emit(CanonCmd::Finish)?;
                     self.emit(CanonCmd::OnReset)?;
                     self.emit(CanonCmd::OnReset)?;
+                    self.ended = true;
                     return Ok(());
                 }
                 let last = self.files[f].end.max(1);
@@ -341,6 +378,9 @@ impl<'a> Interp<'a> {
                 ));
             }
             self.step(f, l)?;
+            if self.pending_probe.is_some() {
+                return Ok(());
+            }
         }
         Ok(())
     }
@@ -471,7 +511,7 @@ impl<'a> Interp<'a> {
                     self.err(1, format!("Unable to open file {}: {e}", path.display()))
                 })?;
                 let name: Arc<str> = Arc::from(path.display().to_string());
-                let src = Source::new(name, text, self.opts)?;
+                let src = Source::new(name, text, &self.opts)?;
                 let lines = src.by_label.get(label).cloned().unwrap_or_default();
                 let def = lines
                     .iter()
@@ -524,7 +564,7 @@ pub(crate) fn interpret(
     text: String,
     opts: &InterpOptions,
 ) -> Result<Vec<Canon>, GcodeError> {
-    let mut it = Interp::new(opts)?;
+    let mut it = Interp::new(Cow::Borrowed(opts))?;
     it.run(name, text)?;
     match it.out {
         Sink::Canon(v) => Ok(v),
@@ -538,7 +578,7 @@ pub(crate) fn interpret_trace(
     text: String,
     opts: &InterpOptions,
 ) -> Result<Vec<u8>, GcodeError> {
-    let mut it = Interp::new(opts)?;
+    let mut it = Interp::new(Cow::Borrowed(opts))?;
     it.out = Sink::Trace {
         buf: Vec::new(),
         seq: 0,

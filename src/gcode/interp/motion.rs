@@ -147,6 +147,15 @@ impl Interp<'_> {
             kind,
         })?;
         self.emit(CanonCmd::Probe { on: false })?;
+        if self.live_probe {
+            // The machine measures: the interpreter stops after this line and continues
+            // with the result (`Interp::probe_result`), as LinuxCNC's does.
+            self.pending_probe = Some(super::PendingProbe {
+                kind,
+                loc: self.loc.clone(),
+            });
+            return Ok(());
+        }
         // Without a machine, rs274's canon reports the probe position as the programmed end
         // and leaves the tool 0.01 inch short of it, back toward the start; the interpreter
         // then continues from there. hytask reproduces that model.
@@ -165,6 +174,23 @@ impl Interp<'_> {
         }
         self.s.pos = stop;
         Ok(())
+    }
+
+    /// Takes the machine's result of the pending probe (LinuxCNC's `set_probe_data`): the
+    /// position becomes where the machine stopped, #5061–#5069 the probed position and
+    /// #5070 whether the probe tripped. Both poses are in the program frame and units in
+    /// effect at the probe.
+    pub(crate) fn probe_result(&mut self, tripped: bool, probed: &[f64; 6], stopped: &[f64; 6]) {
+        self.pending_probe = None;
+        for (i, v) in probed.iter().enumerate() {
+            self.p.numbered[5061 + i] = *v;
+        }
+        for i in 6..9 {
+            self.p.numbered[5061 + i] = 0.0;
+        }
+        self.p.numbered[5070] = if tripped { 1.0 } else { 0.0 };
+        self.s.pos = *stopped;
+        self.s.tlo_at_motion = self.s.tool_offset;
     }
 
     /// G20/G21: converts every stored length to the new units, as LinuxCNC does.
