@@ -82,18 +82,44 @@ fn feed_per_revolution_needs_a_spindle_speed() {
     assert!((peak_speed(&tr) - 100.0 / 60.0).abs() < 1e-3);
 }
 
+/// A probe move is a move of its own between two barriers (arm, end), from rest to rest,
+/// at the programmed feed.
 #[test]
-fn probing_is_refused_clearly() {
+fn a_probe_is_a_move_between_its_arm_and_end_markers() {
+    use hytask::gcode::canon::ProbeKind;
+    use hytask::motion::{AuxKind, Item};
     let cfg = MotionConfig::default();
     let mut g = Prog::new();
+    g.feed(600.0).g1(10.0, 0.0, 0.0);
     g.cmd(CanonCmd::StraightProbe {
-        end: pose(0.0, 0.0, -5.0),
-        kind: hytask::gcode::canon::ProbeKind::TowardErr,
+        end: pose(10.0, 0.0, -5.0),
+        kind: ProbeKind::TowardErr,
     });
-    assert!(matches!(
-        plan(&g.canon, &cfg),
-        Err(PlanError::Unsupported { line: 1, .. })
-    ));
+    g.g1(20.0, 0.0, -5.0);
+    let p = plan(&g.canon, &cfg).unwrap();
+    let arm = p
+        .items
+        .iter()
+        .position(|i| matches!(i, Item::Aux(a) if matches!(a.kind, AuxKind::ProbeArm { kind: ProbeKind::TowardErr })))
+        .expect("arm marker");
+    let end = p
+        .items
+        .iter()
+        .position(|i| matches!(i, Item::Aux(a) if matches!(a.kind, AuxKind::ProbeEnd { .. })))
+        .expect("end marker");
+    let segs: Vec<_> = p.items[arm + 1..end]
+        .iter()
+        .map(|i| match i {
+            Item::Segment(s) => *s,
+            other => panic!("{other:?} inside the probe move"),
+        })
+        .collect();
+    assert!(segs.first().unwrap().v0_mm_s.iter().all(|v| *v == 0.0));
+    assert!(segs.last().unwrap().v1_mm_s.iter().all(|v| *v == 0.0));
+    assert_eq!(segs.last().unwrap().end_mm[2], -5.0);
+    let peak = segs.iter().map(|s| s.peaks()[2][0]).fold(0.0, f64::max);
+    assert!((peak - 10.0).abs() < 1e-9, "F600 = 10 mm/s, got {peak}");
+    assert!(matches!(p.items[arm - 1], Item::Segment(s) if s.v1_mm_s.iter().all(|v| *v == 0.0)));
 }
 
 /// LinuxCNC issue #1813: an S word between moves must not stop motion.

@@ -25,9 +25,17 @@ pub struct Folded {
     pub messages: Vec<String>,
     /// Machine pose after the last move.
     pub end_mm: [f64; NUM_AXES],
+    /// Units, offsets and modes at the end: where the next piece of a program interpreted
+    /// in pieces (probing) continues, and the frame that converts a measured machine pose
+    /// back into program coordinates.
+    pub state: FoldState,
 }
 
-struct State {
+/// The modal state of the fold: units, offsets, rotation, feed and path modes. Carried from
+/// one piece of a probing program to the next, since a piece's canonical commands do not
+/// repeat what was set before it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FoldState {
     units: LengthUnits,
     g5x_mm: [f64; NUM_AXES],
     g92_mm: [f64; NUM_AXES],
@@ -42,7 +50,44 @@ struct State {
     arc_id: u32,
 }
 
-impl State {
+impl Default for FoldState {
+    fn default() -> Self {
+        FoldState {
+            units: LengthUnits::Millimeters,
+            g5x_mm: [0.0; NUM_AXES],
+            g92_mm: [0.0; NUM_AXES],
+            tool_mm: [0.0; NUM_AXES],
+            rotation_deg: 0.0,
+            feed: 0.0,
+            feed_mode: FeedMode::UnitsPerMinute,
+            control: MotionControl::Continuous { tolerance: 0.0 },
+            naivecam_tol: 0.0,
+            spindle_rpm: 0.0,
+            pos_mm: [0.0; NUM_AXES],
+            arc_id: 0,
+        }
+    }
+}
+
+impl FoldState {
+    /// The state at the start of a program: millimetres, no offsets, the configured
+    /// nominal spindle speed.
+    pub fn new(cfg: &MotionConfig) -> Self {
+        FoldState {
+            spindle_rpm: cfg.nominal_spindle_rpm,
+            ..FoldState::default()
+        }
+    }
+
+    /// A machine pose (mm, deg) in the program frame and units of this state: X Y Z A B C,
+    /// as the interpreter wants a probe result.
+    pub fn program_xyzabc(&self, machine_mm: &[f64; NUM_AXES]) -> [f64; 6] {
+        let p = self.to_program(machine_mm);
+        let mut out = [0.0; 6];
+        out.copy_from_slice(&p[..6]);
+        out
+    }
+
     fn scale(&self) -> f64 {
         self.units.mm_per_unit()
     }
@@ -72,7 +117,7 @@ impl State {
     }
 
     /// Machine pose (mm) → program pose (current units).
-    fn to_program(&self, m: &[f64; NUM_AXES]) -> [f64; NUM_AXES] {
+    pub fn to_program(&self, m: &[f64; NUM_AXES]) -> [f64; NUM_AXES] {
         let mut q = *m;
         for i in 0..NUM_AXES {
             q[i] -= self.g5x_mm[i] + self.tool_mm[i];
@@ -177,19 +222,21 @@ pub fn fold(
     cfg: &MotionConfig,
     start_mm: [f64; NUM_AXES],
 ) -> Result<Folded, PlanError> {
-    let mut st = State {
-        units: LengthUnits::Millimeters,
-        g5x_mm: [0.0; NUM_AXES],
-        g92_mm: [0.0; NUM_AXES],
-        tool_mm: [0.0; NUM_AXES],
-        rotation_deg: 0.0,
-        feed: 0.0,
-        feed_mode: FeedMode::UnitsPerMinute,
-        control: MotionControl::Continuous { tolerance: 0.0 },
-        naivecam_tol: 0.0,
-        spindle_rpm: cfg.nominal_spindle_rpm,
+    fold_from(canon, cfg, start_mm, FoldState::new(cfg))
+}
+
+/// Folds the next piece of a program interpreted in pieces: the modal state continues from
+/// `state` (the previous piece's [`Folded::state`]) and the tool starts at `start_mm`
+/// (where the machine actually stopped).
+pub fn fold_from(
+    canon: &[Canon],
+    cfg: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    state: FoldState,
+) -> Result<Folded, PlanError> {
+    let mut st = FoldState {
         pos_mm: start_mm,
-        arc_id: 0,
+        ..state
     };
     let mut out = Folded::default();
     for c in canon {
@@ -223,7 +270,16 @@ pub fn fold(
                 push_line(&mut out, &st, cfg, end, rapid, 0, 0.0, line)?;
                 st.pos_mm = end;
             }
-            CanonCmd::ArcFeed { first_end, second_end, first_center, second_center, rotation, axis_end, plane, end } => {
+            CanonCmd::ArcFeed {
+                first_end,
+                second_end,
+                first_center,
+                second_center,
+                rotation,
+                axis_end,
+                plane,
+                end,
+            } => {
                 check_finite(end, line)?;
                 let (i1, i2, ia) = super::arcs::plane_axes(*plane);
                 let mut e = *end;
@@ -245,7 +301,12 @@ pub fn fold(
                 let mut prev = st.pos_mm;
                 let machine: Vec<[f64; NUM_AXES]> = pts.iter().map(|p| st.to_machine(p)).collect();
                 for m in &machine {
-                    total_mm += Move { start_mm: prev, end_mm: *m, ..blank() }.feed_length_mm();
+                    total_mm += Move {
+                        start_mm: prev,
+                        end_mm: *m,
+                        ..blank()
+                    }
+                    .feed_length_mm();
                     prev = *m;
                 }
                 st.arc_id += 1;
@@ -257,12 +318,19 @@ pub fn fold(
             }
             CanonCmd::Dwell(s) => {
                 if !(s.is_finite() && *s >= 0.0) {
-                    return Err(PlanError::Invalid { line, what: "negative dwell".into() });
+                    return Err(PlanError::Invalid {
+                        line,
+                        what: "negative dwell".into(),
+                    });
                 }
                 out.steps.push(Step::Dwell { seconds: *s, line });
             }
             CanonCmd::SetSpindleSpeed(rpm) => {
-                st.spindle_rpm = if *rpm > 0.0 { *rpm } else { cfg.nominal_spindle_rpm };
+                st.spindle_rpm = if *rpm > 0.0 {
+                    *rpm
+                } else {
+                    cfg.nominal_spindle_rpm
+                };
                 out.steps.push(aux(AuxKind::SpindleSpeed { rpm: *rpm }));
             }
             CanonCmd::StartSpindle(d) => out.steps.push(aux(AuxKind::SpindleStart(*d))),
@@ -276,25 +344,51 @@ pub fn fold(
             CanonCmd::ChangeTool(t) => out.steps.push(aux(AuxKind::ChangeTool(*t))),
             CanonCmd::ChangeToolNumber(t) => out.steps.push(aux(AuxKind::ChangeToolNumber(*t))),
             CanonCmd::DigitalOutput { index, on, synced } => {
-                out.steps.push(aux(AuxKind::DigitalOutput { index: *index, on: *on, synced: *synced }))
+                out.steps.push(aux(AuxKind::DigitalOutput {
+                    index: *index,
+                    on: *on,
+                    synced: *synced,
+                }))
             }
-            CanonCmd::AnalogOutput { index, value, synced } => {
-                out.steps.push(aux(AuxKind::AnalogOutput { index: *index, value: *value, synced: *synced }))
-            }
-            CanonCmd::Wait { index, input, kind, timeout_s } => out.steps.push(aux(AuxKind::Wait {
+            CanonCmd::AnalogOutput {
+                index,
+                value,
+                synced,
+            } => out.steps.push(aux(AuxKind::AnalogOutput {
+                index: *index,
+                value: *value,
+                synced: *synced,
+            })),
+            CanonCmd::Wait {
+                index,
+                input,
+                kind,
+                timeout_s,
+            } => out.steps.push(aux(AuxKind::Wait {
                 index: *index,
                 input: *input,
                 kind: *kind,
                 timeout_s: *timeout_s,
             })),
-            CanonCmd::StraightProbe { .. } => {
-                return Err(PlanError::Unsupported {
-                    line,
-                    what: "probing (G38.x) needs the probe input in the realtime loop; not supported by the planner yet".into(),
-                })
+            CanonCmd::StraightProbe { end, kind } => {
+                // A move of its own, from rest to rest, between two barriers: the machine
+                // checks the probe input before it starts (ProbeArm), the interpolator stops
+                // on the input's change, and the machine reads the result at ProbeEnd.
+                check_finite(end, line)?;
+                let target = st.to_machine(end);
+                out.steps.push(aux(AuxKind::ProbeArm { kind: *kind }));
+                let saved = st.control;
+                st.control = MotionControl::ExactStop;
+                push_line(&mut out, &st, cfg, target, false, 0, 0.0, line)?;
+                st.control = saved;
+                out.steps.push(aux(AuxKind::ProbeEnd { kind: *kind }));
+                st.pos_mm = target;
             }
             CanonCmd::OverrideEnable { which, on } => {
-                out.steps.push(aux(AuxKind::OverrideEnable { which: *which, on: *on }))
+                out.steps.push(aux(AuxKind::OverrideEnable {
+                    which: *which,
+                    on: *on,
+                }))
             }
             CanonCmd::Message(m) => {
                 let id = out.messages.len() as u32;
@@ -304,12 +398,15 @@ pub fn fold(
             CanonCmd::ProgramStop => out.steps.push(aux(AuxKind::ProgramStop)),
             CanonCmd::OptionalProgramStop => out.steps.push(aux(AuxKind::OptionalProgramStop)),
             CanonCmd::ProgramEnd => out.steps.push(aux(AuxKind::ProgramEnd)),
-            CanonCmd::UserMcode { code, p, q } => {
-                out.steps.push(aux(AuxKind::UserMcode { code: *code, p: *p, q: *q }))
-            }
+            CanonCmd::UserMcode { code, p, q } => out.steps.push(aux(AuxKind::UserMcode {
+                code: *code,
+                p: *p,
+                q: *q,
+            })),
         }
     }
     out.end_mm = st.pos_mm;
+    out.state = st;
     Ok(out)
 }
 
@@ -332,7 +429,7 @@ fn blank() -> Move {
 #[allow(clippy::too_many_arguments)]
 fn push_line(
     out: &mut Folded,
-    st: &State,
+    st: &FoldState,
     cfg: &MotionConfig,
     end: [f64; NUM_AXES],
     rapid: bool,

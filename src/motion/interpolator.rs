@@ -12,8 +12,9 @@
 use super::config::MotionConfig;
 use super::kinematics::{Kinematics, Machine};
 use super::limits::override_rates;
-use super::segment::{AuxItem, Item, Segment, SegmentKind};
+use super::segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
 use super::KinematicsError;
+use crate::gcode::canon::ProbeKind;
 use crate::gcode::NUM_AXES;
 
 /// Most queue items consumed in one servo period (bounds the work of a cycle).
@@ -105,6 +106,14 @@ pub struct InterpOutput {
     /// without deceleration. A plan always ends at rest, so this only happens when the
     /// thread filling the queue is late; the machine should treat it as a fault.
     pub underrun: bool,
+    /// The probe input changed as the current G38 move expects, in this very period: the
+    /// caller records the actual axis positions now (the interpolator knows only the
+    /// command, [`Self::probe_pose_mm`]).
+    pub probe_trip_now: bool,
+    /// The current or last probe move tripped (cleared when the next one is armed).
+    pub probe_tripped: bool,
+    /// Commanded pose in the period the probe tripped.
+    pub probe_pose_mm: [f64; NUM_AXES],
 }
 
 /// The servo-thread interpolator.
@@ -125,6 +134,13 @@ pub struct Interpolator {
     abort: bool,
     waiting: bool,
     moved: bool,
+    probe_input: bool,
+    /// The G38 move being executed (between `ProbeArm` and `ProbeEnd`).
+    probe: Option<ProbeKind>,
+    /// The probe tripped: stopping within limits, as for an abort.
+    probe_stop: bool,
+    /// At rest after a trip: dropping the rest of the probe move up to its `ProbeEnd`.
+    probe_flush: bool,
     aux_ring: [Option<AuxItem>; AUX_RING],
     aux_head: usize,
     aux_len: usize,
@@ -153,6 +169,10 @@ impl Interpolator {
             abort: false,
             waiting: false,
             moved: false,
+            probe_input: false,
+            probe: None,
+            probe_stop: false,
+            probe_flush: false,
             aux_ring: [None; AUX_RING],
             aux_head: 0,
             aux_len: 0,
@@ -166,6 +186,9 @@ impl Interpolator {
                 scale: 1.0,
                 fault: joints.err(),
                 underrun: false,
+                probe_trip_now: false,
+                probe_tripped: false,
+                probe_pose_mm: start_mm,
             },
         }
     }
@@ -201,6 +224,17 @@ impl Interpolator {
     /// Stop within limits, then drop every queued item.
     pub fn abort(&mut self) {
         self.abort = true;
+    }
+
+    /// The probe input's level this period (active = the stylus touches). Read only while a
+    /// G38 move runs.
+    pub fn set_probe_input(&mut self, active: bool) {
+        self.probe_input = active;
+    }
+
+    /// Stopping on the path: feed hold, abort, or a tripped probe.
+    fn stopping(&self) -> bool {
+        self.hold || self.abort || self.probe_stop
     }
 
     /// The machine finished the command the interpolator is waiting for.
@@ -249,6 +283,17 @@ impl Interpolator {
                     return;
                 }
                 Some(Item::Aux(a)) => {
+                    match a.kind {
+                        AuxKind::ProbeArm { kind } => {
+                            self.probe = Some(kind);
+                            self.out.probe_tripped = false;
+                        }
+                        AuxKind::ProbeEnd { .. } => {
+                            self.probe = None;
+                            self.probe_stop = false;
+                        }
+                        _ => {}
+                    }
                     self.push_aux(a);
                     self.out.line = a.line;
                     if a.kind.is_barrier() {
@@ -261,7 +306,7 @@ impl Interpolator {
     }
 
     fn target_scale(&self, s: &Segment) -> f64 {
-        if self.hold || self.abort {
+        if self.stopping() {
             return 0.0;
         }
         let ramp = self.k1 * (s.duration_s - self.t_s).max(0.0) / self.max_override;
@@ -317,16 +362,30 @@ impl Interpolator {
         let mut budget = MAX_ITEMS_PER_STEP;
         self.out.fault = None;
         self.out.underrun = false;
+        self.out.probe_trip_now = false;
         if self.abort && self.seg.is_none() {
             self.finish_abort(src, &mut budget);
         }
-        if self.seg.is_none() && !self.waiting {
+        if self.probe_flush {
+            self.flush_probe(src, &mut budget);
+        }
+        if let Some(kind) = self.probe {
+            // The input as read this period shows where the tool was at the end of the last
+            // one: the commanded pose of that period is where it tripped.
+            if !self.waiting && !self.probe_stop && self.probe_input == kind.toward() {
+                self.probe_stop = true;
+                self.out.probe_trip_now = true;
+                self.out.probe_tripped = true;
+                self.out.probe_pose_mm = self.out.pose_mm;
+            }
+        }
+        if self.seg.is_none() && !self.waiting && !self.probe_flush {
             self.fetch(src, &mut budget);
         }
         if let Some(mut s) = self.seg {
             let dt = self.dt_s;
             let advance = if s.kind == SegmentKind::Dwell {
-                if self.hold || self.abort {
+                if self.stopping() {
                     0.0
                 } else {
                     dt
@@ -340,7 +399,7 @@ impl Interpolator {
                     self.k = 0.0;
                     self.kd = self.kd.max(0.0);
                 }
-                if self.hold || self.abort {
+                if self.stopping() {
                     // Settle exactly at rest once the remainder is far below anything
                     // measurable (a 1e-9 scale step is a nm/s-level velocity step).
                     if self.k < 1e-9 && self.kd.abs() < 1e-6 {
@@ -375,10 +434,16 @@ impl Interpolator {
             } else {
                 self.out.distance_to_go_mm = 0.0;
             }
-            if self.abort && self.k == 0.0 && self.kd.abs() <= self.k2 * dt {
+            let at_rest = self.k == 0.0 && self.kd.abs() <= self.k2 * dt;
+            if self.abort && at_rest {
                 self.kd = 0.0;
                 self.seg = None;
                 self.finish_abort(src, &mut budget);
+            } else if self.probe_stop && self.seg.is_some() && at_rest {
+                self.kd = 0.0;
+                self.seg = None;
+                self.probe_flush = true;
+                self.flush_probe(src, &mut budget);
             }
         }
         match self.kin.inverse(&self.out.pose_mm) {
@@ -389,7 +454,7 @@ impl Interpolator {
         self.out.scale = self.k;
         self.out.state = if self.waiting {
             InterpState::Waiting
-        } else if self.seg.is_some() {
+        } else if self.seg.is_some() || self.probe_flush {
             if self.hold && self.k == 0.0 {
                 InterpState::Holding
             } else {
@@ -403,6 +468,34 @@ impl Interpolator {
         &self.out
     }
 
+    /// After a probe trip, at rest: drops the rest of the probe move (bounded per period) up
+    /// to its `ProbeEnd`, which is reported as usual (a barrier: the machine reads the
+    /// result). What follows in the queue was planned from where the probe move ends, and
+    /// the program is interpreted in pieces so that nothing but that marker follows it.
+    fn flush_probe(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
+        while *budget > 0 && self.aux_len < AUX_RING {
+            *budget -= 1;
+            match src.pop() {
+                Some(Item::Aux(a)) if matches!(a.kind, AuxKind::ProbeEnd { .. }) => {
+                    self.probe_flush = false;
+                    self.probe_stop = false;
+                    self.probe = None;
+                    self.push_aux(a);
+                    self.out.line = a.line;
+                    self.waiting = true;
+                    // At rest: the next piece starts at its beginning, at the planned speed.
+                    self.t_s = 0.0;
+                    self.k = 1.0;
+                    self.kd = 0.0;
+                    self.out.distance_to_go_mm = 0.0;
+                    return;
+                }
+                Some(_) => {}
+                None => return,
+            }
+        }
+    }
+
     /// Drops what is left of the queue (bounded per period), then goes idle.
     fn finish_abort(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
         while *budget > 0 {
@@ -411,6 +504,9 @@ impl Interpolator {
                 self.abort = false;
                 self.waiting = false;
                 self.moved = false;
+                self.probe = None;
+                self.probe_stop = false;
+                self.probe_flush = false;
                 self.aux_len = 0;
                 // At rest: the next job starts at the planned speed.
                 self.k = 1.0;

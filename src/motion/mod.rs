@@ -107,6 +107,8 @@ pub struct Plan {
     pub line_count: usize,
     /// Number of motion segments in the queue.
     pub segment_count: usize,
+    /// Units, offsets and modes at the end (where a probing program's next piece goes on).
+    pub end_state: from_canon::FoldState,
 }
 
 /// Plans a canonical stream starting at machine zero. See [`plan_from`].
@@ -122,8 +124,19 @@ pub fn plan_from(
     cfg: &MotionConfig,
     start_mm: [f64; NUM_AXES],
 ) -> Result<Plan, PlanError> {
+    plan_continue(canon, cfg, start_mm, from_canon::FoldState::new(cfg))
+}
+
+/// Plans the next piece of a program interpreted in pieces (probing): like [`plan_from`],
+/// with the units, offsets and modes the previous piece ended with ([`Plan::end_state`]).
+pub fn plan_continue(
+    canon: &[Canon],
+    cfg: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    state: from_canon::FoldState,
+) -> Result<Plan, PlanError> {
     cfg.validate()?;
-    let folded = from_canon::fold(canon, cfg, start_mm)?;
+    let folded = from_canon::fold_from(canon, cfg, start_mm, state)?;
     let kin = kinematics::Machine::new(&cfg.kinematics);
     for step in &folded.steps {
         if let moves::Step::Move(m) = step {
@@ -173,5 +186,6 @@ pub fn plan_from(
         distance_mm,
         line_count: lines.len(),
         segment_count,
+        end_state: folded.state,
     })
 }

@@ -3,7 +3,7 @@
 //! pointer inside, so it can travel through a lock-free ring buffer.
 
 use super::profile::Shape;
-use crate::gcode::canon::{InputKind, OverrideKind, SpindleDir, WaitKind};
+use crate::gcode::canon::{InputKind, OverrideKind, ProbeKind, SpindleDir, WaitKind};
 use crate::gcode::NUM_AXES;
 
 /// What a segment does, for overrides and display.
@@ -211,6 +211,19 @@ pub enum AuxKind {
     OptionalProgramStop,
     /// M2/M30.
     ProgramEnd,
+    /// G38.x begins: the probe move that follows stops when the probe input changes. A
+    /// barrier: the machine first checks that the input is not already in the state the
+    /// move waits for (LinuxCNC refuses such a probe move).
+    ProbeArm {
+        /// G38.2 .. G38.5.
+        kind: ProbeKind,
+    },
+    /// G38.x ends (tripped, or the move reached its end). A barrier: the machine reads the
+    /// result and the next piece of the program is interpreted with it.
+    ProbeEnd {
+        /// G38.2 .. G38.5.
+        kind: ProbeKind,
+    },
     /// M100–M199.
     UserMcode {
         /// 100..=199.
