@@ -216,6 +216,7 @@ fn cross_references_are_checked() {
             "flood_output = \"probe\"",
         ),
         ("servo_thread = \"servo\"", "servo_thread = \"fast\""),
+        ("probe_input = \"probe\"", "probe_input = \"coolant_mist\""),
     ]);
     assert_has(
         &found,
@@ -232,6 +233,10 @@ fn cross_references_are_checked() {
     assert_has(
         &found,
         "motion.servo_thread: no [[thread]] named \"fast\" (threads: servo, plc)",
+    );
+    assert_has(
+        &found,
+        "motion.probe_input: \"coolant_mist\" is a digital output, expected a digital input",
     );
 }
 

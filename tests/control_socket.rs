@@ -33,6 +33,7 @@ impl MachineApi for Double {
             threads: vec![],
             inputs: Default::default(),
             outputs: Default::default(),
+            probe: Default::default(),
         }
     }
     fn estop(&self) -> Result<(), ApiError> {

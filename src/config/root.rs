@@ -92,6 +92,9 @@ impl MachineConfig {
         if let Some(n) = &self.coolant.mist_output {
             need("coolant.mist_output", n, IoKind::DigitalOutput);
         }
+        if let Some(n) = &self.motion.probe_input {
+            need("motion.probe_input", n, IoKind::DigitalInput);
+        }
         need(
             "safety.estop_input",
             &self.safety.estop_input,

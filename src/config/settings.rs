@@ -129,6 +129,10 @@ pub struct MotionConfig {
     /// Highest feed override the operator may set (1 ..= 10).
     #[serde(default = "default_max_feed_override")]
     pub max_feed_override: f64,
+    /// Digital input of the touch probe for G38.2–G38.5 (active = the stylus touches). A
+    /// machine without one refuses programs that probe when they reach the probe.
+    #[serde(default)]
+    pub probe_input: Option<String>,
 }
 
 fn default_servo_thread() -> String {
@@ -155,6 +159,7 @@ impl Default for MotionConfig {
             g64_tolerance: default_g64_tolerance(),
             rapid_override: default_rapid_override(),
             max_feed_override: default_max_feed_override(),
+            probe_input: None,
         }
     }
 }

@@ -153,6 +153,19 @@ impl Default for Overrides {
     }
 }
 
+/// The last probe move's result (G38.x), as LinuxCNC reports it.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct ProbeStatus {
+    /// Probe moves completed since start.
+    pub count: u32,
+    /// Source line of the last one.
+    pub line: u32,
+    /// The last one tripped.
+    pub tripped: bool,
+    /// Where it tripped (or ended), machine frame, by axis letter.
+    pub position: std::collections::BTreeMap<String, f64>,
+}
+
 /// The answer to `status`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Status {
@@ -178,6 +191,9 @@ pub struct Status {
     pub inputs: std::collections::BTreeMap<String, f64>,
     /// Outputs by name, as the machine commands them.
     pub outputs: std::collections::BTreeMap<String, f64>,
+    /// The last probe result.
+    #[serde(default)]
+    pub probe: ProbeStatus,
 }
 
 /// A fault to inject into a simulated machine (`sim.fault`).

@@ -3,8 +3,9 @@
 //! A job with any error is refused as a whole before anything moves, and the error names
 //! file, line and column.
 
+use super::probing::ProbingSource;
 use crate::config::MachineConfig;
-use crate::gcode::{self, InterpOptions, NUM_AXES};
+use crate::gcode::{self, Canon, CanonCmd, InterpOptions, NUM_AXES};
 use crate::machine::api::{ApiError, JobSource};
 use crate::motion::{self, AxisLimits, KinematicsConfig, MotionConfig, Plan};
 use std::path::Path;
@@ -18,8 +19,42 @@ pub struct PreparedJob {
     pub total_lines: u32,
     /// Canonical commands the interpreter produced.
     pub commands: usize,
-    /// The plan: segment queue, messages, duration, distance.
+    /// The plan: segment queue, messages, duration, distance. For a job that probes, the
+    /// plan of the whole program with simulated probes (each trips at its programmed end):
+    /// it validates the job and estimates its time; the job then runs piece by piece.
     pub plan: Plan,
+    /// Set when the program probes (G38.x): what to interpret again, live, when it runs.
+    pub probing: Option<ProbingSource>,
+}
+
+/// Line of the first probe move, if the program probes.
+pub fn first_probe_line(canon: &[Canon]) -> Option<u32> {
+    canon
+        .iter()
+        .find(|c| matches!(c.cmd, CanonCmd::StraightProbe { .. }))
+        .map(|c| c.loc.line)
+}
+
+/// Line of the first probe move of a prepared job, if it probes.
+pub fn first_probe_line_of(job: &PreparedJob) -> Option<u32> {
+    job.plan.items.iter().find_map(|i| match i {
+        motion::Item::Aux(a) if matches!(a.kind, motion::AuxKind::ProbeArm { .. }) => Some(a.line),
+        _ => None,
+    })
+}
+
+fn probing_source(
+    canon: &[Canon],
+    name: &str,
+    text: &str,
+    opts: &InterpOptions,
+) -> Option<ProbingSource> {
+    first_probe_line(canon)?;
+    Some(ProbingSource {
+        name: name.to_string(),
+        text: text.to_string(),
+        opts: opts.clone(),
+    })
 }
 
 /// Maps the machine description onto the planner's plain-data configuration.
@@ -118,14 +153,16 @@ pub fn prepare(
             ))
         }
     };
-    let opts = &starting_at(opts, start_mm);
-    let program = match &src.path {
-        Some(p) => gcode::load_file(Path::new(p), opts),
-        None => gcode::load_str(&name, &text, opts),
+    let mut opts = starting_at(opts, start_mm);
+    if let Some(p) = &src.path {
+        // Subroutine files are also searched next to the program.
+        opts.program_dir = Path::new(p).parent().map(Path::to_path_buf);
     }
-    .map_err(|e| ApiError::Gcode(e.to_string()))?;
+    let program =
+        gcode::load_str(&name, &text, &opts).map_err(|e| ApiError::Gcode(e.to_string()))?;
     let plan = motion::plan_from(&program.canon, motion, start_mm)
         .map_err(|e| ApiError::Gcode(format!("{name}: {e}")))?;
+    let probing = probing_source(&program.canon, &name, &text, &opts);
     let display = Path::new(&name)
         .file_name()
         .map(|f| f.to_string_lossy().into_owned())
@@ -135,6 +172,7 @@ pub fn prepare(
         total_lines: text.lines().count() as u32,
         commands: program.canon.len(),
         plan,
+        probing,
     })
 }
 
@@ -148,15 +186,18 @@ pub fn prepare_mdi(
 ) -> Result<PreparedJob, ApiError> {
     let mut opts = starting_at(opts, start_mm);
     opts.mdi = true;
-    let program = gcode::load_str("mdi", &format!("{line}\n"), &opts)
-        .map_err(|e| ApiError::Gcode(e.to_string()))?;
+    let text = format!("{line}\n");
+    let program =
+        gcode::load_str("mdi", &text, &opts).map_err(|e| ApiError::Gcode(e.to_string()))?;
     let plan = motion::plan_from(&program.canon, motion, start_mm)
         .map_err(|e| ApiError::Gcode(format!("mdi: {e}")))?;
+    let probing = probing_source(&program.canon, "mdi", &text, &opts);
     Ok(PreparedJob {
         name: "mdi".into(),
         total_lines: 1,
         commands: program.canon.len(),
         plan,
+        probing,
     })
 }
 

@@ -5,6 +5,7 @@ pub mod api;
 pub mod devices;
 pub mod job;
 pub mod mode;
+pub mod probing;
 pub mod runtime;
 pub mod safety;
 pub mod servo;

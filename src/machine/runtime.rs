@@ -13,6 +13,7 @@
 use super::api::*;
 use super::devices;
 use super::job::{self, PreparedJob};
+use super::probing;
 use super::safety::{AxisGuard, Trip};
 use super::servo::axis_task::AxisTask;
 use super::servo::interp_task::InterpolatorTask;
@@ -78,6 +79,9 @@ struct ActiveJob {
     feeder: Option<std::thread::JoinHandle<()>>,
     started: Instant,
     manual: bool,
+    /// Why the job failed off the realtime path (a piece after a probe did not interpret
+    /// or plan); the machine task only sees the abort this causes.
+    error: Option<String>,
 }
 
 #[derive(Default)]
@@ -255,6 +259,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         axes: axes.clone(),
         homing_groups,
         estop_input,
+        probe_input: config.motion.probe_input.as_deref().and_then(di),
         spindle,
         flood_output: config.coolant.flood_output.as_deref().and_then(dout),
         mist_output: config.coolant.mist_output.as_deref().and_then(dout),
@@ -514,16 +519,21 @@ impl Machine {
         }
         let id = self.next_job.fetch_add(1, Ordering::Relaxed);
         let cancel = Arc::new(AtomicBool::new(false));
-        let feeder = {
-            let queue = self.queue.clone();
-            let items = job.clone();
-            let cancel = cancel.clone();
-            std::thread::Builder::new()
-                .name(format!("feeder-{id}"))
-                .spawn(move || feed(queue, &items.plan.items, id, &cancel))
-                .map_err(|e| ApiError::Failed(format!("cannot start the feeder: {e}")))?
+        let (feeder, items) = match &job.probing {
+            None => {
+                let queue = self.queue.clone();
+                let items = job.clone();
+                let cancel = cancel.clone();
+                let feeder = std::thread::Builder::new()
+                    .name(format!("feeder-{id}"))
+                    .spawn(move || {
+                        feed(queue, &items.plan.items, id, &cancel);
+                    })
+                    .map_err(|e| ApiError::Failed(format!("cannot start the feeder: {e}")))?;
+                (feeder, job.plan.items.len() as u64)
+            }
+            Some(src) => self.start_piece_runner(src, &job, id, &cancel)?,
         };
-        let items = job.plan.items.len() as u64;
         let mut book = lock(&self.book);
         book.status = JobStatus {
             name: job.name.clone(),
@@ -544,6 +554,7 @@ impl Machine {
             feeder: Some(feeder),
             started: Instant::now(),
             manual,
+            error: None,
         });
         drop(book);
         if let Some(mut p) = previous {
@@ -574,6 +585,60 @@ impl Machine {
         }
     }
 
+    /// A probing job: plans its first piece now (from the machine's position) and starts
+    /// the thread that queues it and the pieces after each probe. Returns the thread and the
+    /// first piece's item count.
+    fn start_piece_runner(
+        &self,
+        src: &probing::ProbingSource,
+        job: &PreparedJob,
+        id: u32,
+        cancel: &Arc<AtomicBool>,
+    ) -> Result<(std::thread::JoinHandle<()>, u64), ApiError> {
+        if self.config.motion.probe_input.is_none() {
+            let line = job::first_probe_line_of(job).unwrap_or(0);
+            return Err(ApiError::Rejected(format!(
+                "{}: line {line} probes (G38.x) but the machine has no probe input \
+                 (set motion.probe_input)",
+                job.name
+            )));
+        }
+        let first = probing::first_piece(src, &self.motion_cfg, job.plan.start_mm)?;
+        let items = first.plan.items.len() as u64;
+        let snapshot = lock(&self.runtime)
+            .as_ref()
+            .ok_or_else(|| ApiError::Failed("the machine is shutting down".into()))?
+            .reader::<MachineSnapshot>(ports::SNAPSHOT)
+            .map_err(|e| ApiError::Failed(e.to_string()))?;
+        let runner = probing::PieceRunner {
+            queue: self.queue.clone(),
+            machine: self.machine.clone(),
+            snapshot,
+            cfg: self.motion_cfg.clone(),
+            job: id,
+            name: job.name.clone(),
+            cancel: cancel.clone(),
+            seen_probe_seq: self.snapshot().0.probe.seq,
+        };
+        let book = self.book.clone();
+        let machine = self.machine.clone();
+        let thread = std::thread::Builder::new()
+            .name(format!("pieces-{id}"))
+            .spawn(move || {
+                if let probing::RunnerEnd::Failed(msg) = runner.run(first) {
+                    tracing::error!("job {id}: {msg}");
+                    if let Some(a) = lock(&book).active.as_mut().filter(|a| a.id == id) {
+                        a.error = Some(msg);
+                    }
+                    if let Ok(h) = machine.send(MachineCmd::Abort) {
+                        let _ = h.wait_accepted(ACCEPT_TIMEOUT);
+                    }
+                }
+            })
+            .map_err(|e| ApiError::Failed(format!("cannot start the job thread: {e}")))?;
+        Ok((thread, items))
+    }
+
     fn axes(&self) -> Vec<(char, usize)> {
         self.config
             .axes
@@ -591,13 +656,19 @@ impl Machine {
 }
 
 /// Pushes a job's items into the segment queue, waiting while it is full, until done or
-/// cancelled. Runs on its own ordinary thread: the realtime side never waits for it.
-fn feed(queue: BufferWriter<QueueItem>, items: &[motion::Item], job: u32, cancel: &AtomicBool) {
+/// cancelled (then false). Runs on its own ordinary thread: the realtime side never waits
+/// for it.
+pub(crate) fn feed(
+    queue: BufferWriter<QueueItem>,
+    items: &[motion::Item],
+    job: u32,
+    cancel: &AtomicBool,
+) -> bool {
     for &item in items {
         let mut q = QueueItem { job, item };
         loop {
             if cancel.load(Ordering::Acquire) {
-                return;
+                return false;
             }
             match queue.try_push(q) {
                 Ok(()) => break,
@@ -608,6 +679,7 @@ fn feed(queue: BufferWriter<QueueItem>, items: &[motion::Item], job: u32, cancel
             }
         }
     }
+    true
 }
 
 /// Forwards realtime events to subscribers, keeps the job book, publishes progress.
@@ -718,7 +790,11 @@ fn handle_job_event(m: &Machine, e: JobEvent) {
         }
         JobEvent::Resumed => ("running", None, false),
         JobEvent::Finished => ("done", None, true),
-        JobEvent::Aborted { line } => ("aborted", Some(format!("aborted at line {line}")), true),
+        JobEvent::Aborted { line } => match book.active.as_ref().and_then(|a| a.error.clone()) {
+            Some(error) => ("failed", Some(error), true),
+            None => ("aborted", Some(format!("aborted at line {line}")), true),
+        },
+        JobEvent::Error { line, error } => ("failed", Some(format!("line {line}: {error}")), true),
         JobEvent::Failed { line, trip } => ("failed", Some(describe_trip(&trip, line)), true),
         JobEvent::Message { id, line } => {
             let text = book
@@ -859,6 +935,16 @@ impl MachineApi for Machine {
             threads,
             inputs: in_map,
             outputs: out_map,
+            probe: ProbeStatus {
+                count: snap.probe.seq,
+                line: snap.probe.line,
+                tripped: snap.probe.tripped,
+                position: self
+                    .axes()
+                    .iter()
+                    .map(|&(c, i)| (c.to_string(), snap.probe.probed_mm[i]))
+                    .collect(),
+            },
         }
     }
 
@@ -940,6 +1026,7 @@ impl MachineApi for Machine {
             total_lines: 1,
             commands: canon.len(),
             plan,
+            probing: None,
         });
         self.start_job(job, true)
     }

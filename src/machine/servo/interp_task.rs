@@ -98,6 +98,17 @@ impl InterpolatorTask {
         }
     }
 
+    /// The actual pose from the axis feedback (commanded joints where there is none).
+    fn actual_pose(&self) -> Option<[f64; NUM_AXES]> {
+        let mut joints = self.sp.joints;
+        for &(_, i) in &self.axes {
+            if self.feedback[i].valid {
+                joints[i] = self.feedback[i].actual;
+            }
+        }
+        self.kin.forward(&joints).ok()
+    }
+
     /// Follow the drives: commanded = actual.
     fn track(&mut self) {
         let mut joints = self.sp.joints;
@@ -162,6 +173,7 @@ impl Task for InterpolatorTask {
             }
             self.interp.set_feed_override(c.feed_override);
             self.interp.set_rapid_override(c.rapid_override);
+            self.interp.set_probe_input(c.probe_input);
             if c.hold {
                 self.interp.hold();
             } else {
@@ -191,6 +203,12 @@ impl Task for InterpolatorTask {
             self.sp.distance_to_go_mm = out.distance_to_go_mm;
             self.sp.scale = out.scale;
             self.sp.aux = out.aux;
+            self.sp.probe_tripped = out.probe_tripped;
+            if out.probe_trip_now {
+                // Where the axes actually were when the input changed (the command leads
+                // the feedback by the following error).
+                self.sp.probe_pose_mm = self.actual_pose().unwrap_or(out.probe_pose_mm);
+            }
             if out.aux.is_some() {
                 self.sp.aux_seq = self.sp.aux_seq.wrapping_add(1);
             }

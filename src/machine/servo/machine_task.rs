@@ -15,8 +15,8 @@
 //! step 6), so a fault found in cycle n starts the controlled stop in cycle n + 1.
 
 use super::{
-    ports, AxisFeedback, DriveControl, FaultEvent, Inputs, JobEvent, MachineSnapshot, ModeEvent,
-    MonitorSnapshot, MotionControl, Outputs, Setpoints,
+    ports, AxisFeedback, DriveControl, FaultEvent, Inputs, JobError, JobEvent, MachineSnapshot,
+    ModeEvent, MonitorSnapshot, MotionControl, Outputs, Setpoints,
 };
 use crate::gcode::canon::{InputKind, SpindleDir, WaitKind};
 use crate::gcode::NUM_AXES;
@@ -57,6 +57,14 @@ pub enum MachineCmd {
     Resume,
     /// Controlled stop; the rest of the job is dropped.
     Abort,
+    /// The next piece of a probing job (interpreted with the probe's result) is queued:
+    /// `items` more queue items for job `job`, which waits at the end of its probe move.
+    Continue {
+        /// Job id.
+        job: u32,
+        /// Queue items added.
+        items: u64,
+    },
     /// Overrides (fractions).
     Overrides {
         /// Feed, 0..=max.
@@ -70,7 +78,7 @@ pub enum MachineCmd {
 
 const NO_PARAMS: &[ParamDescriptor] = &[];
 
-static OPERATIONS: [OperationDescriptor; 10] = [
+static OPERATIONS: [OperationDescriptor; 11] = [
     OperationDescriptor {
         name: "estop",
         doc: "Trip the e-stop: every drive quick-stops this cycle, outputs go safe.",
@@ -160,6 +168,22 @@ static OPERATIONS: [OperationDescriptor; 10] = [
         ],
         next: NextCommand::AfterAcceptance,
     },
+    OperationDescriptor {
+        name: "continue",
+        doc: "Job `job` waits after a probe move: `items` more queue items (the next piece \
+              of the program, interpreted with the probe's result) are queued.",
+        params: &[
+            ParamDescriptor {
+                name: "job",
+                ty: ArgType::Int,
+            },
+            ParamDescriptor {
+                name: "items",
+                ty: ArgType::Int,
+            },
+        ],
+        next: NextCommand::AfterAcceptance,
+    },
 ];
 
 impl Commands for MachineCmd {
@@ -179,6 +203,7 @@ impl Commands for MachineCmd {
             MachineCmd::Resume => 7,
             MachineCmd::Abort => 8,
             MachineCmd::Overrides { .. } => 9,
+            MachineCmd::Continue { .. } => 10,
         }
     }
 
@@ -200,6 +225,10 @@ impl Commands for MachineCmd {
             "pause" => MachineCmd::Pause,
             "resume" => MachineCmd::Resume,
             "abort" => MachineCmd::Abort,
+            "continue" => MachineCmd::Continue {
+                job: a.int(0)? as u32,
+                items: a.int(1)?.max(0) as u64,
+            },
             _ => MachineCmd::Overrides {
                 feed: a.float(0)?,
                 rapid: a.float(1)?,
@@ -218,6 +247,8 @@ pub struct MachineSetup {
     pub homing_groups: Vec<u32>,
     /// Machine-wide digital input index of the e-stop.
     pub estop_input: usize,
+    /// Machine-wide digital input index of the probe (G38.x), if the machine has one.
+    pub probe_input: Option<usize>,
     /// Spindle outputs (digital enable, digital direction, analog speed) and at-speed input.
     pub spindle: Option<SpindleIo>,
     /// Coolant outputs.
@@ -275,6 +306,8 @@ enum Barrier {
     },
     /// M0 (or M1 with optional stop on): held until `resume`.
     ProgramStop,
+    /// The end of a probe move: held until the next piece of the program is queued.
+    Probe,
 }
 
 /// What the current motion is, and how it should end.
@@ -405,7 +438,10 @@ impl MachineTask {
     fn emit_job(&mut self, e: JobEvent) {
         if matches!(
             e,
-            JobEvent::Finished | JobEvent::Aborted { .. } | JobEvent::Failed { .. }
+            JobEvent::Finished
+                | JobEvent::Aborted { .. }
+                | JobEvent::Failed { .. }
+                | JobEvent::Error { .. }
         ) {
             self.ended = Some((self.job_id, e));
         }
@@ -479,6 +515,13 @@ impl MachineTask {
         self.spindle_stop();
         self.drive.home_abort_seq = self.drive.home_abort_seq.wrapping_add(1);
         self.controlled_stop(true, end);
+    }
+
+    /// Ends the job with a program error: stop under control, drives stay enabled.
+    fn job_error(&mut self, error: JobError, line: u32) {
+        self.current = Motion::None;
+        self.snap.probe.waiting = false;
+        self.controlled_stop(false, Some(JobEvent::Error { line, error }));
     }
 
     fn spindle_stop(&mut self) {
@@ -569,6 +612,44 @@ impl MachineTask {
                 self.spindle_stop();
                 self.coolant(self.setup.flood_output, self.setup.mist_output, false);
             }
+            AuxKind::ProbeArm { kind } => {
+                let error = match self.setup.probe_input {
+                    None => Some(JobError::NoProbeInput),
+                    Some(_) if kind.toward() && self.motion.probe_input => {
+                        Some(JobError::ProbeAlreadyTripped(kind))
+                    }
+                    Some(_) if !kind.toward() && !self.motion.probe_input => {
+                        Some(JobError::ProbeNotTripped(kind))
+                    }
+                    Some(_) => None,
+                };
+                if let Some(error) = error {
+                    self.job_error(error, line);
+                    return;
+                }
+            }
+            AuxKind::ProbeEnd { kind } => {
+                let tripped = self.setpoints.probe_tripped;
+                if !tripped && kind.needs_contact() {
+                    self.job_error(JobError::ProbeNoContact(kind), line);
+                    return;
+                }
+                let stopped = self.setpoints.pose_mm;
+                let p = &mut self.snap.probe;
+                p.seq = p.seq.wrapping_add(1);
+                p.job = self.job_id;
+                p.line = line;
+                p.tripped = tripped;
+                p.probed_mm = if tripped {
+                    self.setpoints.probe_pose_mm
+                } else {
+                    stopped
+                };
+                p.stopped_mm = stopped;
+                p.waiting = true;
+                self.barrier = Barrier::Probe;
+                done = false;
+            }
         }
         if done && kind.is_barrier() {
             self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
@@ -599,7 +680,7 @@ impl MachineTask {
     /// Progress of the current barrier; releases the interpolator when it is met.
     fn poll_barrier(&mut self) {
         let met = match self.barrier {
-            Barrier::None | Barrier::ProgramStop => false,
+            Barrier::None | Barrier::ProgramStop | Barrier::Probe => false,
             Barrier::SpindleAtSpeed { since } => {
                 let at = self
                     .setup
@@ -825,6 +906,7 @@ impl Task for MachineTask {
             });
         }
         self.mode.set_estop_input(pressed);
+        self.motion.probe_input = self.setup.probe_input.is_some_and(|i| self.inputs.di(i));
         if self.mode.mode() == Mode::Estop {
             // The quick stop is requested until the drives are off.
             self.drive.quick_stop = self
@@ -933,6 +1015,26 @@ impl Task for MachineTask {
                     self.controlled_stop(false, Some(JobEvent::Aborted { line }));
                 }
             }
+            MachineCmd::Continue { job, items } => {
+                let waiting = self.barrier == Barrier::Probe && self.snap.probe.job == job;
+                let Motion::Job {
+                    job: current,
+                    items: total,
+                } = self.current
+                else {
+                    return Err(RejectReason::Other("no job is running"));
+                };
+                if current != job || !waiting {
+                    return Err(RejectReason::Other("the job is not waiting after a probe"));
+                }
+                self.current = Motion::Job {
+                    job,
+                    items: total + items,
+                };
+                self.barrier = Barrier::None;
+                self.snap.probe.waiting = false;
+                self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
+            }
             MachineCmd::Overrides {
                 feed,
                 rapid,
@@ -1002,6 +1104,9 @@ impl Task for MachineTask {
                 Some((j, JobEvent::Failed { .. })) if j == job => {
                     Progress::Failed("stopped by a fault or e-stop")
                 }
+                Some((j, JobEvent::Error { .. })) if j == job => {
+                    Progress::Failed("stopped by a program error")
+                }
                 _ => Progress::Running,
             },
             MachineCmd::Pause => {
@@ -1026,6 +1131,7 @@ impl Task for MachineTask {
             MachineCmd::Estop
             | MachineCmd::EstopReset
             | MachineCmd::Resume
+            | MachineCmd::Continue { .. }
             | MachineCmd::Overrides { .. } => Progress::Done,
         }
     }

@@ -27,11 +27,13 @@ pub mod io_task;
 pub mod machine_task;
 pub mod monitor_task;
 #[cfg(test)]
+mod probe_tests;
+#[cfg(test)]
 mod tests;
 
 use super::api::Mode;
 use super::safety::Trip;
-use crate::gcode::NUM_AXES;
+use crate::gcode::{ProbeKind, NUM_AXES};
 use crate::motion::{AuxItem, InterpState};
 use hytask_hal::axis::DriveState;
 
@@ -136,6 +138,8 @@ pub struct MotionControl {
     pub rapid_override: f64,
     /// Job whose queue items to execute; items of older jobs are discarded.
     pub job: u32,
+    /// The probe input is active this cycle (false when the machine has none).
+    pub probe_input: bool,
 }
 
 impl Default for MotionControl {
@@ -148,6 +152,7 @@ impl Default for MotionControl {
             feed_override: 1.0,
             rapid_override: 1.0,
             job: 0,
+            probe_input: false,
         }
     }
 }
@@ -181,6 +186,11 @@ pub struct Setpoints {
     pub abort_ack: u32,
     /// Job being executed.
     pub job: u32,
+    /// The current or last G38 move tripped.
+    pub probe_tripped: bool,
+    /// Actual pose (forward kinematics of the axis feedback) in the cycle the probe
+    /// tripped: LinuxCNC's probed position is the feedback position too.
+    pub probe_pose_mm: [f64; NUM_AXES],
 }
 
 impl Default for Setpoints {
@@ -199,6 +209,8 @@ impl Default for Setpoints {
             scale: 0.0,
             abort_ack: 0,
             job: 0,
+            probe_tripped: false,
+            probe_pose_mm: [0.0; NUM_AXES],
         }
     }
 }
@@ -266,6 +278,29 @@ pub struct MachineSnapshot {
     pub trips: u32,
     /// The last trip.
     pub last_trip: Option<Trip>,
+    /// The last probe move's result.
+    pub probe: ProbeSnapshot,
+}
+
+/// The result of the last G38 move, published when the machine reaches its end. While
+/// `waiting`, the job stands still until the next piece of the program, interpreted with
+/// this result, arrives (`MachineCmd::Continue`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ProbeSnapshot {
+    /// Incremented with every probe move that ended.
+    pub seq: u32,
+    /// Job of that probe move.
+    pub job: u32,
+    /// Source line of the G38 block.
+    pub line: u32,
+    /// The probe input changed as the move expected.
+    pub tripped: bool,
+    /// Where it changed (actual pose), or where the move ended without a change.
+    pub probed_mm: [f64; NUM_AXES],
+    /// Commanded pose at rest after the move: where the next piece starts.
+    pub stopped_mm: [f64; NUM_AXES],
+    /// The job waits for its next piece.
+    pub waiting: bool,
 }
 
 impl Default for MachineSnapshot {
@@ -280,6 +315,7 @@ impl Default for MachineSnapshot {
             tool: 0,
             trips: 0,
             last_trip: None,
+            probe: ProbeSnapshot::default(),
         }
     }
 }
@@ -328,6 +364,14 @@ pub enum JobEvent {
         /// The fault.
         trip: Trip,
     },
+    /// Stopped by an error of the program's execution (not a machine fault: the drives stay
+    /// enabled), e.g. a G38.2 that made no contact.
+    Error {
+        /// Line of the error.
+        line: u32,
+        /// What went wrong.
+        error: JobError,
+    },
     /// An `(MSG, …)` was reached: text `messages[id]` of the plan.
     Message {
         /// Index into the plan's messages.
@@ -335,6 +379,42 @@ pub enum JobEvent {
         /// Line.
         line: u32,
     },
+}
+
+/// Errors that end a job without faulting the machine (LinuxCNC reports them and stops the
+/// program).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JobError {
+    /// G38.2/G38.3 started with the probe already active.
+    ProbeAlreadyTripped(ProbeKind),
+    /// G38.4/G38.5 started with the probe not active.
+    ProbeNotTripped(ProbeKind),
+    /// G38.2/G38.4 reached the end of the move without the expected change.
+    ProbeNoContact(ProbeKind),
+    /// The program probes but the machine has no probe input (`motion.probe_input`).
+    NoProbeInput,
+}
+
+impl std::fmt::Display for JobError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            JobError::ProbeAlreadyTripped(_) => {
+                f.write_str("probe is already tripped when starting G38.2 or G38.3 move")
+            }
+            JobError::ProbeNotTripped(_) => {
+                f.write_str("probe is not tripped when starting G38.4 or G38.5 move")
+            }
+            JobError::ProbeNoContact(k) => write!(
+                f,
+                "{} move finished without {} the probe",
+                k.gcode(),
+                if k.toward() { "tripping" } else { "releasing" }
+            ),
+            JobError::NoProbeInput => {
+                f.write_str("the program probes (G38.x) but the machine has no probe input: set motion.probe_input")
+            }
+        }
+    }
 }
 
 /// An item of the segment queue, stamped with its job so that the leftovers of an aborted

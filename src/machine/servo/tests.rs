@@ -14,20 +14,20 @@ use crate::rt::prelude::*;
 use hytask_hal::axis::DriveState;
 use std::sync::Arc;
 
-struct Rig {
-    rt: SteppedRuntime,
-    built_machine: TaskHandle<MachineCmd>,
-    queue: BufferWriter<QueueItem>,
-    motion_cfg: motion::MotionConfig,
-    sim_io: Vec<Option<hytask_hal::sim::SimIoHandle>>,
+pub(super) struct Rig {
+    pub(super) rt: SteppedRuntime,
+    pub(super) built_machine: TaskHandle<MachineCmd>,
+    pub(super) queue: BufferWriter<QueueItem>,
+    pub(super) motion_cfg: motion::MotionConfig,
+    pub(super) sim_io: Vec<Option<hytask_hal::sim::SimIoHandle>>,
     sim_axes: Vec<(char, hytask_hal::sim::SimAxisHandle)>,
-    snap: DataReader<MachineSnapshot>,
-    sp: DataReader<Setpoints>,
+    pub(super) snap: DataReader<MachineSnapshot>,
+    pub(super) sp: DataReader<Setpoints>,
     fb: Vec<DataReader<AxisFeedback>>,
 }
 
 impl Rig {
-    fn new() -> Rig {
+    pub(super) fn new() -> Rig {
         let path =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
         let cfg = crate::config::load(&path).expect("config");
@@ -74,15 +74,15 @@ impl Rig {
         panic!("{cmd:?} not done after {max_cycles} cycles");
     }
 
-    fn mode(&mut self) -> Mode {
+    pub(super) fn mode(&mut self) -> Mode {
         self.snap.latest().expect("snapshot").mode
     }
 
-    fn feedback(&mut self, axis: usize) -> AxisFeedback {
+    pub(super) fn feedback(&mut self, axis: usize) -> AxisFeedback {
         self.fb[axis].latest().expect("feedback")
     }
 
-    fn ready(&mut self) {
+    pub(super) fn ready(&mut self) {
         self.send_until_done(MachineCmd::EstopReset, 10);
         self.send_until_done(MachineCmd::On, 100);
         self.send_until_done(MachineCmd::Home { mask: 0 }, 20_000);

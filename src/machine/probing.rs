@@ -1,0 +1,195 @@
+//! Jobs that probe (G38.2–G38.5) run piece by piece: the machine side of
+//! [`gcode::Session`](crate::gcode::Session).
+//!
+//! The job is validated as a whole first (interpreted with simulated probes and planned in
+//! full, as every job is). When it runs, the program is interpreted again, live: the first
+//! piece (up to and including the first probe line) is planned from the machine's position
+//! and queued like any job. The machine task stops at the end of the probe move (a barrier)
+//! and publishes the result in its snapshot; the [`PieceRunner`] thread converts it into
+//! program coordinates with the offsets in effect, lets the interpreter continue, plans the
+//! next piece from where the machine actually stopped, queues it and tells the machine
+//! task to continue. Everything but the probe itself is off the realtime path; the probe
+//! input is checked inside the servo cycle by the interpolator.
+//!
+//! An error that only shows with the measured values (say a probed Z that sends the next
+//! move past a soft limit) ends the job with the error's file, line and column; the
+//! machine is standing still at the probe when it is found.
+
+use super::api::ApiError;
+use super::servo::machine_task::MachineCmd;
+use super::servo::{MachineSnapshot, QueueItem};
+use crate::gcode::{InterpOptions, PieceEnd, ProbeResult, Session, NUM_AXES};
+use crate::motion::from_canon::FoldState;
+use crate::motion::{self, Item, MotionConfig, Plan};
+use crate::rt::prelude::{BufferWriter, CommandStatus, DataReader, TaskHandle};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// What a probing job needs to be interpreted again when it runs.
+#[derive(Debug, Clone)]
+pub struct ProbingSource {
+    /// Name used in locations and errors.
+    pub name: String,
+    /// The program text that was validated (not re-read from disk).
+    pub text: String,
+    /// Interpreter options (subroutine path, program directory, MDI mode).
+    pub opts: InterpOptions,
+}
+
+/// The first piece of a probing job, planned from `start_mm`, and the session to go on.
+pub struct FirstPiece {
+    /// The live interpreter.
+    pub session: Session,
+    /// The first piece's plan.
+    pub plan: Plan,
+    /// Whether a probe ends it (otherwise the program has no probe after all).
+    pub more: bool,
+}
+
+/// Opens the live session and plans the first piece.
+pub fn first_piece(
+    src: &ProbingSource,
+    cfg: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+) -> Result<FirstPiece, ApiError> {
+    let mut opts = src.opts.clone();
+    let mut p = [0.0; 6];
+    p.copy_from_slice(&start_mm[..6]);
+    opts.initial_position = Some(p);
+    let gcode = |e: crate::gcode::GcodeError| ApiError::Gcode(e.to_string());
+    let mut session = Session::open_str(&src.name, &src.text, &opts).map_err(gcode)?;
+    let (canon, end) = session.next_piece().map_err(gcode)?;
+    let plan = motion::plan_continue(&canon, cfg, start_mm, FoldState::new(cfg))
+        .map_err(|e| ApiError::Gcode(format!("{}: {e}", src.name)))?;
+    Ok(FirstPiece {
+        session,
+        plan,
+        more: matches!(end, PieceEnd::Probe { .. }),
+    })
+}
+
+/// The thread that feeds a probing job, piece by piece.
+pub struct PieceRunner {
+    /// The segment queue.
+    pub queue: BufferWriter<QueueItem>,
+    /// The machine task.
+    pub machine: TaskHandle<MachineCmd>,
+    /// The machine task's snapshot (probe results).
+    pub snapshot: DataReader<MachineSnapshot>,
+    /// Planner configuration.
+    pub cfg: MotionConfig,
+    /// Job id.
+    pub job: u32,
+    /// Program name, for errors.
+    pub name: String,
+    /// Set when the job has ended (or is replaced): the runner stops.
+    pub cancel: Arc<AtomicBool>,
+    /// Probe results already seen before this job started.
+    pub seen_probe_seq: u32,
+}
+
+/// How a runner ended, for the job book.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RunnerEnd {
+    /// Every piece was queued (or the job was cancelled).
+    Done,
+    /// A later piece could not be interpreted or planned: the job must fail with this text.
+    Failed(String),
+}
+
+impl PieceRunner {
+    /// Queues the first piece, then waits for each probe result and queues the next piece,
+    /// until the program ends, the job is cancelled, or a piece fails.
+    pub fn run(mut self, first: FirstPiece) -> RunnerEnd {
+        let FirstPiece {
+            mut session,
+            plan,
+            more,
+        } = first;
+        if !self.feed(&plan.items) || !more {
+            return RunnerEnd::Done;
+        }
+        let mut plan = plan;
+        loop {
+            let Some(snap) = self.wait_for_probe() else {
+                return RunnerEnd::Done;
+            };
+            let p = snap.probe;
+            let state = plan.end_state.clone();
+            session.probe_result(&ProbeResult {
+                tripped: p.tripped,
+                probed: state.program_xyzabc(&p.probed_mm),
+                stopped: state.program_xyzabc(&p.stopped_mm),
+            });
+            let (canon, end) = match session.next_piece() {
+                Ok(piece) => piece,
+                Err(e) => return RunnerEnd::Failed(e.to_string()),
+            };
+            plan = match motion::plan_continue(&canon, &self.cfg, p.stopped_mm, state) {
+                Ok(plan) => plan,
+                Err(e) => return RunnerEnd::Failed(format!("{}: {e}", self.name)),
+            };
+            // Queue what fits, release the machine, then queue the rest as it drains: the
+            // interpolator consumes nothing until `continue`, so a piece longer than the
+            // queue would otherwise never fit.
+            let first = self.push_available(&plan.items);
+            let h = self.machine.send(MachineCmd::Continue {
+                job: self.job,
+                items: plan.items.len() as u64,
+            });
+            let accepted = h.is_ok_and(|h| {
+                matches!(
+                    h.wait_accepted(Duration::from_secs(2)),
+                    CommandStatus::Accepted | CommandStatus::Done
+                )
+            });
+            if !accepted || !self.feed(&plan.items[first..]) {
+                return RunnerEnd::Done;
+            }
+            if !matches!(end, PieceEnd::Probe { .. }) {
+                return RunnerEnd::Done;
+            }
+        }
+    }
+
+    /// Waits until the machine publishes the result of this job's next probe; `None` when
+    /// the job was cancelled first.
+    fn wait_for_probe(&mut self) -> Option<MachineSnapshot> {
+        loop {
+            if self.cancel.load(Ordering::Acquire) {
+                return None;
+            }
+            if let Some(s) = self.snapshot.latest() {
+                if s.probe.seq != self.seen_probe_seq && s.probe.job == self.job && s.probe.waiting
+                {
+                    self.seen_probe_seq = s.probe.seq;
+                    return Some(s);
+                }
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// Pushes items while the queue has room; returns how many went in.
+    fn push_available(&self, items: &[Item]) -> usize {
+        for (n, &item) in items.iter().enumerate() {
+            if self
+                .queue
+                .try_push(QueueItem {
+                    job: self.job,
+                    item,
+                })
+                .is_err()
+            {
+                return n;
+            }
+        }
+        items.len()
+    }
+
+    /// Pushes every item, waiting while the queue is full; false if cancelled.
+    fn feed(&self, items: &[Item]) -> bool {
+        super::runtime::feed(self.queue.clone(), items, self.job, &self.cancel)
+    }
+}
