@@ -1,7 +1,8 @@
 //! Proves that the machine's own realtime tasks (io, machine, interpolator, axis.X/Y/Z,
 //! monitor) allocate nothing in steady state: the whole servo cycle runs on the stepped
 //! runtime on this thread, under a counting global allocator, through motion, a feed hold,
-//! a resume, aux commands and an e-stop.
+//! a resume, aux commands and an e-stop; and through a probe move, its trip, the stop and
+//! the next piece of the program.
 #![allow(clippy::unwrap_used)]
 
 use hytask::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
@@ -139,4 +140,109 @@ fn the_servo_cycle_of_the_machine_allocates_nothing() {
         "the machine moved"
     );
     assert_eq!(during, 0, "{during} allocations in 3000 servo cycles");
+}
+
+#[test]
+fn a_probe_move_its_trip_stop_and_the_next_piece_allocate_nothing() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
+    let cfg = hytask::config::load(&path).unwrap();
+    let Built {
+        mut app,
+        machine,
+        queue,
+        motion_cfg,
+        sim_io,
+        ..
+    } = build(&cfg).unwrap();
+    app.configure().unwrap();
+    let mut rt = app.start_stepped(SimClock::new(0)).unwrap();
+    let mut fb: Vec<DataReader<AxisFeedback>> = ['X', 'Y', 'Z']
+        .iter()
+        .map(|&c| rt.reader(&ports::feedback(c)).unwrap())
+        .collect();
+    let mut snap: DataReader<hytask::machine::servo::MachineSnapshot> =
+        rt.reader(ports::SNAPSHOT).unwrap();
+    for cmd in [
+        MachineCmd::EstopReset,
+        MachineCmd::On,
+        MachineCmd::Home { mask: 0 },
+    ] {
+        let h = machine.send(cmd).unwrap();
+        until_done(&mut rt, &h, 20_000);
+    }
+    let mut start = [0.0; NUM_AXES];
+    for (i, s) in start.iter_mut().take(3).enumerate() {
+        *s = fb[i].latest().unwrap().actual;
+    }
+    let text = "G21 G90 F600\nG38.2 Z-30\nG1 X[#5061 - 20] F3000\nM2\n";
+    let mut opts = hytask::gcode::InterpOptions::default();
+    let mut p = [0.0; 6];
+    p.copy_from_slice(&start[..6]);
+    opts.initial_position = Some(p);
+    let mut session = hytask::gcode::Session::open_str("p.ngc", text, &opts).unwrap();
+    let (canon, _) = session.next_piece().unwrap();
+    let first = hytask::motion::plan_from(&canon, &motion_cfg, start).unwrap();
+    for &item in &first.items {
+        queue.try_push(QueueItem { job: 1, item }).unwrap();
+    }
+    let run = machine
+        .send(MachineCmd::Run {
+            job: 1,
+            items: first.items.len() as u64,
+            manual: false,
+        })
+        .unwrap();
+    rt.run_cycles(50);
+    let probe = sim_io[0].clone().unwrap();
+    let plate = start[2] - 5.0;
+
+    // Window 1: the probe move, the trip inside the servo cycle, the stop, the end marker.
+    let before = allocations();
+    let mut waited = 0;
+    while !snap.latest().unwrap().probe.waiting {
+        let z = fb[2].latest().unwrap().actual;
+        probe.set_digital_input(1, z <= plate).unwrap();
+        rt.run_cycles(1);
+        waited += 1;
+        assert!(waited < 20_000, "the probe never ended");
+    }
+    let window1 = allocations() - before;
+
+    // Off the realtime path: the interpreter goes on with the result, the next piece is
+    // planned from where the machine stopped (this allocates, as planning does).
+    let s = snap.latest().unwrap().probe;
+    assert!(s.tripped);
+    let r = hytask::gcode::ProbeResult {
+        tripped: true,
+        probed: first.end_state.program_xyzabc(&s.probed_mm),
+        stopped: first.end_state.program_xyzabc(&s.stopped_mm),
+    };
+    session.probe_result(&r);
+    let (canon, _) = session.next_piece().unwrap();
+    let second =
+        hytask::motion::plan_continue(&canon, &motion_cfg, s.stopped_mm, first.end_state.clone())
+            .unwrap();
+    for &item in &second.items {
+        queue.try_push(QueueItem { job: 1, item }).unwrap();
+    }
+
+    // Window 2: continue, and the next piece to the end of the job.
+    let before = allocations();
+    let cont = machine
+        .send(MachineCmd::Continue {
+            job: 1,
+            items: second.items.len() as u64,
+        })
+        .unwrap();
+    until_done(&mut rt, &run, 20_000);
+    let window2 = allocations() - before;
+
+    assert_eq!(cont.status(), CommandStatus::Done);
+    assert!((fb[0].latest().unwrap().actual - (start[0] - 20.0)).abs() < 0.01);
+    assert_eq!(
+        (window1, window2),
+        (0, 0),
+        "allocations in the probing servo cycles"
+    );
 }
