@@ -95,6 +95,45 @@ fn pause_resume_abort_and_overrides_act_on_a_running_job() {
 }
 
 #[test]
+fn job_step_runs_one_line_then_holds() {
+    let d = Daemon::start(&fast_sim());
+    let mut c = d.client();
+    ready(&mut c);
+    run_job(&mut c, "jobs/long.ngc");
+    // Line 6 is "G1 X250 F1200": 200 mm at 20 mm/s.
+    wait_status(&mut c, "on line 6", Duration::from_secs(20), |s| {
+        s["job"]["line"] == json!(6)
+    });
+    ok(&mut c, "job.step", Value::Null);
+    let held = wait_status(&mut c, "held on line 7", Duration::from_secs(20), |s| {
+        s["mode"] == json!("holding")
+            && s["axes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|a| a["velocity"].as_f64().unwrap().abs() < 1e-6)
+    });
+    assert_eq!(held["job"]["line"], json!(7), "{}", held["job"]);
+    // Line 7 ("G1 Y250") had only just begun: X is at its end, Y barely moved.
+    let (x, y) = (
+        axis(&held, "X")["actual"].as_f64().unwrap(),
+        axis(&held, "Y")["actual"].as_f64().unwrap(),
+    );
+    assert!((x - 250.0).abs() < 1.0 && y < 55.0, "X {x} Y {y}");
+    ok(&mut c, "job.step", Value::Null);
+    let held = wait_status(&mut c, "held on line 8", Duration::from_secs(30), |s| {
+        s["mode"] == json!("holding") && s["job"]["line"] == json!(8)
+    });
+    assert!(axis(&held, "Y")["actual"].as_f64().unwrap() > 245.0);
+    ok(&mut c, "job.abort", Value::Null);
+    wait_status(&mut c, "idle", Duration::from_secs(10), |s| {
+        s["mode"] == json!("idle")
+    });
+    let (code, msg) = err(&mut c, "job.step", Value::Null);
+    assert_eq!(code, 1, "{msg}");
+}
+
+#[test]
 fn jog_and_mdi_move_the_machine() {
     let d = Daemon::start(&fast_sim());
     let mut c = d.client();

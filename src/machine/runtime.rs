@@ -112,8 +112,6 @@ pub struct Machine {
     servo: Arc<crate::rt::activity::ThreadInfo>,
     bridge_stop: Arc<AtomicBool>,
     bridge: Mutex<Option<std::thread::JoinHandle<()>>>,
-    step_pending: AtomicBool,
-    step_line: AtomicU32,
     receivers: Mutex<Option<Receivers>>,
 }
 
@@ -399,8 +397,6 @@ impl Machine {
             servo: servo_info,
             bridge_stop: Arc::new(AtomicBool::new(false)),
             bridge: Mutex::new(None),
-            step_pending: AtomicBool::new(false),
-            step_line: AtomicU32::new(0),
             receivers: Mutex::new(Some(Receivers {
                 mode: mode_rx,
                 job: job_rx,
@@ -730,12 +726,6 @@ fn bridge_loop(machine: std::sync::Weak<Machine>, stop: Arc<AtomicBool>) {
             return;
         };
         m.pump_events();
-        if m.step_pending.load(Ordering::Acquire) {
-            let (snap, sp, _, _) = m.snapshot();
-            if snap.mode == Mode::Running && sp.line != 0 {
-                step_watch(&m, sp.line);
-            }
-        }
         if last_progress.elapsed() >= Duration::from_millis(100) {
             last_progress = Instant::now();
             let running = lock(&m.book).active.is_some();
@@ -748,18 +738,6 @@ fn bridge_loop(machine: std::sync::Weak<Machine>, stop: Arc<AtomicBool>) {
                 );
             }
         }
-    }
-}
-
-/// `job.step`: hold as soon as the executing line changes from the one the step began on.
-fn step_watch(m: &Machine, line: u32) {
-    let from = m.step_line.load(Ordering::Acquire);
-    if from == 0 {
-        m.step_line.store(line, Ordering::Release);
-    } else if line != from {
-        m.step_pending.store(false, Ordering::Release);
-        m.step_line.store(0, Ordering::Release);
-        let _ = m.command(MachineCmd::Pause);
     }
 }
 
@@ -1083,30 +1061,15 @@ impl MachineApi for Machine {
     }
 
     fn job_resume(&self) -> Result<(), ApiError> {
-        self.step_pending.store(false, Ordering::Release);
         self.command(MachineCmd::Resume).map(|_| ())
     }
 
     fn job_abort(&self) -> Result<(), ApiError> {
-        self.step_pending.store(false, Ordering::Release);
         self.command(MachineCmd::Abort).map(|_| ())
     }
 
     fn job_step(&self) -> Result<(), ApiError> {
-        let (snap, _, _, _) = self.snapshot();
-        match snap.mode {
-            Mode::Holding => {
-                self.step_line.store(0, Ordering::Release);
-                self.step_pending.store(true, Ordering::Release);
-                self.command(MachineCmd::Resume).map(|_| ())
-            }
-            Mode::Running => {
-                self.step_line.store(0, Ordering::Release);
-                self.step_pending.store(true, Ordering::Release);
-                Ok(())
-            }
-            _ => Err(ApiError::Rejected("no job is running".into())),
-        }
+        self.command(MachineCmd::Step).map(|_| ())
     }
 
     fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError> {

@@ -8,7 +8,7 @@
 //! → {"id":2,"method":"job.run"}     ← {"id":2,"result":{"ok":true}}
 //! → {"id":3,"method":"job.pause"}   feed hold: decelerate to a stop on the path
 //! → {"id":4,"method":"job.resume"}
-//! → {"id":5,"method":"job.step"}    run to the end of the next source line, then hold
+//! → {"id":5,"method":"job.step"}    hold when the next source line begins (resumes a hold)
 //! → {"id":6,"method":"job.abort"}   controlled stop, the rest of the job is dropped
 //! ```
 //! A job is interpreted and planned in full (soft limits included) by `job.load`, before any

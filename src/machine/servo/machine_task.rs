@@ -57,6 +57,10 @@ pub enum MachineCmd {
     Resume,
     /// Controlled stop; the rest of the job is dropped.
     Abort,
+    /// Single block: run to the end of the current source line, then hold (resuming first
+    /// if held). Watched in the servo cycle: the hold starts in the cycle the next line
+    /// begins.
+    Step,
     /// The next piece of a probing job (interpreted with the probe's result) is queued:
     /// `items` more queue items for job `job`, which waits at the end of its probe move.
     Continue {
@@ -78,7 +82,7 @@ pub enum MachineCmd {
 
 const NO_PARAMS: &[ParamDescriptor] = &[];
 
-static OPERATIONS: [OperationDescriptor; 11] = [
+static OPERATIONS: [OperationDescriptor; 12] = [
     OperationDescriptor {
         name: "estop",
         doc: "Trip the e-stop: every drive quick-stops this cycle, outputs go safe.",
@@ -169,6 +173,12 @@ static OPERATIONS: [OperationDescriptor; 11] = [
         next: NextCommand::AfterAcceptance,
     },
     OperationDescriptor {
+        name: "step",
+        doc: "Run to the end of the current source line, then hold (resumes a hold first).",
+        params: NO_PARAMS,
+        next: NextCommand::AfterAcceptance,
+    },
+    OperationDescriptor {
         name: "continue",
         doc: "Job `job` waits after a probe move: `items` more queue items (the next piece \
               of the program, interpreted with the probe's result) are queued.",
@@ -204,6 +214,7 @@ impl Commands for MachineCmd {
             MachineCmd::Abort => 8,
             MachineCmd::Overrides { .. } => 9,
             MachineCmd::Continue { .. } => 10,
+            MachineCmd::Step => 11,
         }
     }
 
@@ -225,6 +236,7 @@ impl Commands for MachineCmd {
             "pause" => MachineCmd::Pause,
             "resume" => MachineCmd::Resume,
             "abort" => MachineCmd::Abort,
+            "step" => MachineCmd::Step,
             "continue" => MachineCmd::Continue {
                 job: a.int(0)? as u32,
                 items: a.int(1)?.max(0) as u64,
@@ -363,6 +375,8 @@ pub struct MachineTask {
     /// Job id of the current or last motion, and how it ended.
     job_id: u32,
     ended: Option<(u32, JobEvent)>,
+    /// Single block in progress: the line the step began on (0 until motion shows one).
+    step_from: Option<u32>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -415,6 +429,7 @@ impl MachineTask {
             settle_since: None,
             job_id: 0,
             ended: None,
+            step_from: None,
         }
     }
 
@@ -722,6 +737,43 @@ impl MachineTask {
         }
     }
 
+    /// Leaves a feed hold or an M0 stop.
+    fn resume_job(&mut self, homed: bool) -> Result<(), RejectReason> {
+        self.mode
+            .request(Request::Resume, homed)
+            .map_err(RejectReason::Other)?;
+        self.motion.hold = false;
+        if self.barrier == Barrier::ProgramStop {
+            self.barrier = Barrier::None;
+            self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
+        }
+        self.emit_job(JobEvent::Resumed);
+        Ok(())
+    }
+
+    /// Single block: hold in the cycle a new source line starts executing.
+    fn poll_step(&mut self) {
+        let Some(from) = self.step_from else {
+            return;
+        };
+        if self.mode.mode() != Mode::Running {
+            if self.current == Motion::None {
+                self.step_from = None;
+            }
+            return;
+        }
+        let line = self.setpoints.line;
+        if from == 0 {
+            self.step_from = (line != 0).then_some(line).or(Some(0));
+        } else if line != 0 && line != from {
+            self.step_from = None;
+            if self.mode.request(Request::Pause, true).is_ok() {
+                self.motion.hold = true;
+                self.emit_job(JobEvent::Held { line });
+            }
+        }
+    }
+
     fn poll_homing(&mut self) {
         let Some(g) = self.homing_group else {
             return;
@@ -924,6 +976,7 @@ impl Task for MachineTask {
                 }
             }
         }
+        self.poll_step();
         self.poll_barrier();
         self.poll_homing();
         self.poll_motion();
@@ -994,17 +1047,21 @@ impl Task for MachineTask {
                 self.mode.request(Request::Pause, homed).map_err(reject)?;
                 self.motion.hold = true;
             }
-            MachineCmd::Resume => {
-                self.mode.request(Request::Resume, homed).map_err(reject)?;
-                self.motion.hold = false;
-                if self.barrier == Barrier::ProgramStop {
-                    self.barrier = Barrier::None;
-                    self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
+            MachineCmd::Step => {
+                match self.mode.mode() {
+                    Mode::Holding => self.resume_job(homed)?,
+                    Mode::Running => {}
+                    _ => return Err(RejectReason::Other("no job is running")),
                 }
-                self.emit_job(JobEvent::Resumed);
+                self.step_from = Some(self.setpoints.line);
+            }
+            MachineCmd::Resume => {
+                self.resume_job(homed)?;
+                self.step_from = None;
             }
             MachineCmd::Abort => {
                 self.mode.request(Request::Abort, homed).map_err(reject)?;
+                self.step_from = None;
                 let line = self.setpoints.line;
                 if self.homing_group.is_some() {
                     self.drive.home_abort_seq = self.drive.home_abort_seq.wrapping_add(1);
@@ -1132,6 +1189,7 @@ impl Task for MachineTask {
             | MachineCmd::EstopReset
             | MachineCmd::Resume
             | MachineCmd::Continue { .. }
+            | MachineCmd::Step
             | MachineCmd::Overrides { .. } => Progress::Done,
         }
     }

@@ -259,3 +259,87 @@ fn a_following_error_fault_stops_the_other_axes_under_control_and_disables_the_d
         );
     }
 }
+
+#[test]
+fn single_block_holds_in_the_cycle_the_next_line_begins() {
+    let mut r = Rig::new();
+    r.ready();
+    let mut start = [0.0; NUM_AXES];
+    for (i, s) in start.iter_mut().take(3).enumerate() {
+        *s = r.feedback(i).actual;
+    }
+    // Three lines of a zigzag, 10 mm along -X each, blended.
+    let canon: Vec<Canon> = (0..4)
+        .map(|k| {
+            let loc = SourceLoc {
+                file: Arc::from("t"),
+                line: 10 + k,
+                col: 1,
+            };
+            let cmd = if k == 0 {
+                CanonCmd::SetFeedRate(1200.0)
+            } else {
+                let mut p = start;
+                p[0] -= 10.0 * f64::from(k);
+                p[1] -= if k % 2 == 1 { 5.0 } else { 0.0 };
+                CanonCmd::StraightFeed(p)
+            };
+            Canon { loc, cmd }
+        })
+        .collect();
+    let plan = motion::plan_from(&canon, &r.motion_cfg, start).expect("plan");
+    for &item in &plan.items {
+        r.queue.try_push(QueueItem { job: 1, item }).expect("room");
+    }
+    let run = r
+        .built_machine
+        .send(MachineCmd::Run {
+            job: 1,
+            items: plan.items.len() as u64,
+            manual: false,
+        })
+        .expect("queue");
+    r.rt.run_cycles(100);
+    assert_eq!(r.sp.latest().expect("sp").line, 11);
+    // Step while running line 11: it holds as line 12 begins.
+    r.send_until_done(MachineCmd::Step, 10);
+    let mut held_line = None;
+    for _ in 0..5000 {
+        r.rt.run_cycles(1);
+        let sp = r.sp.latest().expect("sp");
+        if r.mode() == Mode::Holding {
+            held_line.get_or_insert(sp.line);
+        }
+        if sp.state == InterpState::Holding {
+            break;
+        }
+    }
+    assert_eq!(held_line, Some(12), "held as line 12 began");
+    let x_held = r.sp.latest().expect("sp").pose_mm[0];
+    assert!(
+        x_held < start[0] - 10.0 && x_held > start[0] - 20.0,
+        "{x_held}"
+    );
+    r.rt.run_cycles(200);
+    assert_eq!(r.sp.latest().expect("sp").pose_mm[0], x_held, "stays held");
+    // Step from the hold: resumes, holds again when line 13 begins.
+    r.send_until_done(MachineCmd::Step, 10);
+    for _ in 0..5000 {
+        r.rt.run_cycles(1);
+        if r.sp.latest().expect("sp").state == InterpState::Holding {
+            break;
+        }
+    }
+    assert_eq!(r.mode(), Mode::Holding);
+    assert_eq!(r.sp.latest().expect("sp").line, 13);
+    // Resume runs to the end.
+    r.send_until_done(MachineCmd::Resume, 10);
+    for _ in 0..10_000 {
+        r.rt.run_cycles(1);
+        if run.status() == CommandStatus::Done {
+            break;
+        }
+    }
+    assert_eq!(run.status(), CommandStatus::Done);
+    assert!((r.feedback(0).actual - (start[0] - 30.0)).abs() < 0.01);
+}
