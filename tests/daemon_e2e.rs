@@ -60,12 +60,7 @@ fn pause_resume_abort_and_overrides_act_on_a_running_job() {
     std::thread::sleep(Duration::from_millis(1500));
     ok(&mut c, "job.pause", Value::Null);
     let held = wait_status(&mut c, "holding at rest", Duration::from_secs(5), |s| {
-        s["mode"] == json!("holding")
-            && s["axes"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .all(|a| a["velocity"].as_f64().unwrap().abs() < 1e-6)
+        s["mode"] == json!("holding") && at_rest(s, 1e-6)
     });
     let x = axis(&held, "X")["actual"].as_f64().unwrap();
     std::thread::sleep(Duration::from_millis(300));
@@ -106,12 +101,7 @@ fn job_step_runs_one_line_then_holds() {
     });
     ok(&mut c, "job.step", Value::Null);
     let held = wait_status(&mut c, "held on line 7", Duration::from_secs(20), |s| {
-        s["mode"] == json!("holding")
-            && s["axes"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .all(|a| a["velocity"].as_f64().unwrap().abs() < 1e-6)
+        s["mode"] == json!("holding") && at_rest(s, 1e-6)
     });
     assert_eq!(held["job"]["line"], json!(7), "{}", held["job"]);
     // Line 7 ("G1 Y250") had only just begun: X is at its end, Y barely moved.

@@ -14,11 +14,7 @@ use std::time::Duration;
 use support::*;
 
 fn all_stopped(s: &Value) -> bool {
-    s["axes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .all(|a| a["velocity"].as_f64().unwrap().abs() < 1e-3)
+    at_rest(s, 1e-3)
 }
 
 fn drives_off(s: &Value) -> bool {

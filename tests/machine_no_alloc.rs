@@ -57,8 +57,19 @@ fn until_done(rt: &mut hytask::rt::deploy::SteppedRuntime, h: &CommandHandle, ma
     panic!("not done: {:?}", h.status());
 }
 
-#[test]
-fn the_servo_cycle_of_the_machine_allocates_nothing() {
+/// The simulated mill on the stepped runtime, homed and idle.
+struct Homed {
+    rt: hytask::rt::deploy::SteppedRuntime,
+    machine: TaskHandle<MachineCmd>,
+    queue: BufferWriter<QueueItem>,
+    motion_cfg: hytask::motion::MotionConfig,
+    sim_io: Vec<Option<hytask_hal::sim::SimIoHandle>>,
+    fb: Vec<DataReader<AxisFeedback>>,
+    /// Where the axes are after homing.
+    start: [f64; NUM_AXES],
+}
+
+fn homed() -> Homed {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
     let cfg = hytask::config::load(&path).unwrap();
@@ -84,12 +95,34 @@ fn the_servo_cycle_of_the_machine_allocates_nothing() {
         let h = machine.send(cmd).unwrap();
         until_done(&mut rt, &h, 20_000);
     }
-
-    // A job with spindle and coolant (aux items) and a long feed move, queued up front.
     let mut start = [0.0; NUM_AXES];
     for (i, s) in start.iter_mut().take(3).enumerate() {
         *s = fb[i].latest().unwrap().actual;
     }
+    Homed {
+        rt,
+        machine,
+        queue,
+        motion_cfg,
+        sim_io,
+        fb,
+        start,
+    }
+}
+
+#[test]
+fn the_servo_cycle_of_the_machine_allocates_nothing() {
+    let Homed {
+        mut rt,
+        machine,
+        queue,
+        motion_cfg,
+        sim_io,
+        mut fb,
+        start,
+    } = homed();
+
+    // A job with spindle and coolant (aux items) and a long feed move, queued up front.
     let mut end = start;
     end[..3].copy_from_slice(&[100.0, 150.0, -30.0]);
     let loc = SourceLoc {
@@ -144,37 +177,17 @@ fn the_servo_cycle_of_the_machine_allocates_nothing() {
 
 #[test]
 fn a_probe_move_its_trip_stop_and_the_next_piece_allocate_nothing() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
-    let cfg = hytask::config::load(&path).unwrap();
-    let Built {
-        mut app,
+    let Homed {
+        mut rt,
         machine,
         queue,
         motion_cfg,
         sim_io,
-        ..
-    } = build(&cfg).unwrap();
-    app.configure().unwrap();
-    let mut rt = app.start_stepped(SimClock::new(0)).unwrap();
-    let mut fb: Vec<DataReader<AxisFeedback>> = ['X', 'Y', 'Z']
-        .iter()
-        .map(|&c| rt.reader(&ports::feedback(c)).unwrap())
-        .collect();
+        mut fb,
+        start,
+    } = homed();
     let mut snap: DataReader<hytask::machine::servo::MachineSnapshot> =
         rt.reader(ports::SNAPSHOT).unwrap();
-    for cmd in [
-        MachineCmd::EstopReset,
-        MachineCmd::On,
-        MachineCmd::Home { mask: 0 },
-    ] {
-        let h = machine.send(cmd).unwrap();
-        until_done(&mut rt, &h, 20_000);
-    }
-    let mut start = [0.0; NUM_AXES];
-    for (i, s) in start.iter_mut().take(3).enumerate() {
-        *s = fb[i].latest().unwrap().actual;
-    }
     let text = "G21 G90 F600\nG38.2 Z-30\nG1 X[#5061 - 20] F3000\nM2\n";
     let mut opts = hytask::gcode::InterpOptions::default();
     let mut p = [0.0; 6];

@@ -188,6 +188,15 @@ pub fn ready(c: &mut Client) {
     });
 }
 
+/// Every axis' |velocity| in a status is below `tolerance`.
+pub fn at_rest(s: &Value, tolerance: f64) -> bool {
+    s["axes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|a| a["velocity"].as_f64().unwrap().abs() < tolerance)
+}
+
 /// Axis `name`'s field from a status.
 pub fn axis<'a>(s: &'a Value, name: &str) -> &'a Value {
     s["axes"]
