@@ -106,6 +106,17 @@ impl Session {
         self.it.probe_result(r.tripped, &r.probed, &r.stopped);
     }
 
+    /// The result `rs274` reports without a machine for the pending probe (not tripped;
+    /// probed at the programmed end; stopped 0.01 inch short of it): what the whole-program
+    /// dry run before motion uses. `None` when no probe is pending.
+    pub fn simulated_result(&self) -> Option<ProbeResult> {
+        self.it.pending_probe.as_ref().map(|p| ProbeResult {
+            tripped: false,
+            probed: p.simulated.0,
+            stopped: p.simulated.1,
+        })
+    }
+
     /// True once the program has ended.
     pub fn finished(&self) -> bool {
         self.it.ended() && self.it.pending_probe.is_none()

@@ -220,6 +220,8 @@ pub(crate) struct PendingProbe {
     pub kind: crate::gcode::canon::ProbeKind,
     /// Where the G38 word is.
     pub loc: SourceLoc,
+    /// What `rs274` without a machine would report: (probed, stopped) positions.
+    pub simulated: ([f64; 6], [f64; 6]),
 }
 
 impl<'a> Interp<'a> {

@@ -147,22 +147,9 @@ impl Interp<'_> {
             kind,
         })?;
         self.emit(CanonCmd::Probe { on: false })?;
-        if self.live_probe {
-            // The machine measures: the interpreter stops after this line and continues
-            // with the result (`Interp::probe_result`), as LinuxCNC's does.
-            self.pending_probe = Some(super::PendingProbe {
-                kind,
-                loc: self.loc.clone(),
-            });
-            return Ok(());
-        }
         // Without a machine, rs274's canon reports the probe position as the programmed end
-        // and leaves the tool 0.01 inch short of it, back toward the start; the interpreter
-        // then continues from there. hytask reproduces that model.
-        for (i, v) in end.iter().enumerate() {
-            self.p.numbered[5061 + i] = *v;
-        }
-        self.p.numbered[5070] = 0.0;
+        // and leaves the tool 0.01 inch short of it, back toward the start (not tripped); the
+        // interpreter then continues from there. hytask's dry run reproduces that model.
         let d = [end[0] - start[0], end[1] - start[1], end[2] - start[2]];
         let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let mut stop = end;
@@ -172,7 +159,18 @@ impl Interp<'_> {
                 stop[i] = end[i] - back * d[i] / len;
             }
         }
-        self.s.pos = stop;
+        let simulated = (end, stop);
+        if self.live_probe {
+            // The machine measures: the interpreter stops after this line and continues
+            // with the result (`Interp::probe_result`), as LinuxCNC's does.
+            self.pending_probe = Some(super::PendingProbe {
+                kind,
+                loc: self.loc.clone(),
+                simulated,
+            });
+        } else {
+            self.probe_result(false, &simulated.0, &simulated.1);
+        }
         Ok(())
     }
 
