@@ -3,7 +3,7 @@
 //! bounds and a stop-at-every-corner planner) and, from the trace interpolated at the servo
 //! period, each axis' peak velocity, acceleration and jerk against its limit.
 
-use crate::motion::{bounds, trace, MotionConfig, AXIS_NAMES};
+use crate::motion::{self, bounds, trace, MotionConfig, AXIS_NAMES};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -176,6 +176,18 @@ pub fn report(
         plan.duration_s
     )?;
     writeln!(out, "distance:        {:.3} mm", plan.distance_mm)?;
+    let probes = plan
+        .items
+        .iter()
+        .filter(|i| matches!(i, motion::Item::Aux(a) if matches!(a.kind, motion::AuxKind::ProbeArm { .. })))
+        .count();
+    if probes > 0 {
+        writeln!(
+            out,
+            "probes:          {probes} (G38 moves planned to their programmed end; on the \
+             machine each stops at contact and the program goes on from there)"
+        )?;
+    }
     let ratio = |x: f64| {
         if x > 0.0 {
             plan.duration_s / x
