@@ -506,3 +506,19 @@ fn a_missing_section_is_named() {
         other => panic!("expected a parse error, got {other:?}"),
     }
 }
+
+#[test]
+fn the_simulated_touch_plate_is_checked() {
+    let found = issues(&[(
+        "touch_plate = { input = \"probe\", axis = \"Z\", top = -80.0 }",
+        "touch_plate = { input = \"prob\", axis = \"A\", top = -80.0 }",
+    )]);
+    assert_has(
+        &found,
+        "io[0] (panel).touch_plate.input: \"prob\" is not a digital input of this device",
+    );
+    assert_has(
+        &found,
+        "io[0] (panel).touch_plate.axis: no [[axis]] named A",
+    );
+}

@@ -39,6 +39,24 @@ pub struct IoConfig {
     /// Analog outputs, in channel order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub analog_outputs: Vec<AnalogPoint>,
+    /// Simulation only: a flat plate under the tool, so probing (G38.x) can be tried on the
+    /// simulated machine.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub touch_plate: Option<TouchPlate>,
+}
+
+/// A simulated touch plate: digital input `input` of the device reads active while the
+/// position of `axis` is at or below `top`, as a probe resting on a plate would. The input
+/// follows the axis' actual position of the previous servo cycle.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TouchPlate {
+    /// Name of one of this device's digital inputs.
+    pub input: String,
+    /// Axis whose position touches the plate (usually Z).
+    pub axis: super::AxisName,
+    /// The plate's surface: the input is active at or below it.
+    pub top: f64,
 }
 
 /// I/O backends.
@@ -222,6 +240,15 @@ impl IoConfig {
         issues.name(format!("{key}.name"), &self.name);
         match self.backend {
             IoBackend::Sim => {
+                if let Some(t) = &self.touch_plate {
+                    issues.finite(format!("{key}.touch_plate.top"), t.top);
+                    if !self.digital_inputs.iter().any(|p| p.name == t.input) {
+                        issues.push(
+                            format!("{key}.touch_plate.input"),
+                            format!("{:?} is not a digital input of this device", t.input),
+                        );
+                    }
+                }
                 if self.address.is_some() {
                     issues.push(format!("{key}.address"), "not used with backend = \"sim\"");
                 }
@@ -240,6 +267,15 @@ impl IoConfig {
                 ),
                 Some(_) => {}
             },
+        }
+        if self.backend != IoBackend::Sim && self.touch_plate.is_some() {
+            issues.push(
+                format!("{key}.touch_plate"),
+                format!(
+                    "simulation only: not used with backend = {:?}",
+                    self.backend.as_str()
+                ),
+            );
         }
         for kind in [
             IoKind::DigitalInput,

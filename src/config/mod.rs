@@ -47,7 +47,7 @@ pub use drive::{
     CanopenDriveConfig, DriveBackend, DriveConfig, SimDriveConfig, SwitchConfig, SIM_DRIVE_HEADROOM,
 };
 pub use error::{ConfigError, Issue, Issues};
-pub use io::{AnalogPoint, DigitalPoint, IoBackend, IoConfig, IoKind, IoRef};
+pub use io::{AnalogPoint, DigitalPoint, IoBackend, IoConfig, IoKind, IoRef, TouchPlate};
 pub use machine::{Kinematics, KinematicsKind, MachineSection, ScaraConfig};
 pub use root::MachineConfig;
 pub use settings::{

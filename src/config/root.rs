@@ -66,6 +66,16 @@ impl MachineConfig {
         for (i, dev) in self.io.iter().enumerate() {
             dev.validate(&IoConfig::key(i, &dev.name), &mut issues);
         }
+        for (i, dev) in self.io.iter().enumerate() {
+            if let Some(t) = &dev.touch_plate {
+                if !self.axes.iter().any(|a| a.name == t.axis) {
+                    issues.push(
+                        format!("{}.touch_plate.axis", IoConfig::key(i, &dev.name)),
+                        format!("no [[axis]] named {}", t.axis),
+                    );
+                }
+            }
+        }
         let channels = io::index(&self.io, &mut issues);
         let mut need = |key: &str, name: &str, kind: IoKind| {
             check_channel(&channels, key, name, kind, &mut issues);

@@ -35,6 +35,34 @@ pub fn first_probe_line(canon: &[Canon]) -> Option<u32> {
         .map(|c| c.loc.line)
 }
 
+/// Plans a job before it runs: validation and estimates. A program without probes is checked
+/// in full. One that probes is checked in full up to and including its first probe; what
+/// follows depends on the measurements (the dry run's simulated probe runs each move to its
+/// programmed end, which may be far from where the machine will touch), so those pieces are
+/// checked against the soft limits when they are planned, before they move, and the estimate
+/// plans them without soft limits.
+fn plan_job(
+    canon: &[Canon],
+    motion: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    name: &str,
+) -> Result<Plan, ApiError> {
+    let refuse = |e: motion::PlanError| ApiError::Gcode(format!("{name}: {e}"));
+    let Some(k) = canon
+        .iter()
+        .position(|c| matches!(c.cmd, CanonCmd::StraightProbe { .. }))
+    else {
+        return motion::plan_from(canon, motion, start_mm).map_err(refuse);
+    };
+    let first = motion::plan_from(&canon[..=k], motion, start_mm).map_err(refuse)?;
+    let mut relaxed = motion.clone();
+    for a in relaxed.axes.iter_mut().filter(|a| a.min_mm < a.max_mm) {
+        a.min_mm = -1e9;
+        a.max_mm = 1e9;
+    }
+    Ok(motion::plan_from(canon, &relaxed, start_mm).unwrap_or(first))
+}
+
 /// Line of the first probe move of a prepared job, if it probes.
 pub fn first_probe_line_of(job: &PreparedJob) -> Option<u32> {
     job.plan.items.iter().find_map(|i| match i {
@@ -160,8 +188,7 @@ pub fn prepare(
     }
     let program =
         gcode::load_str(&name, &text, &opts).map_err(|e| ApiError::Gcode(e.to_string()))?;
-    let plan = motion::plan_from(&program.canon, motion, start_mm)
-        .map_err(|e| ApiError::Gcode(format!("{name}: {e}")))?;
+    let plan = plan_job(&program.canon, motion, start_mm, &name)?;
     let probing = probing_source(&program.canon, &name, &text, &opts);
     let display = Path::new(&name)
         .file_name()
@@ -189,8 +216,7 @@ pub fn prepare_mdi(
     let text = format!("{line}\n");
     let program =
         gcode::load_str("mdi", &text, &opts).map_err(|e| ApiError::Gcode(e.to_string()))?;
-    let plan = motion::plan_from(&program.canon, motion, start_mm)
-        .map_err(|e| ApiError::Gcode(format!("mdi: {e}")))?;
+    let plan = plan_job(&program.canon, motion, start_mm, "mdi")?;
     let probing = probing_source(&program.canon, "mdi", &text, &opts);
     Ok(PreparedJob {
         name: "mdi".into(),

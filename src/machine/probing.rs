@@ -20,10 +20,11 @@ use super::servo::machine_task::MachineCmd;
 use super::servo::{MachineSnapshot, QueueItem};
 use crate::gcode::{InterpOptions, PieceEnd, ProbeResult, Session, NUM_AXES};
 use crate::motion::from_canon::FoldState;
+use crate::motion::AuxKind;
 use crate::motion::{self, Item, MotionConfig, Plan};
 use crate::rt::prelude::{BufferWriter, CommandStatus, DataReader, TaskHandle};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// What a probing job needs to be interpreted again when it runs.
@@ -87,6 +88,23 @@ pub struct PieceRunner {
     pub cancel: Arc<AtomicBool>,
     /// Probe results already seen before this job started.
     pub seen_probe_seq: u32,
+    /// The job's `(MSG, …)` texts: each piece's are appended, and the message ids of its
+    /// queue items shifted to match (each piece's plan numbers its own from 0).
+    pub messages: Arc<Mutex<Vec<String>>>,
+}
+
+/// Appends a piece's message texts to the job's and renumbers the piece's message items.
+pub fn append_messages(plan: &mut Plan, messages: &Mutex<Vec<String>>) {
+    let mut all = messages.lock().unwrap_or_else(|p| p.into_inner());
+    let offset = all.len() as u32;
+    all.extend(plan.messages.iter().cloned());
+    for item in &mut plan.items {
+        if let Item::Aux(a) = item {
+            if let AuxKind::Message { id } = &mut a.kind {
+                *id += offset;
+            }
+        }
+    }
 }
 
 /// How a runner ended, for the job book.
@@ -130,6 +148,7 @@ impl PieceRunner {
                 Ok(plan) => plan,
                 Err(e) => return RunnerEnd::Failed(format!("{}: {e}", self.name)),
             };
+            append_messages(&mut plan, &self.messages);
             // Queue what fits, release the machine, then queue the rest as it drains: the
             // interpolator consumes nothing until `continue`, so a piece longer than the
             // queue would otherwise never fit.

@@ -17,7 +17,7 @@ use super::probing;
 use super::safety::{AxisGuard, Trip};
 use super::servo::axis_task::AxisTask;
 use super::servo::interp_task::InterpolatorTask;
-use super::servo::io_task::{IoTask, SimSpindle};
+use super::servo::io_task::{IoTask, SimPlate, SimSpindle};
 use super::servo::machine_task::{MachineCmd, MachineSetup, MachineTask, SpindleIo};
 use super::servo::monitor_task::MonitorTask;
 use super::servo::{
@@ -79,6 +79,8 @@ struct ActiveJob {
     feeder: Option<std::thread::JoinHandle<()>>,
     started: Instant,
     manual: bool,
+    /// Texts of its `(MSG, …)` items (a probing job's grow piece by piece).
+    messages: Arc<Mutex<Vec<String>>>,
     /// Why the job failed off the realtime path (a piece after a probe did not interpret
     /// or plan); the machine task only sees the abort this causes.
     error: Option<String>,
@@ -248,6 +250,23 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
             (s.spin_up_s / period_s).ceil() as u32,
         ))
     });
+    // Simulated touch plates: the input follows the axis position.
+    let plates: Vec<SimPlate> = config
+        .io
+        .iter()
+        .enumerate()
+        .filter_map(|(d, dev)| {
+            let t = dev.touch_plate.as_ref()?;
+            let r = config.find_io(&t.input)?;
+            let handle = devs.sim_io.get(d)?.clone()?;
+            let invert = dev.digital_inputs.get(r.channel)?.invert;
+            Some(SimPlate::new(
+                axis_letter(t.axis as usize),
+                t.top,
+                (handle, r.channel, invert),
+            ))
+        })
+        .collect();
     let homing_groups: Vec<u32> = config
         .homing_order()
         .iter()
@@ -284,7 +303,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         sim_io,
     } = devs;
     let overrun_injection = Arc::new(AtomicU32::new(0));
-    let mut io_task = IoTask::new(io, io_map.clone(), sim_spindle);
+    let mut io_task = IoTask::new(io, io_map.clone(), sim_spindle).with_plates(plates);
     if sim_io.iter().all(Option::is_some) {
         io_task = io_task.with_overrun_injection(overrun_injection.clone());
     }
@@ -515,8 +534,10 @@ impl Machine {
         }
         let id = self.next_job.fetch_add(1, Ordering::Relaxed);
         let cancel = Arc::new(AtomicBool::new(false));
+        let messages = Arc::new(Mutex::new(Vec::new()));
         let (feeder, items) = match &job.probing {
             None => {
+                lock(&messages).clone_from(&job.plan.messages);
                 let queue = self.queue.clone();
                 let items = job.clone();
                 let cancel = cancel.clone();
@@ -528,7 +549,7 @@ impl Machine {
                     .map_err(|e| ApiError::Failed(format!("cannot start the feeder: {e}")))?;
                 (feeder, job.plan.items.len() as u64)
             }
-            Some(src) => self.start_piece_runner(src, &job, id, &cancel)?,
+            Some(src) => self.start_piece_runner(src, &job, id, &cancel, &messages)?,
         };
         let mut book = lock(&self.book);
         book.status = JobStatus {
@@ -550,6 +571,7 @@ impl Machine {
             feeder: Some(feeder),
             started: Instant::now(),
             manual,
+            messages,
             error: None,
         });
         drop(book);
@@ -590,6 +612,7 @@ impl Machine {
         job: &PreparedJob,
         id: u32,
         cancel: &Arc<AtomicBool>,
+        messages: &Arc<Mutex<Vec<String>>>,
     ) -> Result<(std::thread::JoinHandle<()>, u64), ApiError> {
         if self.config.motion.probe_input.is_none() {
             let line = job::first_probe_line_of(job).unwrap_or(0);
@@ -599,7 +622,8 @@ impl Machine {
                 job.name
             )));
         }
-        let first = probing::first_piece(src, &self.motion_cfg, job.plan.start_mm)?;
+        let mut first = probing::first_piece(src, &self.motion_cfg, job.plan.start_mm)?;
+        probing::append_messages(&mut first.plan, messages);
         let items = first.plan.items.len() as u64;
         let snapshot = lock(&self.runtime)
             .as_ref()
@@ -615,6 +639,7 @@ impl Machine {
             name: job.name.clone(),
             cancel: cancel.clone(),
             seen_probe_seq: self.snapshot().0.probe.seq,
+            messages: messages.clone(),
         };
         let book = self.book.clone();
         let machine = self.machine.clone();
@@ -778,7 +803,7 @@ fn handle_job_event(m: &Machine, e: JobEvent) {
             let text = book
                 .active
                 .as_ref()
-                .and_then(|a| a.job.plan.messages.get(id as usize).cloned())
+                .and_then(|a| lock(&a.messages).get(id as usize).cloned())
                 .unwrap_or_default();
             drop(book);
             tracing::info!("message (line {line}): {text}");

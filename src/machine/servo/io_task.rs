@@ -7,9 +7,9 @@
 //!
 //! On simulated I/O the task also plays the spindle's part of the plant: the at-speed input
 //! turns on `spin_up_s` after the spindle enable output, so M3 waits as it would on a real
-//! machine.
+//! machine; and a touch plate (`touch_plate`) switches the probe input from the axis position.
 
-use super::{ports, Inputs, Outputs};
+use super::{ports, AxisFeedback, Inputs, Outputs};
 use crate::machine::devices::{DynIo, IoMap};
 use crate::rt::prelude::*;
 use hytask_hal::sim::SimIoHandle;
@@ -53,6 +53,41 @@ impl SimSpindle {
     }
 }
 
+/// The simulated touch plate (`[[io]] touch_plate`): drives a simulated digital input from
+/// an axis' actual position of the previous cycle.
+pub struct SimPlate {
+    /// Axis letter whose feedback is read.
+    pub axis: char,
+    /// The input is active at or below this position.
+    pub top: f64,
+    /// Device handle and channel of the input, and its inversion.
+    pub input: (SimIoHandle, usize, bool),
+    feedback: Option<DataReader<AxisFeedback>>,
+    last: AxisFeedback,
+}
+
+impl SimPlate {
+    /// A plate at `top` under `axis`, switching `input`.
+    pub fn new(axis: char, top: f64, input: (SimIoHandle, usize, bool)) -> Self {
+        SimPlate {
+            axis,
+            top,
+            input,
+            feedback: None,
+            last: AxisFeedback::default(),
+        }
+    }
+
+    fn update(&mut self) {
+        if let Some(r) = &mut self.feedback {
+            r.get(&mut self.last);
+        }
+        let touching = self.last.valid && self.last.actual <= self.top;
+        let (handle, channel, invert) = &self.input;
+        let _ = handle.set_digital_input(*channel, touching != *invert);
+    }
+}
+
 /// The I/O task.
 pub struct IoTask {
     devices: Vec<DynIo>,
@@ -62,6 +97,7 @@ pub struct IoTask {
     current: Inputs,
     written: Option<Outputs>,
     spindle: Option<SimSpindle>,
+    plates: Vec<SimPlate>,
     overrun: Option<std::sync::Arc<std::sync::atomic::AtomicU32>>,
 }
 
@@ -77,7 +113,14 @@ impl IoTask {
             current: Inputs::default(),
             written: None,
             spindle,
+            plates: Vec::new(),
         }
+    }
+
+    /// Simulated touch plates to drive before the inputs are read.
+    pub fn with_plates(mut self, plates: Vec<SimPlate>) -> Self {
+        self.plates = plates;
+        self
     }
 
     fn read_all(&mut self) -> bool {
@@ -164,10 +207,16 @@ impl Task for IoTask {
     fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
         self.inputs = Some(ctx.output(ports::INPUTS));
         self.outputs = Some(ctx.input(ports::OUTPUTS));
+        for p in &mut self.plates {
+            p.feedback = Some(ctx.input(&ports::feedback(p.axis)));
+        }
         Ok(())
     }
 
     fn read_inputs(&mut self, _ctx: &StepContext) {
+        for p in &mut self.plates {
+            p.update();
+        }
         let ok = self.read_all();
         self.current.link_ok = ok;
         self.current.stale_cycles = if ok {
