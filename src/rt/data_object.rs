@@ -13,39 +13,43 @@
 //! `reading[i]`: `FREE` (not registered), `BUSY` (the reader is mid-acquire) or the index of the
 //! slot the reader has pinned. `set` costs one copy whatever the number of readers.
 //!
-//! - Writer (`set`): pick a slot that is neither `latest` nor pinned by a registered reader
-//!   (`N` readers pin at most `N` slots, so of `N + 2` one is always free), write value and
-//!   sequence number into it, `latest.store(slot)`, then for every registered reader whose
-//!   marker is `BUSY`, `compare_exchange(BUSY, slot)`: the writer finishes that reader's
-//!   acquire for it with a slot it has completely written.
+//! - Writer (`set`): one pass over the registered readers' markers. A pinned slot is taken.
+//!   A reader caught `BUSY` is handed `latest` (completely written) by
+//!   `compare_exchange(BUSY, latest)`; if that fails the reader has just pinned a slot itself,
+//!   which the failed exchange returns, and that slot is taken. Then write value and sequence
+//!   number into a slot that is neither `latest` nor taken (`N` readers take at most `N`, so of
+//!   `N + 2` one is free) and publish it: `latest.store(slot)`.
 //! - Reader (`read`): if `latest` is the slot it has pinned, nothing is new. Otherwise
 //!   `reading[i].swap(BUSY)`, `l = latest.load()`, `compare_exchange(BUSY, l)`; if that fails the
-//!   writer has pinned a newer slot for it, which it uses. Constant steps, no loop.
+//!   writer has handed it a slot, which it uses. Constant steps, no loop.
 //! - A reader registering late claims a free entry (under a mutex `set` and `read` never take)
 //!   and sets its bit in the `registered` mask; its first read is an ordinary acquire, so it
 //!   gets the latest value with no seed. Sequence numbers in the slots (0: the initial default
 //!   value, reported as no data) tell new from old data.
 //!
-//! # Why the writer never writes a slot a reader is reading
-//! Every access below is `SeqCst`, so they all fall in one total order, *S*. The writer loads
-//! the `registered` mask once per `set`, *after* its `latest` store, and uses it for that set's
-//! `BUSY` check and for the next set's scan (a new writer loads both at creation). Take set
-//! `k`, writing slot `s`, and a reader reading slot `s`:
-//! 1. If set `k`'s scan saw the reader's pin on `s`, it skipped `s`. If it saw a later marker,
-//!    the reader had moved on: its read happens before the write (release/acquire through the
-//!    marker).
-//! 2. Otherwise the reader's `BUSY` swap comes after, in *S*, an access that follows set
-//!    `k - 1`'s `latest` store: the scan itself (it read an older marker), or set `k - 1`'s
-//!    `BUSY` check (the scan read this very `BUSY`, which that check must have missed: had it
-//!    seen it, it would have replaced it), or set `k - 1`'s mask load (it missed the reader's
-//!    registration, which precedes the swap).
-//! 3. So the reader's `latest` load returns set `k - 1`'s slot, which set `k` never writes (it
-//!    is `latest`), or a newer one, whose write happens before that load; and a slot the
-//!    writer pins for the reader by compare-exchange was written before being offered.
+//! Chen & Burns hand `BUSY` readers the new slot right after the `latest` store, in a second
+//! pass over the markers. Handing them the then-latest slot in the next `set`'s one pass gives
+//! the same guarantees (below; a reader is never handed a slot older than one it has returned,
+//! since `latest` was stored before it went `BUSY`) for half the writer's work per reader.
 //!
-//! Hence the mask is loaded after the `latest` store: loaded before it, a reader registering
-//! in between could load the slot published before, and the next set, seeing that reader
-//! `BUSY`, could rewrite the slot under it. `loom_tests` below model these races;
+//! # Why the writer never writes a slot a reader is reading
+//! Every access below is `SeqCst`, so they all fall in one total order, *S*. Set `k` loads the
+//! `registered` mask and the markers after set `k - 1`'s `latest` store (program order). Take
+//! set `k`, writing slot `s`, and a reader reading slot `s` after one acquire:
+//! 1. If set `k` saw the reader's pin on `s`, or its failed exchange returned it, it skipped
+//!    `s`; if it handed the reader `latest`, that is not `s`. If it saw a later marker, the
+//!    reader had moved on: its read happens before the write (release/acquire through the
+//!    marker).
+//! 2. Otherwise set `k` read an older marker, or its mask load missed the reader's
+//!    registration. Both precede the reader's `BUSY` swap in *S* and follow set `k - 1`'s
+//!    `latest` store, so the reader's `latest` load returns set `k - 1`'s slot (which set `k`
+//!    never writes: it is `latest`) or a newer one, whose write happens before that load.
+//! 3. A slot a later set handed over was `latest` then: its writes happen before the reader's
+//!    failed exchange reads it.
+//!
+//! Hence the writer must look at the markers only after its previous `latest` store, and must
+//! take the slot a failed exchange returns: that slot may be older than `latest` (the reader
+//! loaded `latest` before the previous store). `loom_tests` below model these races;
 //! `sync::seqcst_order_for_loom` explains the fence loom needs to model `SeqCst` accesses.
 
 use super::sync::{
@@ -87,12 +91,14 @@ pub enum DataObjectError {
 pub const MAX_READERS: usize = 64;
 
 /// Marker of an unregistered reader entry: pins nothing, the writer ignores it.
-const FREE: u8 = u8::MAX;
+const FREE: u8 = 127;
 /// Marker of a reader between its `swap(BUSY)` and its compare-exchange: pins nothing yet; the
 /// writer may complete the acquire for it.
-const BUSY: u8 = u8::MAX - 1;
-// Slot indices (< MAX_READERS + 2) never collide with the markers, and fit the u128 masks.
-const _: () = assert!(MAX_READERS + 2 <= 128 && MAX_READERS + 2 < BUSY as usize);
+const BUSY: u8 = 126;
+// Slot indices (< MAX_READERS + 2) never collide with the markers. Markers are below 128 so the
+// writer's scan can set a bit of its u128 mask for every marker without a range check: the
+// markers' bits lie above every slot and so pin nothing.
+const _: () = assert!(MAX_READERS + 2 <= BUSY as usize && FREE < 128);
 const _: () = assert!(MAX_READERS <= 64, "the registered mask is a u64");
 
 /// One value slot: the value first and 64-byte aligned, so a cache-line-sized payload is
@@ -217,7 +223,6 @@ impl<T: Clone + Default + Send> DataObject<T> {
             shared: self.shared.clone(),
             seq: s.published.last_seq.load(Ordering::Acquire),
             latest: s.published.latest.load(Ordering::SeqCst),
-            readers: s.table.registered.load(Ordering::SeqCst),
         })
     }
 
@@ -276,54 +281,49 @@ pub struct DataWriter<T> {
     seq: u64,
     /// Private copy of `latest` (only this writer stores it), saving a load per `set`.
     latest: u8,
-    /// The registered mask loaded after the previous publish: the readers this `set` scans.
-    readers: u64,
 }
 
 impl<T: Clone + Send> DataWriter<T> {
     /// Publishes `value` to every reader. Wait-free and one copy whatever the number of
-    /// readers: a load of each registered reader's marker (one cache line), the copy, one
-    /// atomic store, and a compare-exchange only for readers caught mid-acquire. Never blocks,
-    /// never allocates.
+    /// readers: one pass over the registered readers' markers (one cache line; a
+    /// compare-exchange only for a reader caught mid-acquire), the copy, one atomic store.
+    /// Never blocks, never allocates.
     #[inline]
     pub fn set(&mut self, value: T) {
         let s = &*self.shared;
         self.seq += 1;
         let seq = self.seq;
-        let nslots = s.slots.len();
-        // Every slot a registered reader may read: the latest and the pinned ones.
-        let mut taken = 1u128 << self.latest;
-        let mut mask = self.readers;
-        while mask != 0 {
-            let i = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            let r = s.table.reading[i].load(Ordering::SeqCst);
-            if usize::from(r) < nslots {
-                taken |= 1u128 << r;
-            }
-        }
-        // At most `readers + 1` of the `readers + 2` slots are taken, so the lowest free index
-        // is a slot.
-        let slot = (!taken).trailing_zeros() as u8;
-        debug_assert!(usize::from(slot) < nslots);
-        // SAFETY: no reader can read `slot` until it is published below (module doc).
-        s.slots[usize::from(slot)].with_mut(|p| unsafe { *p = Slot { value, seq } });
-        s.published.latest.store(slot, Ordering::SeqCst);
-        self.latest = slot;
-        seqcst_order_for_loom();
-        // After the publish (module doc): readers registered before it are scanned now and at
-        // the next `set`; readers registered after it see this publish by themselves.
+        let latest = self.latest;
+        // Every slot a reader may read: `latest`, and each registered reader's pinned slot. A
+        // reader caught BUSY is handed `latest` (module doc). The mask and the markers are
+        // loaded after the previous `latest` store (program order, SeqCst).
+        let mut taken = 1u128 << latest;
         let mut mask = s.table.registered.load(Ordering::SeqCst);
-        self.readers = mask;
         while mask != 0 {
             let i = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             let entry = &s.table.reading[i];
-            if entry.load(Ordering::SeqCst) == BUSY {
-                // Fails if the reader completed its own acquire first: then it has a slot.
-                let _ = entry.compare_exchange(BUSY, slot, Ordering::SeqCst, Ordering::Relaxed);
+            let mut r = entry.load(Ordering::SeqCst);
+            if r == BUSY {
+                // On failure the reader has just pinned a slot itself: the exchange returns it.
+                r = match entry.compare_exchange(BUSY, latest, Ordering::SeqCst, Ordering::SeqCst) {
+                    Ok(_) => latest,
+                    Err(pinned) => pinned,
+                };
             }
+            // A marker's bit (FREE) lies above every slot: no branch needed.
+            taken |= 1u128 << (r & 127);
         }
+        // At most `readers + 1` of the `readers + 2` slots are taken, so the lowest free index
+        // is a slot.
+        let slot = (!taken).trailing_zeros() as u8;
+        debug_assert!(usize::from(slot) < s.slots.len());
+        // SAFETY: no reader can read `slot` until it is published below (module doc).
+        s.slots[usize::from(slot)].with_mut(|p| unsafe { *p = Slot { value, seq } });
+        s.published.latest.store(slot, Ordering::SeqCst);
+        self.latest = slot;
+        // The next `set`'s loads of the mask and the markers come after this store.
+        seqcst_order_for_loom();
         s.published.last_seq.store(seq, Ordering::Release);
     }
 
@@ -728,7 +728,7 @@ mod loom_tests {
     #[test]
     fn late_reader_registering_during_writes_gets_the_latest() {
         // Registration races with two publishes (the second may reuse the slot the new
-        // reader loaded as `latest`): the mask-after-publish rule of the module doc.
+        // reader loaded as `latest`): case 2 of the module doc's argument.
         loom::model(|| {
             let obj = DataObject::<Pair>::new("p", 1);
             let mut w = obj.writer().unwrap();
