@@ -95,10 +95,54 @@ const FREE: u8 = 127;
 /// Marker of a reader between its `swap(BUSY)` and its compare-exchange: pins nothing yet; the
 /// writer may complete the acquire for it.
 const BUSY: u8 = 126;
-// Slot indices (< MAX_READERS + 2) never collide with the markers. Markers are below 128 so the
-// writer's scan can set a bit of its u128 mask for every marker without a range check: the
-// markers' bits lie above every slot and so pin nothing.
+// Slot indices (< MAX_READERS + 2) never collide with the markers, and the writer's slot masks
+// (`SlotMask`) can take a marker's bit without a range check: it lies above every slot.
 const _: () = assert!(MAX_READERS + 2 <= BUSY as usize && FREE < 128);
+const _: () = assert!(BUSY & 63 == 62 && FREE & 63 == 63);
+
+/// The writer's set of taken slots: `u64` for objects of at most [`U64_SLOTS`] slots (a
+/// one-instruction bit set per reader), `u128` for larger ones.
+trait SlotMask: Copy {
+    /// The bit of slot `r`; for a marker, a bit above every slot.
+    fn bit(r: u8) -> Self;
+    /// Union.
+    fn or(self, other: Self) -> Self;
+    /// The lowest index whose bit is clear.
+    fn lowest_clear(self) -> u8;
+}
+
+/// Most slots a `u64` mask handles: bits 62 and 63 are the markers'.
+const U64_SLOTS: usize = 62;
+
+impl SlotMask for u64 {
+    #[inline(always)]
+    fn bit(r: u8) -> Self {
+        1 << (r & 63)
+    }
+    #[inline(always)]
+    fn or(self, other: Self) -> Self {
+        self | other
+    }
+    #[inline(always)]
+    fn lowest_clear(self) -> u8 {
+        (!self).trailing_zeros() as u8
+    }
+}
+
+impl SlotMask for u128 {
+    #[inline(always)]
+    fn bit(r: u8) -> Self {
+        1 << (r & 127)
+    }
+    #[inline(always)]
+    fn or(self, other: Self) -> Self {
+        self | other
+    }
+    #[inline(always)]
+    fn lowest_clear(self) -> u8 {
+        (!self).trailing_zeros() as u8
+    }
+}
 const _: () = assert!(MAX_READERS <= 64, "the registered mask is a u64");
 
 /// One value slot: the value first and 64-byte aligned, so a cache-line-sized payload is
@@ -294,29 +338,11 @@ impl<T: Clone + Send> DataWriter<T> {
         self.seq += 1;
         let seq = self.seq;
         let latest = self.latest;
-        // Every slot a reader may read: `latest`, and each registered reader's pinned slot. A
-        // reader caught BUSY is handed `latest` (module doc). The mask and the markers are
-        // loaded after the previous `latest` store (program order, SeqCst).
-        let mut taken = 1u128 << latest;
-        let mut mask = s.table.registered.load(Ordering::SeqCst);
-        while mask != 0 {
-            let i = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            let entry = &s.table.reading[i];
-            let mut r = entry.load(Ordering::SeqCst);
-            if r == BUSY {
-                // On failure the reader has just pinned a slot itself: the exchange returns it.
-                r = match entry.compare_exchange(BUSY, latest, Ordering::SeqCst, Ordering::SeqCst) {
-                    Ok(_) => latest,
-                    Err(pinned) => pinned,
-                };
-            }
-            // A marker's bit (FREE) lies above every slot: no branch needed.
-            taken |= 1u128 << (r & 127);
-        }
-        // At most `readers + 1` of the `readers + 2` slots are taken, so the lowest free index
-        // is a slot.
-        let slot = (!taken).trailing_zeros() as u8;
+        let slot = if s.slots.len() <= U64_SLOTS {
+            pick_slot::<u64>(&s.table, latest)
+        } else {
+            pick_slot::<u128>(&s.table, latest)
+        };
         debug_assert!(usize::from(slot) < s.slots.len());
         // SAFETY: no reader can read `slot` until it is published below (module doc).
         s.slots[usize::from(slot)].with_mut(|p| unsafe { *p = Slot { value, seq } });
@@ -331,6 +357,32 @@ impl<T: Clone + Send> DataWriter<T> {
     pub fn name(&self) -> &str {
         &self.shared.name
     }
+}
+
+/// The writer's one pass over the registered readers' markers (module doc): every slot a
+/// reader may read is taken (`latest`, each pinned slot), a reader caught BUSY is handed
+/// `latest`. Returns the lowest slot not taken. The mask and the markers are loaded after the
+/// previous `latest` store (program order, SeqCst).
+#[inline(always)]
+fn pick_slot<M: SlotMask>(table: &ReaderTable, latest: u8) -> u8 {
+    let mut taken = M::bit(latest);
+    let mut mask = table.registered.load(Ordering::SeqCst);
+    while mask != 0 {
+        let i = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        let entry = &table.reading[i];
+        let mut r = entry.load(Ordering::SeqCst);
+        if r == BUSY {
+            // On failure the reader has just pinned a slot itself: the exchange returns it.
+            r = match entry.compare_exchange(BUSY, latest, Ordering::SeqCst, Ordering::SeqCst) {
+                Ok(_) => latest,
+                Err(pinned) => pinned,
+            };
+        }
+        taken = taken.or(M::bit(r));
+    }
+    // At most `readers + 1` of the `readers + 2` slots are taken, so this is a slot.
+    taken.lowest_clear()
 }
 
 impl<T> Drop for DataWriter<T> {
@@ -578,6 +630,33 @@ mod tests {
         assert_eq!((*held_a, *held_b, *held_c), (1, 2, 3));
         assert_eq!(a.read(), (FlowStatus::NewData, &99));
         assert_eq!(b.read(), (FlowStatus::NewData, &99));
+    }
+
+    #[test]
+    fn every_reader_pinning_its_own_slot_leaves_the_writer_one() {
+        // 60 readers: 62 slots, the largest object on the u64 mask; 61 and 64: the u128 mask,
+        // with slots 62..=65 in use.
+        for n in [60u64, 61, 64] {
+            let obj = DataObject::<u64>::new("x", n as usize);
+            let mut w = obj.writer().unwrap();
+            let mut readers: Vec<_> = (0..n).map(|_| obj.reader().unwrap()).collect();
+            let mut held = Vec::new();
+            for (i, r) in readers.iter_mut().enumerate() {
+                w.set(i as u64 + 1);
+                held.push(r.read().1);
+            }
+            // n pinned slots plus `latest`: exactly one slot is free for each of these writes.
+            for i in 0..3 * n {
+                w.set(1000 + i);
+            }
+            assert!(
+                held.iter().enumerate().all(|(i, v)| **v == i as u64 + 1),
+                "n={n}"
+            );
+            for r in &mut readers {
+                assert_eq!(r.read(), (FlowStatus::NewData, &(1000 + 3 * n - 1)));
+            }
+        }
     }
 
     #[test]
