@@ -827,9 +827,8 @@ mod loom_tests {
     #[test]
     fn two_readers_and_a_writer() {
         // Two readers pin up to two of the four slots; the writer must pick around both.
-        let mut b = loom::model::Builder::new();
-        b.preemption_bound = Some(3);
-        b.check(|| {
+        // Unbounded exploration: about 30 s in release.
+        loom::model(|| {
             let obj = DataObject::<Pair>::new("p", 2);
             let mut w = obj.writer().unwrap();
             let mut r1 = obj.reader().unwrap();
