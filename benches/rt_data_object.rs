@@ -1,6 +1,7 @@
 //! DataObject get/set against triple_buffer (the single-reader target), arc-swap, and a plain
 //! seqlock (reference line only: it is not wait-free for readers). 64-byte payload.
-//! Uncontended and with another thread hammering the other side.
+//! Uncontended and with another thread hammering the other side; `set` with 1, 3 and 8
+//! registered readers; `get` with and without new data.
 #![allow(missing_docs)] // criterion_group! generates undocumented items
 
 use arc_swap::ArcSwap;
@@ -9,6 +10,7 @@ use hytask::rt::data_object::DataObject;
 use std::cell::UnsafeCell;
 use std::sync::atomic::{fence, AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 #[derive(Clone, Copy, Default)]
 struct Payload(#[allow(dead_code)] [u64; 8]);
@@ -74,6 +76,59 @@ fn uncontended(c: &mut Criterion) {
     let mut r3 = obj.reader().unwrap_or_else(|e| panic!("{e}"));
     g.bench_function("hytask_set_3readers", |b| b.iter(|| w.set(black_box(p))));
     black_box((r2.read().0, r3.read().0));
+    let eight = DataObject::<Payload>::new("e", 8);
+    let mut ew = eight.writer().unwrap_or_else(|e| panic!("{e}"));
+    let mut er: Vec<_> = (0..8)
+        .map(|_| eight.reader().unwrap_or_else(|e| panic!("{e}")))
+        .collect();
+    // Every reader pins a slot, so the writer has to pick around all eight.
+    ew.set(p);
+    for r in &mut er {
+        black_box(r.read().0);
+    }
+    g.bench_function("hytask_set_8readers", |b| b.iter(|| ew.set(black_box(p))));
+
+    // `get` that finds new data: GETS_PER_ROUND objects (one reader each) are written outside
+    // the timed region, then each is read once, timed. Same for triple_buffer.
+    let mut objects: Vec<_> = (0..GETS_PER_ROUND)
+        .map(|_| {
+            let o = DataObject::<Payload>::new("n", 4);
+            let r = o.reader().unwrap_or_else(|e| panic!("{e}"));
+            let w = o.writer().unwrap_or_else(|e| panic!("{e}"));
+            (w, r)
+        })
+        .collect();
+    g.bench_function("hytask_get_new_data", |b| {
+        b.iter_custom(|iters| {
+            timed_rounds(iters, |n| {
+                for (w, _) in &mut objects[..n] {
+                    w.set(black_box(p));
+                }
+                let start = Instant::now();
+                for (_, r) in &mut objects[..n] {
+                    black_box(r.get(&mut out));
+                }
+                start.elapsed()
+            })
+        })
+    });
+    let mut triples: Vec<_> = (0..GETS_PER_ROUND)
+        .map(|_| triple_buffer::triple_buffer(&Payload::default()))
+        .collect();
+    g.bench_function("triple_buffer_get_new_data", |b| {
+        b.iter_custom(|iters| {
+            timed_rounds(iters, |n| {
+                for (i, _) in &mut triples[..n] {
+                    i.write(black_box(p));
+                }
+                let start = Instant::now();
+                for (_, o) in &mut triples[..n] {
+                    black_box(*o.read());
+                }
+                start.elapsed()
+            })
+        })
+    });
 
     let (mut ti, mut to) = triple_buffer::triple_buffer(&Payload::default());
     g.bench_function("triple_buffer_set", |b| b.iter(|| ti.write(black_box(p))));
@@ -98,6 +153,23 @@ fn uncontended(c: &mut Criterion) {
     g.bench_function("seqlock_set_ref", |b| b.iter(|| s.write(black_box(p))));
     g.bench_function("seqlock_get_ref", |b| b.iter(|| black_box(s.read())));
     g.finish();
+}
+
+/// Objects written per timed round of the get-with-new-data rows: enough that the clock
+/// reads (~20-30 ns) are spread over many gets.
+const GETS_PER_ROUND: usize = 64;
+
+/// Runs `iters` timed operations in rounds of up to [`GETS_PER_ROUND`]; `round(n)` prepares
+/// and times `n` of them.
+fn timed_rounds(iters: u64, mut round: impl FnMut(usize) -> Duration) -> Duration {
+    let mut left = iters;
+    let mut total = Duration::ZERO;
+    while left > 0 {
+        let n = left.min(GETS_PER_ROUND as u64);
+        total += round(n as usize);
+        left -= n;
+    }
+    total
 }
 
 /// Runs `hammer` on another thread while `measure` is benchmarked.

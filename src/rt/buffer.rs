@@ -8,9 +8,19 @@
 //! uses [`BufferWriter::try_push`], which hands the item back instead of dropping anything.
 //!
 //! Many writers (the writer handle is `Clone`), one reader (the reader handle is not).
+//!
+//! A deployment creates a buffer when a task first names it (`Configure::buffer_out` /
+//! `Configure::buffer_in`), and its capacity and policy are declared by the producers. When
+//! the consumer is configured first, the buffer exists *unsized* until its first producer
+//! declares them, still during `configure`: that keeps configure order irrelevant, as for data
+//! objects. An unsized buffer stores nothing (a push is dropped and counted, a pop finds
+//! nothing); a deployment whose buffer never gets a producer fails its topology check, so
+//! running tasks never see one. The price is one load of an already-initialised flag per push
+//! and pop.
 
 use super::ring::Ring;
 use super::sync::{Arc, AtomicU64, Ordering};
+use std::sync::OnceLock;
 
 /// What [`BufferWriter::push`] does when the buffer is full.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -34,18 +44,31 @@ pub enum PushOutcome {
     DroppedOldest,
 }
 
-struct Shared<T> {
+/// The storage and policy of a sized buffer.
+struct Core<T> {
     ring: Ring<T>,
     policy: FullPolicy,
+}
+
+struct Shared<T> {
+    /// Set once: at creation, or by the first producer of a deployment-made buffer.
+    core: OnceLock<Core<T>>,
     overflows: AtomicU64,
 }
 
 /// Creates a buffer of at least `capacity` items (rounded up to a power of two) with the given
 /// full policy. Allocates once, here; pushes and pops never allocate.
 pub fn buffer<T: Send>(capacity: usize, policy: FullPolicy) -> (BufferWriter<T>, BufferReader<T>) {
+    let (w, r) = unsized_buffer();
+    w.size(capacity, policy);
+    (w, r)
+}
+
+/// Creates a buffer without storage yet; [`BufferWriter::size`] gives it its capacity and
+/// policy. For the deployment registry (module doc).
+pub(crate) fn unsized_buffer<T: Send>() -> (BufferWriter<T>, BufferReader<T>) {
     let shared = Arc::new(Shared {
-        ring: Ring::new(capacity),
-        policy,
+        core: OnceLock::new(),
         overflows: AtomicU64::new(0),
     });
     (
@@ -70,20 +93,39 @@ impl<T> Clone for BufferWriter<T> {
 }
 
 impl<T: Send> BufferWriter<T> {
+    /// Gives an unsized buffer its capacity and policy (allocating its storage). Returns false
+    /// if it was already sized, whatever with; configuration time only.
+    pub(crate) fn size(&self, capacity: usize, policy: FullPolicy) -> bool {
+        let mut sized = false;
+        self.shared.core.get_or_init(|| {
+            sized = true;
+            Core {
+                ring: Ring::new(capacity),
+                policy,
+            }
+        });
+        sized
+    }
+
     /// Queues `item`, applying the buffer's [`FullPolicy`] if it is full. Never blocks, never
     /// allocates; a loss is counted.
     #[inline]
     pub fn push(&self, item: T) -> PushOutcome {
         let s = &*self.shared;
-        let Err(mut item) = s.ring.push(item) else {
+        let Some(core) = s.core.get() else {
+            // Unsized (module doc): nowhere to put it.
+            s.overflows.fetch_add(1, Ordering::Relaxed);
+            return PushOutcome::DroppedNewest;
+        };
+        let Err(mut item) = core.ring.push(item) else {
             return PushOutcome::Stored;
         };
         s.overflows.fetch_add(1, Ordering::Relaxed);
-        if s.policy == FullPolicy::DropOldest {
+        if core.policy == FullPolicy::DropOldest {
             // Make room and retry; bounded so that racing producers cannot starve us.
             for _ in 0..4 {
-                drop(s.ring.pop_shared());
-                match s.ring.push(item) {
+                drop(core.ring.pop_shared());
+                match core.ring.push(item) {
                     Ok(()) => return PushOutcome::DroppedOldest,
                     Err(back) => item = back,
                 }
@@ -97,13 +139,19 @@ impl<T: Send> BufferWriter<T> {
     /// counted). For producers that can wait and retry.
     #[inline]
     pub fn try_push(&self, item: T) -> Result<(), T> {
-        self.shared.ring.push(item)
+        match self.shared.core.get() {
+            Some(core) => core.ring.push(item),
+            None => Err(item),
+        }
     }
 
     /// Free slots right now (approximate under concurrency): lets a producer decide how much
     /// to prepare.
     pub fn free(&self) -> usize {
-        self.shared.ring.capacity() - self.shared.ring.len()
+        self.shared
+            .core
+            .get()
+            .map_or(0, |c| c.ring.capacity() - c.ring.len())
     }
 }
 
@@ -116,18 +164,18 @@ impl<T: Send> BufferReader<T> {
     /// Takes the oldest item, if any. Never blocks, never allocates.
     #[inline]
     pub fn pop(&mut self) -> Option<T> {
-        let s = &*self.shared;
-        match s.policy {
-            FullPolicy::DropNewest => s.ring.pop_single(),
+        let core = self.shared.core.get()?;
+        match core.policy {
+            FullPolicy::DropNewest => core.ring.pop_single(),
             // Producers pop too under this policy.
-            FullPolicy::DropOldest => s.ring.pop_shared(),
+            FullPolicy::DropOldest => core.ring.pop_shared(),
         }
     }
 
     /// Pops every queued item into `f` (bounded by the capacity, so a fast producer cannot
     /// keep the consumer here forever). Returns how many were handled.
     pub fn drain(&mut self, mut f: impl FnMut(T)) -> usize {
-        let cap = self.shared.ring.capacity();
+        let cap = self.capacity();
         let mut n = 0;
         while n < cap {
             match self.pop() {
@@ -143,7 +191,7 @@ impl<T: Send> BufferReader<T> {
 
     /// Number of queued items (approximate under concurrency).
     pub fn len(&self) -> usize {
-        self.shared.ring.len()
+        self.shared.core.get().map_or(0, |c| c.ring.len())
     }
 
     /// True when nothing is queued.
@@ -151,9 +199,14 @@ impl<T: Send> BufferReader<T> {
         self.len() == 0
     }
 
-    /// Capacity in items.
+    /// Capacity in items (0 while unsized, see the module doc).
     pub fn capacity(&self) -> usize {
-        self.shared.ring.capacity()
+        self.shared.core.get().map_or(0, |c| c.ring.capacity())
+    }
+
+    /// The full policy (`None` while unsized, see the module doc).
+    pub fn policy(&self) -> Option<FullPolicy> {
+        self.shared.core.get().map(|c| c.policy)
     }
 
     /// Items lost to a full buffer since creation.
@@ -198,6 +251,28 @@ mod tests {
         assert_eq!(r.drain(|x| seen.push(x)), 2);
         assert_eq!(seen, ["a", "b"]);
         assert!(r.is_empty());
+    }
+
+    #[test]
+    fn unsized_buffer_stores_nothing_until_sized_once() {
+        let (w, mut r) = unsized_buffer::<u32>();
+        assert_eq!((r.capacity(), r.policy(), w.free()), (0, None, 0));
+        assert_eq!(w.push(1), PushOutcome::DroppedNewest);
+        assert_eq!(w.try_push(2), Err(2));
+        assert_eq!((r.pop(), r.overflows()), (None, 1));
+        let w2 = w.clone();
+        assert!(w2.size(3, FullPolicy::DropOldest));
+        assert!(!w.size(16, FullPolicy::DropNewest), "sized once");
+        assert_eq!(
+            (r.capacity(), r.policy()),
+            (4, Some(FullPolicy::DropOldest))
+        );
+        for i in 0..5 {
+            w.push(i);
+        }
+        let mut seen = vec![];
+        r.drain(|x| seen.push(x));
+        assert_eq!(seen, [1, 2, 3, 4]);
     }
 }
 

@@ -5,16 +5,22 @@
 //! Why check before starting: a miswired application must not start half-working. Every
 //! problem is collected, each naming the task and the port (input connected to no writer, two
 //! writers on one data object, a type mismatch, an unknown peer, an operation a peer does not
-//! have, a subscription to an event nobody emits), and [`Deployment::start`] refuses with the
-//! whole list. A thread layout where a slower thread has a higher priority than a faster one
-//! (the paper: priority follows rate) is reported as a warning.
+//! have, a subscription to an event nobody emits, a buffer nobody produces into, a buffer with
+//! two consumers or declared with two capacities or policies), and [`Deployment::start`]
+//! refuses with the whole list. Legal but suspicious layouts are warnings in the
+//! [`CheckReport`]: a slower thread with a higher priority than a faster one (the paper:
+//! priority follows rate), a buffer that nobody consumes.
 //!
-//! Data objects and events are named globally (`axis.x.position_mm`, `monitor.tracking_error`);
-//! whichever task mentions a name first creates the object, so configure order does not matter.
+//! Data objects, buffers and events are named globally (`axis.x.position_mm`,
+//! `monitor.tracking_error`); whichever task mentions a name first creates the object, so
+//! configure order does not matter (a buffer first named by its consumer gets its capacity and
+//! policy from its first producer: see [`super::buffer`]). Buffers and data objects have
+//! separate names.
 
 use super::activity::{
     Overrun, OverrunPolicy, PeriodicActivity, SteppedActivity, TaskGroup, ThreadInfo, ThreadSpec,
 };
+use super::buffer::{unsized_buffer, BufferReader, BufferWriter, FullPolicy};
 use super::clock::SimClock;
 use super::command::{command_queue, CommandHandle, CommandSender, Commands, SendError};
 use super::data_object::{DataObject, DataObjectError, DataReader, DataWriter};
@@ -70,6 +76,20 @@ pub enum TopologyErrorKind {
     MultipleEmitters(Vec<String>),
     /// The data object has no free reader slot.
     TooManyReaders,
+    /// A buffer input that no task produces into.
+    BufferWithoutProducer,
+    /// More than one task consumes the buffer (one consumer per buffer).
+    MultipleConsumers(Vec<String>),
+    /// A producer declared the buffer with another capacity or full policy than the producer
+    /// that declared it first (declarations must agree exactly).
+    BufferConflict {
+        /// Capacity and policy as first declared.
+        existing: (usize, FullPolicy),
+        /// The task that declared them first.
+        declared_by: String,
+        /// Capacity and policy this task declared.
+        requested: (usize, FullPolicy),
+    },
     /// The task's `configure` hook failed.
     ConfigureFailed(TaskError),
 }
@@ -120,6 +140,25 @@ impl fmt::Display for TopologyError {
                     "task '{t}' input '{p}': data object has no free reader slot"
                 )
             }
+            TopologyErrorKind::BufferWithoutProducer => {
+                write!(f, "task '{t}' buffer input '{p}': no task produces into it")
+            }
+            TopologyErrorKind::MultipleConsumers(c) => {
+                write!(
+                    f,
+                    "task '{t}' buffer input '{p}': buffer has several consumers: {}",
+                    c.join(", ")
+                )
+            }
+            TopologyErrorKind::BufferConflict {
+                existing: (cap0, policy0),
+                declared_by,
+                requested: (cap, policy),
+            } => write!(
+                f,
+                "task '{t}' buffer output '{p}': capacity {cap} {policy:?} but task \
+                 '{declared_by}' declared capacity {cap0} {policy0:?}"
+            ),
             TopologyErrorKind::ConfigureFailed(e) => write!(f, "task '{t}': configure failed: {e}"),
         }
     }
@@ -188,7 +227,8 @@ pub enum DeployError {
 /// Result of the topology check that did not prevent starting.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct CheckReport {
-    /// Warnings (e.g. a slower thread with a higher priority than a faster one).
+    /// Warnings (a slower thread with a higher priority than a faster one, a buffer that no
+    /// task consumes).
     pub warnings: Vec<String>,
 }
 
@@ -197,6 +237,23 @@ struct ObjectEntry {
     type_name: &'static str,
     writers: Vec<String>,
     readers: Vec<String>,
+}
+
+/// A buffer's handles as kept by the registry: a producer handle to clone for each producer,
+/// and the consumer handle until its consumer takes it.
+struct BufferPorts<T> {
+    writer: BufferWriter<T>,
+    reader: Option<BufferReader<T>>,
+}
+
+struct BufferEntry {
+    /// A `BufferPorts<T>`.
+    handle: Box<dyn Any + Send + Sync>,
+    type_name: &'static str,
+    /// Capacity and policy as first declared, and the producer that declared them.
+    declared: Option<(usize, FullPolicy, String)>,
+    producers: Vec<String>,
+    consumers: Vec<String>,
 }
 
 struct EventEntry {
@@ -210,6 +267,7 @@ struct EventEntry {
 #[derive(Default)]
 pub(crate) struct Registry {
     objects: BTreeMap<String, ObjectEntry>,
+    buffers: BTreeMap<String, BufferEntry>,
     events: BTreeMap<String, EventEntry>,
     tasks: BTreeMap<String, (TaskInfo, Box<dyn Any + Send + Sync>)>,
     errors: Vec<TopologyError>,
@@ -233,6 +291,24 @@ impl Registry {
             .downcast_ref::<DataObject<T>>()
             .cloned()
             .ok_or(e.type_name)
+    }
+
+    /// The entry of buffer `name`, created (unsized, typed `T`) on first mention. Its handle
+    /// may hold another type: the callers check.
+    fn buffer_entry<T: Send + 'static>(&mut self, name: &str) -> &mut BufferEntry {
+        self.buffers.entry(name.to_owned()).or_insert_with(|| {
+            let (writer, reader) = unsized_buffer::<T>();
+            BufferEntry {
+                handle: Box::new(BufferPorts {
+                    writer,
+                    reader: Some(reader),
+                }),
+                type_name: std::any::type_name::<T>(),
+                declared: None,
+                producers: Vec::new(),
+                consumers: Vec::new(),
+            }
+        })
     }
 
     fn event<T: Clone + Send + 'static>(&mut self, name: &str) -> Result<Event<T>, &'static str> {
@@ -293,6 +369,26 @@ impl Registry {
                 }
             }
         }
+        for (name, b) in &self.buffers {
+            if b.producers.is_empty() {
+                for c in &b.consumers {
+                    errors.push(TopologyError {
+                        task: c.clone(),
+                        port: name.clone(),
+                        kind: TopologyErrorKind::BufferWithoutProducer,
+                    });
+                }
+            }
+            if b.consumers.len() > 1 {
+                for c in &b.consumers[1..] {
+                    errors.push(TopologyError {
+                        task: c.clone(),
+                        port: name.clone(),
+                        kind: TopologyErrorKind::MultipleConsumers(b.consumers.clone()),
+                    });
+                }
+            }
+        }
         for (name, e) in &self.events {
             if e.emitters.is_empty() {
                 for s in &e.subscribers {
@@ -314,6 +410,27 @@ impl Registry {
             }
         }
         errors
+    }
+
+    /// Warnings of the whole topology: buffers produced into but consumed by no task.
+    ///
+    /// Why a warning and not an error: nothing breaks (pushes never block; once the buffer
+    /// is full items are dropped and counted), and a machine builder may deploy an optional
+    /// consumer (a trace or logging task) only in some configurations. A misspelt buffer name
+    /// on the consumer side is still an error: that consumer has no producer.
+    fn warnings(&self) -> Vec<String> {
+        self.buffers
+            .iter()
+            .filter(|(_, b)| b.consumers.is_empty() && !b.producers.is_empty())
+            .map(|(name, b)| {
+                let producers: Vec<String> = b.producers.iter().map(|p| format!("'{p}'")).collect();
+                format!(
+                    "buffer '{name}' (output of task {}) has no consumer: once full, every \
+                     push is dropped",
+                    producers.join(", ")
+                )
+            })
+            .collect()
     }
 
     fn reader<T: Clone + Default + Send + Sync + 'static>(
@@ -411,6 +528,85 @@ impl Configure<'_> {
                 detached_reader(object)
             }
         }
+    }
+
+    /// Declares a buffer output port: this task produces into buffer `name` (several tasks
+    /// may), declaring its capacity (at least, rounded up to a power of two) and full policy.
+    /// Every producer must declare the same capacity and policy (a topology error otherwise).
+    /// A buffer without consumer is a warning of the check, not an error. The port appears in
+    /// the task interface as an [`PortDirection::Output`] named after the buffer.
+    pub fn buffer_out<T: Send + 'static>(
+        &mut self,
+        name: &str,
+        capacity: usize,
+        policy: FullPolicy,
+    ) -> BufferWriter<T> {
+        self.iface.ports.push(PortDescriptor {
+            object: name.to_owned(),
+            direction: PortDirection::Output,
+            type_name: std::any::type_name::<T>(),
+        });
+        let task = self.task;
+        let BufferEntry {
+            handle,
+            type_name,
+            declared,
+            producers,
+            ..
+        } = self.reg.buffer_entry::<T>(name);
+        let Some(ports) = handle.downcast_mut::<BufferPorts<T>>() else {
+            let existing = *type_name;
+            self.reg.mismatch::<T>(task, name, existing);
+            return unsized_buffer().0;
+        };
+        producers.push(task.to_owned());
+        let writer = ports.writer.clone();
+        let conflict = match declared {
+            None => {
+                writer.size(capacity, policy);
+                *declared = Some((capacity, policy, task.to_owned()));
+                None
+            }
+            Some((cap0, policy0, by)) if (*cap0, *policy0) != (capacity, policy) => {
+                Some(TopologyErrorKind::BufferConflict {
+                    existing: (*cap0, *policy0),
+                    declared_by: by.clone(),
+                    requested: (capacity, policy),
+                })
+            }
+            Some(_) => None,
+        };
+        if let Some(kind) = conflict {
+            self.reg.error(task, name, kind);
+        }
+        writer
+    }
+
+    /// Declares a buffer input port: this task is the single consumer of buffer `name`, whose
+    /// capacity and policy its producers declare. A buffer without producer, or with a second
+    /// consumer, is a topology error. The port appears in the task interface as an
+    /// [`PortDirection::Input`] named after the buffer.
+    pub fn buffer_in<T: Send + 'static>(&mut self, name: &str) -> BufferReader<T> {
+        self.iface.ports.push(PortDescriptor {
+            object: name.to_owned(),
+            direction: PortDirection::Input,
+            type_name: std::any::type_name::<T>(),
+        });
+        let task = self.task;
+        let BufferEntry {
+            handle,
+            type_name,
+            consumers,
+            ..
+        } = self.reg.buffer_entry::<T>(name);
+        let Some(ports) = handle.downcast_mut::<BufferPorts<T>>() else {
+            let existing = *type_name;
+            self.reg.mismatch::<T>(task, name, existing);
+            return unsized_buffer().1;
+        };
+        consumers.push(task.to_owned());
+        // A second consumer gets a detached reader; the check reports it with every consumer.
+        ports.reader.take().unwrap_or_else(|| unsized_buffer().1)
     }
 
     /// Declares an event this task emits, named `<task>.<name>`.
@@ -755,9 +951,9 @@ impl Deployment {
         if !errors.is_empty() {
             return Err(DeployError::Topology(TopologyErrors(errors)));
         }
-        let report = CheckReport {
-            warnings: self.priority_warnings(),
-        };
+        let mut warnings = self.priority_warnings();
+        warnings.extend(self.reg.warnings());
+        let report = CheckReport { warnings };
         for w in &report.warnings {
             tracing::warn!("{w}");
         }
@@ -1111,4 +1307,126 @@ pub fn check_realtime() -> system::Capabilities {
         });
     }
     caps
+}
+
+#[cfg(all(test, not(loom)))]
+mod tests {
+    use super::*;
+
+    /// Runs `f` as task `task`'s configure hook on `reg`; returns what `f` returns.
+    fn configure<R>(
+        reg: &mut Registry,
+        iface: &mut TaskInterface,
+        task: &str,
+        f: impl FnOnce(&mut Configure<'_>) -> R,
+    ) -> R {
+        let mut ctx = Configure {
+            task,
+            reg,
+            iface,
+            wake: Arc::new(AtomicBool::new(false)),
+        };
+        f(&mut ctx)
+    }
+
+    #[test]
+    fn a_buffer_named_first_by_its_consumer_is_sized_by_its_first_producer() {
+        let mut reg = Registry::default();
+        let (mut ci, mut pi) = (TaskInterface::default(), TaskInterface::default());
+        let mut r = configure(&mut reg, &mut ci, "c", |c| c.buffer_in::<u32>("q"));
+        assert_eq!(
+            (r.capacity(), r.policy()),
+            (0, None),
+            "unsized until a producer"
+        );
+        let w = configure(&mut reg, &mut pi, "p", |c| {
+            c.buffer_out::<u32>("q", 3, FullPolicy::DropOldest)
+        });
+        assert_eq!(
+            (r.capacity(), r.policy()),
+            (4, Some(FullPolicy::DropOldest))
+        );
+        w.push(7);
+        assert_eq!(r.pop(), Some(7));
+        assert_eq!(reg.check(), []);
+        assert_eq!(reg.warnings(), Vec::<String>::new());
+        assert_eq!(
+            (ci.ports[0].direction, pi.ports[0].direction),
+            (PortDirection::Input, PortDirection::Output)
+        );
+        assert_eq!(pi.ports[0].object, "q");
+    }
+
+    #[test]
+    fn agreeing_producers_share_one_buffer_and_a_second_consumer_is_detached() {
+        let mut reg = Registry::default();
+        let mut iface = TaskInterface::default();
+        let w1 = configure(&mut reg, &mut iface, "p1", |c| {
+            c.buffer_out::<u8>("q", 8, FullPolicy::DropNewest)
+        });
+        let w2 = configure(&mut reg, &mut iface, "p2", |c| {
+            c.buffer_out::<u8>("q", 8, FullPolicy::DropNewest)
+        });
+        let mut r1 = configure(&mut reg, &mut iface, "c1", |c| c.buffer_in::<u8>("q"));
+        let mut r2 = configure(&mut reg, &mut iface, "c2", |c| c.buffer_in::<u8>("q"));
+        w1.push(1);
+        w2.push(2);
+        assert_eq!((r1.pop(), r1.pop()), (Some(1), Some(2)));
+        assert_eq!(r2.pop(), None, "the second consumer's reader is detached");
+        let errors = reg.check();
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        assert_eq!(
+            (errors[0].task.as_str(), errors[0].port.as_str()),
+            ("c2", "q")
+        );
+        assert_eq!(
+            errors[0].kind,
+            TopologyErrorKind::MultipleConsumers(vec!["c1".into(), "c2".into()])
+        );
+    }
+
+    #[test]
+    fn conflicts_mismatches_and_missing_ends_are_reported() {
+        let mut reg = Registry::default();
+        let mut iface = TaskInterface::default();
+        configure(&mut reg, &mut iface, "p1", |c| {
+            c.buffer_out::<u8>("q", 8, FullPolicy::DropNewest)
+        });
+        let w = configure(&mut reg, &mut iface, "p2", |c| {
+            c.buffer_out::<u8>("q", 8, FullPolicy::DropOldest)
+        });
+        // The conflicting producer still writes into the one buffer (sized as first declared).
+        let mut r = configure(&mut reg, &mut iface, "c", |c| c.buffer_in::<u8>("q"));
+        w.push(5);
+        assert_eq!(
+            (r.pop(), r.policy()),
+            (Some(5), Some(FullPolicy::DropNewest))
+        );
+        configure(&mut reg, &mut iface, "x", |c| {
+            c.buffer_out::<u16>("q", 8, FullPolicy::DropNewest)
+        });
+        configure(&mut reg, &mut iface, "lonely", |c| {
+            c.buffer_in::<u8>("void")
+        });
+        configure(&mut reg, &mut iface, "tracer", |c| {
+            c.buffer_out::<u8>("trace", 8, FullPolicy::DropOldest)
+        });
+        let errors: Vec<String> = reg.check().iter().map(ToString::to_string).collect();
+        assert_eq!(
+            errors,
+            [
+                "task 'p2' buffer output 'q': capacity 8 DropOldest but task 'p1' declared \
+                 capacity 8 DropNewest",
+                "task 'x' port 'q': type u16 but the object has type u8",
+                "task 'lonely' buffer input 'void': no task produces into it",
+            ]
+        );
+        assert_eq!(
+            reg.warnings(),
+            [
+                "buffer 'trace' (output of task 'tracer') has no consumer: once full, every push \
+              is dropped"
+            ]
+        );
+    }
 }

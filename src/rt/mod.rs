@@ -7,11 +7,12 @@
 //!   lifecycle hooks; [`runner`] documents the fixed order of one step and why.
 //! - [`deploy::Deployment`]: the configuration flow — add tasks to threads (one thread per
 //!   (priority, period); equal ones share a thread and run in start order), configure them
-//!   ([`deploy::Configure`]: ports, events, peers), check the topology (every error listed,
-//!   naming task and port), start on real threads ([`deploy::Runtime`]) or on a stepped,
-//!   simulated-time runtime for tests ([`deploy::SteppedRuntime`]).
-//! - Data flow: [`data_object`] (latest value, one writer, many readers, wait-free both sides)
-//!   and [`buffer`] (bounded lock-free FIFO with a full policy).
+//!   ([`deploy::Configure`]: data and buffer ports, events, peers), check the topology (every
+//!   error listed, naming task and port), start on real threads ([`deploy::Runtime`]) or on a
+//!   stepped, simulated-time runtime for tests ([`deploy::SteppedRuntime`]).
+//! - Data flow: [`data_object`] (latest value, one writer, many readers, wait-free both sides,
+//!   one copy per write whatever the number of readers) and [`buffer`] (bounded lock-free FIFO
+//!   with a full policy, many producers, one consumer).
 //! - Execution flow: [`event`] (typed events, immediate and deferred handlers, non-realtime
 //!   subscribers) and [`command`] (operations as data, typed and dynamic commands, accept /
 //!   reject, completion conditions, handles pollable from realtime and waitable from

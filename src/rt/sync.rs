@@ -59,6 +59,22 @@ impl<T> std::ops::Deref for Padded<T> {
     }
 }
 
+/// A sequentially consistent fence when model checking with loom; nothing in normal builds.
+///
+/// Why: loom models `SeqCst` loads and stores as `AcqRel` (loom's README, "Unsupported
+/// features"), so it explores store-then-load reorderings across two locations that the single
+/// total order of `SeqCst` accesses forbids, and reports races the real code cannot have. The
+/// data object relies on exactly that order (the writer publishes, then looks at the readers'
+/// markers; a reader marks itself busy, then looks at the publication). Calling this between
+/// the two `SeqCst` accesses makes loom model the guarantee the accesses already give in
+/// normal builds, where it compiles to nothing (on x86 the `SeqCst` store is already a locked
+/// instruction; on AArch64 `stlr`/`ldar` keep their order).
+#[inline(always)]
+pub(crate) fn seqcst_order_for_loom() {
+    #[cfg(loom)]
+    loom::sync::atomic::fence(Ordering::SeqCst);
+}
+
 /// Locks a mutex, ignoring poisoning: the data behind our locks (subscriber lists, reader
 /// registration) stays consistent even if a holder panicked, and no realtime path locks.
 pub(crate) fn lock<T>(m: &Mutex<T>) -> impl std::ops::DerefMut<Target = T> + '_ {
