@@ -901,3 +901,84 @@ fn cpu_affinity_pins_the_thread() {
     assert!(cpus.len() > 5);
     assert!(cpus.iter().all(|&c| c == 1), "{cpus:?}");
 }
+
+/// Writes a counter to data object `x`.
+struct Counter {
+    out: Option<DataWriter<u64>>,
+    n: u64,
+}
+
+impl Task for Counter {
+    type Command = NoCommands;
+    fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
+        self.out = Some(ctx.output("x"));
+        Ok(())
+    }
+    fn update(&mut self, _: &StepContext) -> Result<(), TaskError> {
+        self.n += 1;
+        if let Some(w) = &mut self.out {
+            w.set(self.n);
+        }
+        Ok(())
+    }
+    fn cleanup(&mut self) {
+        self.out = None;
+    }
+}
+
+/// Copies data object `x` into a shared cell.
+struct Sink {
+    input: Option<DataReader<u64>>,
+    seen: Arc<Mutex<u64>>,
+}
+
+impl Task for Sink {
+    type Command = NoCommands;
+    fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
+        self.input = Some(ctx.input("x"));
+        Ok(())
+    }
+    fn update(&mut self, _: &StepContext) -> Result<(), TaskError> {
+        if let Some(v) = self.input.as_mut().and_then(DataReader::latest) {
+            *self.seen.lock().unwrap() = v;
+        }
+        Ok(())
+    }
+    fn cleanup(&mut self) {
+        self.input = None;
+    }
+}
+
+#[test]
+fn a_deployment_can_be_cleaned_up_configured_again_and_restarted() {
+    let seen = Arc::new(Mutex::new(0));
+    let mut app = Deployment::new();
+    app.add_periodic("counter", Counter { out: None, n: 0 }, sched(50, MS))
+        .unwrap();
+    app.add_periodic(
+        "sink",
+        Sink {
+            input: None,
+            seen: seen.clone(),
+        },
+        sched(50, MS),
+    )
+    .unwrap();
+    for round in 0..3 {
+        app.configure()
+            .unwrap_or_else(|e| panic!("configure, round {round}: {e}"));
+        assert_eq!(app.tasks()[0].interface().ports.len(), 1, "declared once");
+        let mut rt = app.start_stepped(SimClock::new(0)).unwrap();
+        rt.run_cycles(5);
+        app = rt.stop();
+        app.cleanup();
+        let v = *seen.lock().unwrap();
+        assert_eq!(
+            v,
+            5 * (round + 1),
+            "round {round}: data flows after reconfiguring"
+        );
+        let ports = app.tasks()[0].interface().ports.len();
+        assert_eq!(ports, 0, "cleanup forgets the declared ports");
+    }
+}

@@ -1051,8 +1051,23 @@ impl Deployment {
         for g in &mut self.groups {
             for r in g.periodic.iter_mut().chain(g.non_periodic.iter_mut()) {
                 r.cleanup();
+                // What configure declared (ports, events, peers) is declared again by the
+                // next configure; the operations are the task's own and stay.
+                let mut iface = r.shared().interface_mut();
+                iface.emits.clear();
+                iface.subscribes.clear();
+                iface.ports.clear();
+                iface.peers.clear();
             }
         }
+        // Cleanup undoes configure: the connections the tasks declared go too, and the next
+        // `configure` builds them afresh (otherwise every port would be declared twice).
+        // Handles taken from the deployment before (readers, events) belong to the old
+        // connections: take new ones after configuring again.
+        self.reg.objects.clear();
+        self.reg.buffers.clear();
+        self.reg.events.clear();
+        self.reg.errors.clear();
         self.configured = false;
     }
 }
