@@ -263,6 +263,38 @@ struct EventEntry {
     subscribers: Vec<String>,
 }
 
+/// One named connection (data object, buffer or event) as the topology check sees it: the
+/// tasks on its source side and on its sink side.
+struct Connection<'a> {
+    port: &'a str,
+    sources: &'a [String],
+    sinks: &'a [String],
+}
+
+impl Connection<'_> {
+    /// Every sink is an error when nothing feeds it (`unfed`); every task of the side that
+    /// must be `single` past the first is an error too (`several`, with the whole list).
+    fn errors(
+        &self,
+        errors: &mut Vec<TopologyError>,
+        unfed: TopologyErrorKind,
+        single: &[String],
+        several: fn(Vec<String>) -> TopologyErrorKind,
+    ) {
+        let error = |task: &String, kind: TopologyErrorKind| TopologyError {
+            task: task.clone(),
+            port: self.port.to_owned(),
+            kind,
+        };
+        if self.sources.is_empty() {
+            errors.extend(self.sinks.iter().map(|t| error(t, unfed.clone())));
+        }
+        if let Some(rest) = single.get(1..) {
+            errors.extend(rest.iter().map(|t| error(t, several(single.to_vec()))));
+        }
+    }
+}
+
 /// Names of everything connected, shared by configuration and (read-only) by the runtime.
 #[derive(Default)]
 pub(crate) struct Registry {
@@ -348,66 +380,47 @@ impl Registry {
 
     /// The whole-topology checks that need every task configured.
     fn check(&self) -> Vec<TopologyError> {
+        use TopologyErrorKind as K;
         let mut errors = self.errors.clone();
         for (name, o) in &self.objects {
-            if o.writers.is_empty() {
-                for r in &o.readers {
-                    errors.push(TopologyError {
-                        task: r.clone(),
-                        port: name.clone(),
-                        kind: TopologyErrorKind::InputWithoutWriter,
-                    });
-                }
-            }
-            if o.writers.len() > 1 {
-                for w in &o.writers[1..] {
-                    errors.push(TopologyError {
-                        task: w.clone(),
-                        port: name.clone(),
-                        kind: TopologyErrorKind::MultipleWriters(o.writers.clone()),
-                    });
-                }
-            }
+            let c = Connection {
+                port: name,
+                sources: &o.writers,
+                sinks: &o.readers,
+            };
+            c.errors(
+                &mut errors,
+                K::InputWithoutWriter,
+                &o.writers,
+                K::MultipleWriters,
+            );
         }
         for (name, b) in &self.buffers {
-            if b.producers.is_empty() {
-                for c in &b.consumers {
-                    errors.push(TopologyError {
-                        task: c.clone(),
-                        port: name.clone(),
-                        kind: TopologyErrorKind::BufferWithoutProducer,
-                    });
-                }
-            }
-            if b.consumers.len() > 1 {
-                for c in &b.consumers[1..] {
-                    errors.push(TopologyError {
-                        task: c.clone(),
-                        port: name.clone(),
-                        kind: TopologyErrorKind::MultipleConsumers(b.consumers.clone()),
-                    });
-                }
-            }
+            let c = Connection {
+                port: name,
+                sources: &b.producers,
+                sinks: &b.consumers,
+            };
+            // Many producers may feed a buffer; it has one consumer.
+            c.errors(
+                &mut errors,
+                K::BufferWithoutProducer,
+                &b.consumers,
+                K::MultipleConsumers,
+            );
         }
         for (name, e) in &self.events {
-            if e.emitters.is_empty() {
-                for s in &e.subscribers {
-                    errors.push(TopologyError {
-                        task: s.clone(),
-                        port: name.clone(),
-                        kind: TopologyErrorKind::EventWithoutEmitter,
-                    });
-                }
-            }
-            if e.emitters.len() > 1 {
-                for w in &e.emitters[1..] {
-                    errors.push(TopologyError {
-                        task: w.clone(),
-                        port: name.clone(),
-                        kind: TopologyErrorKind::MultipleEmitters(e.emitters.clone()),
-                    });
-                }
-            }
+            let c = Connection {
+                port: name,
+                sources: &e.emitters,
+                sinks: &e.subscribers,
+            };
+            c.errors(
+                &mut errors,
+                K::EventWithoutEmitter,
+                &e.emitters,
+                K::MultipleEmitters,
+            );
         }
         errors
     }
