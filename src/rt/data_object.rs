@@ -114,35 +114,29 @@ trait SlotMask: Copy {
 /// Most slots a `u64` mask handles: bits 62 and 63 are the markers'.
 const U64_SLOTS: usize = 62;
 
-impl SlotMask for u64 {
-    #[inline(always)]
-    fn bit(r: u8) -> Self {
-        1 << (r & 63)
-    }
-    #[inline(always)]
-    fn or(self, other: Self) -> Self {
-        self | other
-    }
-    #[inline(always)]
-    fn lowest_clear(self) -> u8 {
-        (!self).trailing_zeros() as u8
-    }
+/// The same three operations for both mask widths.
+macro_rules! slot_mask {
+    ($t:ty, $bits:expr) => {
+        impl SlotMask for $t {
+            #[inline(always)]
+            fn bit(r: u8) -> Self {
+                1 << (r & ($bits - 1))
+            }
+            #[inline(always)]
+            fn or(self, other: Self) -> Self {
+                self | other
+            }
+            #[inline(always)]
+            fn lowest_clear(self) -> u8 {
+                (!self).trailing_zeros() as u8
+            }
+        }
+    };
 }
 
-impl SlotMask for u128 {
-    #[inline(always)]
-    fn bit(r: u8) -> Self {
-        1 << (r & 127)
-    }
-    #[inline(always)]
-    fn or(self, other: Self) -> Self {
-        self | other
-    }
-    #[inline(always)]
-    fn lowest_clear(self) -> u8 {
-        (!self).trailing_zeros() as u8
-    }
-}
+slot_mask!(u64, 64);
+slot_mask!(u128, 128);
+
 const _: () = assert!(MAX_READERS <= 64, "the registered mask is a u64");
 
 /// One value slot: the value first and 64-byte aligned, so a cache-line-sized payload is
