@@ -5,7 +5,7 @@
 #![allow(clippy::unwrap_used)]
 
 use hytask::rt::deploy::{TopologyErrorKind, TopologyErrors};
-use hytask::rt::interface::PortDirection;
+use hytask::rt::interface::{PortDirection, PortKind};
 use hytask::rt::prelude::*;
 use std::sync::{Arc, Mutex};
 
@@ -141,6 +141,10 @@ fn producer_feeds_a_slower_consumer_through_a_declared_buffer() {
     let producer = deployment.tasks()[1].interface();
     assert_eq!(producer.ports[0].direction, PortDirection::Output);
     assert_eq!(producer.ports[0].type_name, "u64");
+    assert_eq!(
+        (consumer.ports[0].kind, producer.ports[0].kind),
+        (PortKind::Buffer, PortKind::Buffer)
+    );
 }
 
 #[test]

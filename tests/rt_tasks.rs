@@ -815,6 +815,7 @@ fn interface_is_data_and_status_reports_realtime_flag() {
     assert_eq!(json["operations"][0]["params"][0]["ty"], "int");
     assert_eq!(json["ports"][0]["object"], "w.out");
     assert_eq!(json["ports"][0]["direction"], "Output");
+    assert_eq!(json["ports"][0]["kind"], "Data");
     assert_eq!(json["subscribes"][0]["name"], "emitter.tick");
     assert_eq!(app.tasks()[0].interface().emits[0].name, "emitter.tick");
     let rt = app.start_stepped(SimClock::new(0)).unwrap();

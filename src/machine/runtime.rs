@@ -1157,9 +1157,12 @@ impl MachineApi for Machine {
                         .ports
                         .iter()
                         .map(|p| {
-                            let dir = match p.direction {
-                                crate::rt::interface::PortDirection::Input => "in",
-                                crate::rt::interface::PortDirection::Output => "out",
+                            use crate::rt::interface::{PortDirection as D, PortKind as K};
+                            let dir = match (p.direction, p.kind) {
+                                (D::Input, K::Data) => "in",
+                                (D::Output, K::Data) => "out",
+                                (D::Input, K::Buffer) => "in (buffer)",
+                                (D::Output, K::Buffer) => "out (buffer)",
                             };
                             format!("{dir} {}", p.object)
                         })

@@ -25,7 +25,7 @@ use super::clock::SimClock;
 use super::command::{command_queue, CommandHandle, CommandSender, Commands, SendError};
 use super::data_object::{DataObject, DataObjectError, DataReader, DataWriter};
 use super::event::{Event, EventReceiver, EventSource};
-use super::interface::{EventDescriptor, PortDescriptor, PortDirection, TaskInterface};
+use super::interface::{EventDescriptor, PortDescriptor, PortDirection, PortKind, TaskInterface};
 use super::runner::{Runnable, TaskInfo, TaskRunner, TaskShared};
 use super::stats::TimingStats;
 use super::system;
@@ -499,6 +499,7 @@ impl Configure<'_> {
         self.iface.ports.push(PortDescriptor {
             object: object.to_owned(),
             direction: PortDirection::Output,
+            kind: PortKind::Data,
             type_name: std::any::type_name::<T>(),
         });
         match self.reg.object::<T>(object) {
@@ -523,6 +524,7 @@ impl Configure<'_> {
         self.iface.ports.push(PortDescriptor {
             object: object.to_owned(),
             direction: PortDirection::Input,
+            kind: PortKind::Data,
             type_name: std::any::type_name::<T>(),
         });
         match self.reg.object::<T>(object) {
@@ -547,7 +549,7 @@ impl Configure<'_> {
     /// may), declaring its capacity (at least, rounded up to a power of two) and full policy.
     /// Every producer must declare the same capacity and policy (a topology error otherwise).
     /// A buffer without consumer is a warning of the check, not an error. The port appears in
-    /// the task interface as an [`PortDirection::Output`] named after the buffer.
+    /// the task interface as a [`PortKind::Buffer`] output named after the buffer.
     pub fn buffer_out<T: Send + 'static>(
         &mut self,
         name: &str,
@@ -557,6 +559,7 @@ impl Configure<'_> {
         self.iface.ports.push(PortDescriptor {
             object: name.to_owned(),
             direction: PortDirection::Output,
+            kind: PortKind::Buffer,
             type_name: std::any::type_name::<T>(),
         });
         let task = self.task;
@@ -598,11 +601,12 @@ impl Configure<'_> {
     /// Declares a buffer input port: this task is the single consumer of buffer `name`, whose
     /// capacity and policy its producers declare. A buffer without producer, or with a second
     /// consumer, is a topology error. The port appears in the task interface as an
-    /// [`PortDirection::Input`] named after the buffer.
+    /// [`PortKind::Buffer`] input named after the buffer.
     pub fn buffer_in<T: Send + 'static>(&mut self, name: &str) -> BufferReader<T> {
         self.iface.ports.push(PortDescriptor {
             object: name.to_owned(),
             direction: PortDirection::Input,
+            kind: PortKind::Buffer,
             type_name: std::any::type_name::<T>(),
         });
         let task = self.task;

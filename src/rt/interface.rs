@@ -16,13 +16,24 @@ pub enum PortDirection {
     Output,
 }
 
-/// A data port of a task: which data object it reads or writes.
+/// What a port connects to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum PortKind {
+    /// A data object: the latest value.
+    Data,
+    /// A buffer: every item, in order (an input consumes, an output produces).
+    Buffer,
+}
+
+/// A port of a task: which data object or buffer it reads or writes.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct PortDescriptor {
     /// Name of the data object (global, e.g. `axis.x.position_mm`).
     pub object: String,
     /// Read or written.
     pub direction: PortDirection,
+    /// Data object or buffer.
+    pub kind: PortKind,
     /// Rust type name of the value (informative).
     pub type_name: &'static str,
 }
