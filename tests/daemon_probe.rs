@@ -56,7 +56,7 @@ impl Drop for Plate {
 }
 
 fn wait_job_end(c: &mut hytask::control::client::Client, what: &str) -> Value {
-    wait_status(c, what, Duration::from_secs(60), |s| {
+    wait_status(c, what, Duration::from_secs(180), |s| {
         matches!(
             s["job"]["state"].as_str(),
             Some("done" | "failed" | "aborted")
