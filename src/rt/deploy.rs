@@ -496,12 +496,7 @@ impl Configure<'_> {
         &mut self,
         object: &str,
     ) -> DataWriter<T> {
-        self.iface.ports.push(PortDescriptor {
-            object: object.to_owned(),
-            direction: PortDirection::Output,
-            kind: PortKind::Data,
-            type_name: std::any::type_name::<T>(),
-        });
+        self.declare_port::<T>(object, PortDirection::Output, PortKind::Data);
         match self.reg.object::<T>(object) {
             Ok(obj) => {
                 if let Some(e) = self.reg.objects.get_mut(object) {
@@ -521,12 +516,7 @@ impl Configure<'_> {
         &mut self,
         object: &str,
     ) -> DataReader<T> {
-        self.iface.ports.push(PortDescriptor {
-            object: object.to_owned(),
-            direction: PortDirection::Input,
-            kind: PortKind::Data,
-            type_name: std::any::type_name::<T>(),
-        });
+        self.declare_port::<T>(object, PortDirection::Input, PortKind::Data);
         match self.reg.object::<T>(object) {
             Ok(obj) => {
                 if let Some(e) = self.reg.objects.get_mut(object) {
@@ -545,6 +535,16 @@ impl Configure<'_> {
         }
     }
 
+    /// Records a port in the task's interface (what `hytask tasks` and peers see).
+    fn declare_port<T>(&mut self, object: &str, direction: PortDirection, kind: PortKind) {
+        self.iface.ports.push(PortDescriptor {
+            object: object.to_owned(),
+            direction,
+            kind,
+            type_name: std::any::type_name::<T>(),
+        });
+    }
+
     /// Declares a buffer output port: this task produces into buffer `name` (several tasks
     /// may), declaring its capacity (at least, rounded up to a power of two) and full policy.
     /// Every producer must declare the same capacity and policy (a topology error otherwise).
@@ -556,12 +556,7 @@ impl Configure<'_> {
         capacity: usize,
         policy: FullPolicy,
     ) -> BufferWriter<T> {
-        self.iface.ports.push(PortDescriptor {
-            object: name.to_owned(),
-            direction: PortDirection::Output,
-            kind: PortKind::Buffer,
-            type_name: std::any::type_name::<T>(),
-        });
+        self.declare_port::<T>(name, PortDirection::Output, PortKind::Buffer);
         let task = self.task;
         let BufferEntry {
             handle,
@@ -603,12 +598,7 @@ impl Configure<'_> {
     /// consumer, is a topology error. The port appears in the task interface as an
     /// [`PortKind::Buffer`] input named after the buffer.
     pub fn buffer_in<T: Send + 'static>(&mut self, name: &str) -> BufferReader<T> {
-        self.iface.ports.push(PortDescriptor {
-            object: name.to_owned(),
-            direction: PortDirection::Input,
-            kind: PortKind::Buffer,
-            type_name: std::any::type_name::<T>(),
-        });
+        self.declare_port::<T>(name, PortDirection::Input, PortKind::Buffer);
         let task = self.task;
         let BufferEntry {
             handle,
