@@ -48,6 +48,7 @@
 
 pub mod axis;
 pub mod can;
+pub mod canopen;
 pub mod erased;
 pub mod error;
 pub mod io;

@@ -1,0 +1,209 @@
+//! The SDO server: answers one client on one node's channel from an object dictionary
+//! reached through [`ObjectAccess`]. Expedited and segmented, both directions; block
+//! requests are refused with abort 0x05040001 (block transfer is not implemented yet).
+
+use super::{abort_frame, initiate, multiplexer, sdo_frame, SdoAbortCode, DEFAULT_TIMEOUT, TX};
+use crate::can::CanFrame;
+use crate::canopen::NodeId;
+use std::time::Duration;
+
+/// An object dictionary as the SDO server sees it: values as little-endian bytes.
+pub trait ObjectAccess {
+    /// The value of `index:sub`, or why it cannot be read.
+    fn read(&mut self, index: u16, sub: u8) -> Result<Vec<u8>, SdoAbortCode>;
+    /// Stores `data` in `index:sub`, or says why not (wrong length, read-only, range…).
+    fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), SdoAbortCode>;
+}
+
+#[derive(Debug, Clone)]
+enum Phase {
+    Idle,
+    Down {
+        buf: Vec<u8>,
+        size: Option<usize>,
+        toggle: bool,
+    },
+    Up {
+        data: Vec<u8>,
+        pos: usize,
+        toggle: bool,
+    },
+}
+
+/// An SDO server for the node `node`.
+#[derive(Debug, Clone)]
+pub struct SdoServer {
+    node: NodeId,
+    timeout: Duration,
+    index: u16,
+    sub: u8,
+    deadline: Duration,
+    phase: Phase,
+}
+
+impl SdoServer {
+    /// A server for `node` with [`DEFAULT_TIMEOUT`] between segments.
+    pub fn new(node: NodeId) -> SdoServer {
+        SdoServer {
+            node,
+            timeout: DEFAULT_TIMEOUT,
+            index: 0,
+            sub: 0,
+            deadline: Duration::ZERO,
+            phase: Phase::Idle,
+        }
+    }
+
+    fn abort(&mut self, code: SdoAbortCode) -> Option<CanFrame> {
+        self.phase = Phase::Idle;
+        Some(abort_frame(self.node, TX, self.index, self.sub, code))
+    }
+
+    fn reply(&mut self, data: [u8; 8], now: Duration) -> Option<CanFrame> {
+        self.deadline = now + self.timeout;
+        Some(sdo_frame(self.node, TX, data))
+    }
+
+    /// A segmented transfer whose client went silent is aborted with 0x05040000.
+    pub fn poll(&mut self, now: Duration) -> Option<CanFrame> {
+        if !matches!(self.phase, Phase::Idle) && now > self.deadline {
+            return self.abort(SdoAbortCode::ProtocolTimedOut);
+        }
+        None
+    }
+
+    /// Handles a frame; returns the response to send, if any.
+    pub fn on_frame(
+        &mut self,
+        f: &CanFrame,
+        now: Duration,
+        od: &mut impl ObjectAccess,
+    ) -> Option<CanFrame> {
+        if f.id().is_extended()
+            || f.id().raw() != self.node.cob(super::RX).raw()
+            || f.data().len() != 8
+        {
+            return None;
+        }
+        let d = f.data();
+        let cmd = d[0];
+        let toggle_bit = cmd & 0x10 != 0;
+        match cmd >> 5 {
+            // Initiate download.
+            1 => {
+                (self.index, self.sub) = multiplexer(d);
+                let (index, sub) = (self.index, self.sub);
+                if cmd & 0x02 != 0 {
+                    let len = if cmd & 0x01 != 0 {
+                        4 - usize::from((cmd >> 2) & 0x03)
+                    } else {
+                        4
+                    };
+                    self.phase = Phase::Idle;
+                    return match od.write(index, sub, &d[4..4 + len]) {
+                        Ok(()) => self.reply(initiate(0x60, index, sub, [0; 4]), now),
+                        Err(code) => self.abort(code),
+                    };
+                }
+                let size = (cmd & 0x01 != 0).then(|| {
+                    usize::try_from(u32::from_le_bytes([d[4], d[5], d[6], d[7]]))
+                        .unwrap_or(usize::MAX)
+                });
+                if size.is_some_and(|s| s > 1 << 16) {
+                    return self.abort(SdoAbortCode::OutOfMemory);
+                }
+                self.phase = Phase::Down {
+                    buf: Vec::with_capacity(size.unwrap_or(0)),
+                    size,
+                    toggle: false,
+                };
+                self.reply(initiate(0x60, index, sub, [0; 4]), now)
+            }
+            // Download segment.
+            0 => {
+                let Phase::Down { buf, size, toggle } = &mut self.phase else {
+                    return self.abort(SdoAbortCode::InvalidCommandSpecifier);
+                };
+                if toggle_bit != *toggle {
+                    return self.abort(SdoAbortCode::ToggleBitNotAlternated);
+                }
+                let unused = usize::from((cmd >> 1) & 0x07);
+                buf.extend_from_slice(&d[1..8 - unused]);
+                let t = *toggle;
+                *toggle = !t;
+                if size.is_some_and(|s| buf.len() > s) {
+                    return self.abort(SdoAbortCode::LengthTooHigh);
+                }
+                if cmd & 0x01 != 0 {
+                    if size.is_some_and(|s| buf.len() < s) {
+                        return self.abort(SdoAbortCode::LengthTooLow);
+                    }
+                    let data = core::mem::take(buf);
+                    self.phase = Phase::Idle;
+                    if let Err(code) = od.write(self.index, self.sub, &data) {
+                        return self.abort(code);
+                    }
+                }
+                self.reply([0x20 | (u8::from(t) << 4), 0, 0, 0, 0, 0, 0, 0], now)
+            }
+            // Initiate upload.
+            2 => {
+                (self.index, self.sub) = multiplexer(d);
+                let (index, sub) = (self.index, self.sub);
+                let data = match od.read(index, sub) {
+                    Ok(v) => v,
+                    Err(code) => return self.abort(code),
+                };
+                if data.len() <= 4 {
+                    let mut p = [0u8; 4];
+                    p[..data.len()].copy_from_slice(&data);
+                    // Cannot truncate: len <= 4.
+                    let n = (4 - data.len()) as u8;
+                    self.phase = Phase::Idle;
+                    return self.reply(initiate(0x43 | (n << 2), index, sub, p), now);
+                }
+                let Ok(size) = u32::try_from(data.len()) else {
+                    return self.abort(SdoAbortCode::OutOfMemory);
+                };
+                self.phase = Phase::Up {
+                    data,
+                    pos: 0,
+                    toggle: false,
+                };
+                self.reply(initiate(0x41, index, sub, size.to_le_bytes()), now)
+            }
+            // Upload segment.
+            3 => {
+                let Phase::Up { data, pos, toggle } = &mut self.phase else {
+                    return self.abort(SdoAbortCode::InvalidCommandSpecifier);
+                };
+                if toggle_bit != *toggle {
+                    return self.abort(SdoAbortCode::ToggleBitNotAlternated);
+                }
+                let end = (*pos + 7).min(data.len());
+                let mut out = [0u8; 8];
+                out[1..1 + end - *pos].copy_from_slice(&data[*pos..end]);
+                // Cannot truncate: at most 7 bytes per segment.
+                let unused = (7 - (end - *pos)) as u8;
+                let last = end == data.len();
+                out[0] = (u8::from(*toggle) << 4) | (unused << 1) | u8::from(last);
+                *pos = end;
+                *toggle = !*toggle;
+                if last {
+                    self.phase = Phase::Idle;
+                }
+                self.reply(out, now)
+            }
+            // Abort from the client: drop the transfer, no answer.
+            4 => {
+                self.phase = Phase::Idle;
+                None
+            }
+            // Block upload/download (5, 6) and anything else.
+            _ => {
+                (self.index, self.sub) = multiplexer(d);
+                self.abort(SdoAbortCode::InvalidCommandSpecifier)
+            }
+        }
+    }
+}
