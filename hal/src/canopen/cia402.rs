@@ -342,9 +342,15 @@ mod tests {
             assert_eq!(State402::from_statusword(noisy), s, "{s}");
         }
         // Typical drive values.
-        assert_eq!(State402::from_statusword(0x0250), State402::SwitchOnDisabled);
+        assert_eq!(
+            State402::from_statusword(0x0250),
+            State402::SwitchOnDisabled
+        );
         assert_eq!(State402::from_statusword(0x0231), State402::ReadyToSwitchOn);
-        assert_eq!(State402::from_statusword(0x1637), State402::OperationEnabled);
+        assert_eq!(
+            State402::from_statusword(0x1637),
+            State402::OperationEnabled
+        );
         assert_eq!(State402::from_statusword(0x0218), State402::Fault);
     }
 
@@ -360,7 +366,11 @@ mod tests {
             assert_eq!(Command::decode(c.controlword(), 0), Some(c));
         }
         assert_eq!(Command::decode(0x80, 0x00), Some(Command::FaultReset));
-        assert_eq!(Command::decode(0x80, 0x80), Some(Command::DisableVoltage), "no edge");
+        assert_eq!(
+            Command::decode(0x80, 0x80),
+            Some(Command::DisableVoltage),
+            "no edge"
+        );
     }
 
     #[test]
@@ -383,7 +393,11 @@ mod tests {
         let mut p = PowerController::default();
         p.request(PowerRequest::Enable);
         assert_eq!(p.step(0x0208), 0x80, "edge");
-        assert_eq!(p.step(0x0208), 0x00, "still fault: drop bit 7 to make a new edge");
+        assert_eq!(
+            p.step(0x0208),
+            0x00,
+            "still fault: drop bit 7 to make a new edge"
+        );
         assert_eq!(p.step(0x0208), 0x80);
         assert_eq!(p.step(0x0240), 0x06);
         p.request(PowerRequest::Disable);
@@ -400,6 +414,9 @@ mod tests {
         assert!(!r.is_confirmed());
         assert!(r.on_display(8));
         let e = r.not_confirmed(crate::canopen::NodeId::new(2).unwrap(), 1);
-        assert_eq!(e.to_string(), "node 2: mode of operation 8 requested, drive displays 1");
+        assert_eq!(
+            e.to_string(),
+            "node 2: mode of operation 8 requested, drive displays 1"
+        );
     }
 }

@@ -227,7 +227,10 @@ mod tests {
         };
         assert_eq!(err.kind(), ErrorKind::DeviceFault);
         let msg = err.to_string();
-        assert!(msg.contains("node 2") && msg.contains("0x4210") && msg.contains("device temperature"), "{msg}");
+        assert!(
+            msg.contains("node 2") && msg.contains("0x4210") && msg.contains("device temperature"),
+            "{msg}"
+        );
         assert_eq!(c.active(n(2)).map(|e| e.code), Some(0x4210));
         assert_eq!(
             c.on_frame(&Emergency::new(0, 0).frame(n(2))),

@@ -13,7 +13,9 @@ pub enum CanOpenError {
     #[error("CANopen node id {0} is outside 1..=127")]
     InvalidNodeId(u8),
     /// No heartbeat from a monitored node within its consumer time.
-    #[error("node {node}: heartbeat lost (none for {silent_ms} ms, consumer time {timeout_ms} ms)")]
+    #[error(
+        "node {node}: heartbeat lost (none for {silent_ms} ms, consumer time {timeout_ms} ms)"
+    )]
     HeartbeatLost {
         /// The silent node.
         node: NodeId,

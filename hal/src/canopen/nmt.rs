@@ -138,7 +138,10 @@ mod tests {
         let f = NmtCommand::Start.frame(Some(n(3)));
         assert_eq!(f.id().raw(), 0);
         assert_eq!(f.data(), &[0x01, 3]);
-        assert_eq!(NmtCommand::ResetCommunication.frame(None).data(), &[0x82, 0]);
+        assert_eq!(
+            NmtCommand::ResetCommunication.frame(None).data(),
+            &[0x82, 0]
+        );
         for c in [
             NmtCommand::Start,
             NmtCommand::Stop,
@@ -164,11 +167,23 @@ mod tests {
     fn heartbeats_round_trip_and_ignore_toggle() {
         let f = NmtState::PreOperational.heartbeat_frame(n(5));
         assert_eq!(f.id().raw(), 0x705);
-        assert_eq!(NmtState::decode_heartbeat(&f), Some((n(5), NmtState::PreOperational)));
+        assert_eq!(
+            NmtState::decode_heartbeat(&f),
+            Some((n(5), NmtState::PreOperational))
+        );
         let toggled = frame(cob_id(0x705), &[0x85]);
-        assert_eq!(NmtState::decode_heartbeat(&toggled), Some((n(5), NmtState::Operational)));
-        assert_eq!(NmtState::decode_heartbeat(&frame(cob_id(0x705), &[0x33])), None);
-        assert_eq!(NmtState::decode_heartbeat(&frame(cob_id(0x605), &[0])), None);
+        assert_eq!(
+            NmtState::decode_heartbeat(&toggled),
+            Some((n(5), NmtState::Operational))
+        );
+        assert_eq!(
+            NmtState::decode_heartbeat(&frame(cob_id(0x705), &[0x33])),
+            None
+        );
+        assert_eq!(
+            NmtState::decode_heartbeat(&frame(cob_id(0x605), &[0])),
+            None
+        );
         assert_eq!(NmtState::BootUp.to_string(), "boot-up");
     }
 }

@@ -79,7 +79,9 @@ impl PdoMapping {
         let mut bits = 0u32;
         for o in objects {
             if o.bits == 0 || o.bits % 8 != 0 {
-                return Err(CanOpenError::Mapping("only whole-byte objects can be mapped"));
+                return Err(CanOpenError::Mapping(
+                    "only whole-byte objects can be mapped",
+                ));
             }
             bits += u32::from(o.bits);
         }
@@ -110,7 +112,9 @@ impl PdoMapping {
     /// little-endian) into a frame on `cob`. Never allocates.
     pub fn encode(&self, cob: crate::can::CanId, values: &[i64]) -> Result<CanFrame, CanOpenError> {
         if values.len() != self.len {
-            return Err(CanOpenError::Mapping("one value per mapped object is needed"));
+            return Err(CanOpenError::Mapping(
+                "one value per mapped object is needed",
+            ));
         }
         let mut buf = [0u8; 8];
         let mut pos = 0;
@@ -124,12 +128,21 @@ impl PdoMapping {
 
     /// Decodes `data` into `out` (one value per entry; signed entries are sign-extended
     /// when `signed` says so for that position, others zero-extended). Never allocates.
-    pub fn decode(&self, data: &[u8], signed: &[bool], out: &mut [i64]) -> Result<(), CanOpenError> {
+    pub fn decode(
+        &self,
+        data: &[u8],
+        signed: &[bool],
+        out: &mut [i64],
+    ) -> Result<(), CanOpenError> {
         if data.len() != self.data_len() {
-            return Err(CanOpenError::Mapping("PDO length does not match its mapping"));
+            return Err(CanOpenError::Mapping(
+                "PDO length does not match its mapping",
+            ));
         }
         if out.len() < self.len {
-            return Err(CanOpenError::Mapping("output has fewer slots than mapped objects"));
+            return Err(CanOpenError::Mapping(
+                "output has fewer slots than mapped objects",
+            ));
         }
         let mut pos = 0;
         for (i, e) in self.entries().iter().enumerate() {
@@ -171,13 +184,25 @@ pub struct SdoWrite {
 
 impl SdoWrite {
     fn u32(index: u16, sub: u8, v: u32) -> SdoWrite {
-        SdoWrite { index, sub, data: v.to_le_bytes().to_vec() }
+        SdoWrite {
+            index,
+            sub,
+            data: v.to_le_bytes().to_vec(),
+        }
     }
     fn u16(index: u16, sub: u8, v: u16) -> SdoWrite {
-        SdoWrite { index, sub, data: v.to_le_bytes().to_vec() }
+        SdoWrite {
+            index,
+            sub,
+            data: v.to_le_bytes().to_vec(),
+        }
     }
     fn u8(index: u16, sub: u8, v: u8) -> SdoWrite {
-        SdoWrite { index, sub, data: vec![v] }
+        SdoWrite {
+            index,
+            sub,
+            data: vec![v],
+        }
     }
 }
 
@@ -208,7 +233,9 @@ impl PdoConfig {
         mapping: PdoMapping,
     ) -> Result<PdoConfig, CanOpenError> {
         if !(1..=4).contains(&number) {
-            return Err(CanOpenError::Mapping("only PDOs 1..=4 have predefined COB-IDs"));
+            return Err(CanOpenError::Mapping(
+                "only PDOs 1..=4 have predefined COB-IDs",
+            ));
         }
         let base = match direction {
             PdoDirection::Rpdo => COB_RPDO1,
@@ -329,7 +356,11 @@ impl CspLayout {
         } else {
             None
         };
-        Ok(CspLayout { rpdo1, tpdo1, tpdo2 })
+        Ok(CspLayout {
+            rpdo1,
+            tpdo1,
+            tpdo2,
+        })
     }
 
     /// The PDOs of this layout that travel every SYNC (for the bus-load budget).
@@ -369,13 +400,20 @@ mod tests {
     fn mappings_over_8_bytes_or_partial_bytes_are_refused() {
         assert!(PdoMapping::new(&[STATUSWORD, POSITION_ACTUAL, VELOCITY_ACTUAL]).is_err());
         assert!(PdoMapping::new(&[MappedObject::new(0x6040, 0, 12)]).is_err());
-        assert_eq!(PdoMapping::new(&[STATUSWORD, POSITION_ACTUAL]).unwrap().data_len(), 6);
+        assert_eq!(
+            PdoMapping::new(&[STATUSWORD, POSITION_ACTUAL])
+                .unwrap()
+                .data_len(),
+            6
+        );
     }
 
     #[test]
     fn encode_decode_round_trip_with_sign() {
         let m = PdoMapping::new(&[STATUSWORD, POSITION_ACTUAL]).unwrap();
-        let f = m.encode(super::super::cob_id(0x181), &[0x0237, -5]).unwrap();
+        let f = m
+            .encode(super::super::cob_id(0x181), &[0x0237, -5])
+            .unwrap();
         assert_eq!(f.data(), &[0x37, 0x02, 0xFB, 0xFF, 0xFF, 0xFF]);
         let mut out = [0i64; 2];
         m.decode(f.data(), &[false, true], &mut out).unwrap();
@@ -390,7 +428,8 @@ mod tests {
     fn configuration_is_disable_clear_map_enable() {
         let l = CspLayout::new(n(2), false).unwrap();
         let w = l.rpdo1.sdo_writes();
-        let seq: Vec<(u16, u8, Vec<u8>)> = w.into_iter().map(|w| (w.index, w.sub, w.data)).collect();
+        let seq: Vec<(u16, u8, Vec<u8>)> =
+            w.into_iter().map(|w| (w.index, w.sub, w.data)).collect();
         assert_eq!(
             seq,
             vec![

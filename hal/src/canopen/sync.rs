@@ -38,7 +38,11 @@ impl SyncProducer {
         match self.overflow {
             None => frame(cob_id(COB_SYNC), &[]),
             Some(max) => {
-                self.counter = if self.counter >= max { 1 } else { self.counter + 1 };
+                self.counter = if self.counter >= max {
+                    1
+                } else {
+                    self.counter + 1
+                };
                 frame(cob_id(COB_SYNC), &[self.counter])
             }
         }

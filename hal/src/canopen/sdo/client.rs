@@ -12,10 +12,21 @@ use std::time::Duration;
 #[derive(Debug, Clone)]
 enum Phase {
     Idle,
-    DownInit { data: Vec<u8> },
-    DownSeg { data: Vec<u8>, pos: usize, toggle: bool, last: bool },
+    DownInit {
+        data: Vec<u8>,
+    },
+    DownSeg {
+        data: Vec<u8>,
+        pos: usize,
+        toggle: bool,
+        last: bool,
+    },
     UpInit,
-    UpSeg { buf: Vec<u8>, size: Option<usize>, toggle: bool },
+    UpSeg {
+        buf: Vec<u8>,
+        size: Option<usize>,
+        toggle: bool,
+    },
 }
 
 /// What a frame (or the passing of time) did to the transfer.

@@ -35,7 +35,12 @@ fn od() -> Od {
 
 /// Runs a transfer to its end between a client and a server; returns the final step and
 /// the number of frames the client sent.
-fn run(client: &mut SdoClient, server: &mut SdoServer, od: &mut Od, first: CanFrame) -> (SdoStep, usize) {
+fn run(
+    client: &mut SdoClient,
+    server: &mut SdoServer,
+    od: &mut Od,
+    first: CanFrame,
+) -> (SdoStep, usize) {
     let mut to_server = first;
     let t = Duration::ZERO;
     for sent in 1..1000 {
@@ -55,7 +60,11 @@ fn expedited_download_and_upload() {
     let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
     let f = c.download(0x6060, 0, &[8], Duration::ZERO).unwrap();
     assert_eq!(f.id().raw(), 0x605);
-    assert_eq!(f.data(), &[0x2F, 0x60, 0x60, 0, 8, 0, 0, 0], "1 byte: n=3, e, s");
+    assert_eq!(
+        f.data(),
+        &[0x2F, 0x60, 0x60, 0, 8, 0, 0, 0],
+        "1 byte: n=3, e, s"
+    );
     assert_eq!(run(&mut c, &mut s, &mut od, f), (SdoStep::Downloaded, 1));
     let f = c.upload(0x1000, 0, Duration::ZERO).unwrap();
     assert_eq!(f.data()[0], 0x40);
@@ -83,7 +92,9 @@ fn segmented_upload_and_download_of_21_and_15_bytes() {
 #[test]
 fn server_abort_is_decoded_to_a_named_error() {
     let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
-    let f = c.download(0x1000, 0, &[1, 2, 3, 4], Duration::ZERO).unwrap();
+    let f = c
+        .download(0x1000, 0, &[1, 2, 3, 4], Duration::ZERO)
+        .unwrap();
     let (step, _) = run(&mut c, &mut s, &mut od, f);
     let SdoStep::Failed { error, abort: None } = step else {
         panic!("{step:?}")
@@ -105,7 +116,13 @@ fn server_abort_is_decoded_to_a_named_error() {
     let f = c.upload(0x1234, 7, Duration::ZERO).unwrap();
     assert!(matches!(
         run(&mut c, &mut s, &mut od, f).0,
-        SdoStep::Failed { error: CanOpenError::SdoAbort { abort: SdoAbortCode::ObjectDoesNotExist, .. }, .. }
+        SdoStep::Failed {
+            error: CanOpenError::SdoAbort {
+                abort: SdoAbortCode::ObjectDoesNotExist,
+                ..
+            },
+            ..
+        }
     ));
 }
 
@@ -114,14 +131,28 @@ fn client_detects_a_repeated_toggle_and_aborts() {
     let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
     let f = c.upload(0x1008, 0, Duration::ZERO).unwrap();
     let init = s.on_frame(&f, Duration::ZERO, &mut od).unwrap();
-    let SdoStep::Send(seg_req) = c.on_frame(&init, Duration::ZERO) else { panic!() };
-    let seg1 = s.on_frame(&seg_req, Duration::ZERO, &mut od).unwrap();
-    let SdoStep::Send(_) = c.on_frame(&seg1, Duration::ZERO) else { panic!() };
-    // The server repeats segment 1 (toggle 0) where toggle 1 is due.
-    let SdoStep::Failed { error, abort: Some(a) } = c.on_frame(&seg1, Duration::ZERO) else {
+    let SdoStep::Send(seg_req) = c.on_frame(&init, Duration::ZERO) else {
         panic!()
     };
-    assert!(matches!(error, CanOpenError::SdoAbort { abort: SdoAbortCode::ToggleBitNotAlternated, .. }));
+    let seg1 = s.on_frame(&seg_req, Duration::ZERO, &mut od).unwrap();
+    let SdoStep::Send(_) = c.on_frame(&seg1, Duration::ZERO) else {
+        panic!()
+    };
+    // The server repeats segment 1 (toggle 0) where toggle 1 is due.
+    let SdoStep::Failed {
+        error,
+        abort: Some(a),
+    } = c.on_frame(&seg1, Duration::ZERO)
+    else {
+        panic!()
+    };
+    assert!(matches!(
+        error,
+        CanOpenError::SdoAbort {
+            abort: SdoAbortCode::ToggleBitNotAlternated,
+            ..
+        }
+    ));
     assert_eq!(a.data(), &[0x80, 0x08, 0x10, 0, 0x00, 0x00, 0x03, 0x05]);
     assert!(!c.is_busy());
 }
@@ -136,7 +167,10 @@ fn server_detects_a_repeated_toggle() {
     let a = s.on_frame(&bad, Duration::ZERO, &mut od).unwrap();
     assert_eq!(a.id().raw(), 0x585);
     assert_eq!(&a.data()[..4], &[0x80, 0x10, 0x20, 0]);
-    assert_eq!(u32::from_le_bytes([a.data()[4], a.data()[5], a.data()[6], a.data()[7]]), 0x0503_0000);
+    assert_eq!(
+        u32::from_le_bytes([a.data()[4], a.data()[5], a.data()[6], a.data()[7]]),
+        0x0503_0000
+    );
 }
 
 #[test]
@@ -148,11 +182,18 @@ fn silent_server_times_out_with_abort_frame() {
         Err(CanOpenError::SdoBusy { .. })
     ));
     assert_eq!(c.poll(Duration::from_millis(1100)), None);
-    let Some(SdoStep::Failed { error, abort: Some(a) }) = c.poll(Duration::from_millis(1101)) else {
+    let Some(SdoStep::Failed {
+        error,
+        abort: Some(a),
+    }) = c.poll(Duration::from_millis(1101))
+    else {
         panic!()
     };
     assert_eq!(error.kind(), ErrorKind::Timeout);
-    assert_eq!(error.to_string(), "node 5: SDO 6041:00 timed out after 100 ms");
+    assert_eq!(
+        error.to_string(),
+        "node 5: SDO 6041:00 timed out after 100 ms"
+    );
     assert_eq!(&a.data()[4..], &0x0504_0000u32.to_le_bytes());
     assert!(!c.is_busy());
 }
@@ -175,7 +216,11 @@ fn server_times_out_a_stalled_segmented_transfer_and_refuses_block_transfer() {
 fn frames_for_other_nodes_are_ignored() {
     let mut c = SdoClient::new(node());
     c.upload(0x6041, 0, Duration::ZERO).unwrap();
-    let other = sdo_frame(NodeId::new(6).unwrap(), TX, [0x4B, 0x41, 0x60, 0, 1, 2, 0, 0]);
+    let other = sdo_frame(
+        NodeId::new(6).unwrap(),
+        TX,
+        [0x4B, 0x41, 0x60, 0, 1, 2, 0, 0],
+    );
     assert_eq!(c.on_frame(&other, Duration::ZERO), SdoStep::Ignored);
     assert!(c.is_busy());
 }
