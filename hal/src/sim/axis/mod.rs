@@ -19,7 +19,7 @@
 mod config;
 mod error;
 mod handle;
-mod motor;
+pub(crate) mod motor;
 #[cfg(test)]
 mod tests;
 

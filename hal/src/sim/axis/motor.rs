@@ -10,7 +10,7 @@
 /// in the target ends without overshoot. The demand
 /// never exceeds `max_velocity`, nor the speed that would cover the error within one step
 /// `dt` (which keeps the discrete loop stable for any `lag_s`, including zero).
-pub(super) fn position_loop(
+pub(crate) fn position_loop(
     error: f64,
     lag_s: f64,
     dt: f64,
@@ -36,7 +36,7 @@ pub(super) fn position_loop(
 /// Moves `velocity` toward `demand` within one step `dt`: at most `accel * dt` when speeding
 /// up, at most `decel * dt` when slowing down or reversing. Lands exactly on `demand` when
 /// it is within reach, so "stopped" is an exact zero.
-pub(super) fn ramp(velocity: f64, demand: f64, accel: f64, decel: f64, dt: f64) -> f64 {
+pub(crate) fn ramp(velocity: f64, demand: f64, accel: f64, decel: f64, dt: f64) -> f64 {
     let slowing = demand.abs() < velocity.abs() || demand * velocity < 0.0;
     let rate = if slowing { decel } else { accel };
     let max_step = rate * dt;
