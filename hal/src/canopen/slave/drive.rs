@@ -94,8 +94,10 @@ impl Drive {
         }
         let enabled = self.state == State402::OperationEnabled;
         match self.mode {
-            MODE_CSP if enabled => {
-                sw |= SW_OP_MODE_12;
+            MODE_CSP => {
+                if enabled {
+                    sw |= SW_OP_MODE_12;
+                }
                 if self.following_error {
                     sw |= SW_OP_MODE_13;
                 }

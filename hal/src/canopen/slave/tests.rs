@@ -1,1 +1,337 @@
+use super::*;
+use crate::canopen::cia402::{Command, State402};
+use crate::canopen::sdo::{SdoAbortCode, SdoClient, SdoStep};
+use crate::canopen::{COB_EMCY, COB_RPDO1, COB_TPDO1};
 
+const MS: Duration = Duration::from_millis(1);
+
+fn n1() -> NodeId {
+    NodeId::new(1).unwrap()
+}
+
+/// A booted drive and an SDO client to it, talking through direct calls.
+struct T {
+    s: DriveSlave,
+    c: SdoClient,
+    now: Duration,
+}
+
+impl T {
+    fn new(cfg: SlaveConfig) -> T {
+        let mut s = DriveSlave::new(n1(), cfg);
+        let mut out = Outbox::default();
+        s.tick(Duration::ZERO, &mut out);
+        assert_eq!(
+            out.iter().next().map(|f| (f.id().raw(), f.data()[0])),
+            Some((0x701, 0))
+        );
+        T {
+            s,
+            c: SdoClient::new(n1()),
+            now: Duration::ZERO,
+        }
+    }
+
+    fn feed(&mut self, f: &CanFrame) -> Vec<CanFrame> {
+        let mut out = Outbox::default();
+        self.s.on_frame(f, self.now, &mut out);
+        out.iter().copied().collect()
+    }
+
+    fn sdo(&mut self, mut f: CanFrame) -> SdoStep {
+        loop {
+            let replies = self.feed(&f);
+            let Some(reply) = replies.iter().find(|r| r.id().raw() == 0x581) else {
+                panic!("no SDO reply to {f:?}")
+            };
+            match self.c.on_frame(reply, self.now) {
+                SdoStep::Send(next) => f = next,
+                done => return done,
+            }
+        }
+    }
+
+    fn write(&mut self, index: u16, sub: u8, d: &[u8]) -> Result<(), SdoAbortCode> {
+        let f = self.c.download(index, sub, d, self.now).unwrap();
+        match self.sdo(f) {
+            SdoStep::Downloaded => Ok(()),
+            SdoStep::Failed {
+                error: crate::canopen::CanOpenError::SdoAbort { abort, .. },
+                ..
+            } => Err(abort),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    fn read(&mut self, index: u16, sub: u8) -> Result<Vec<u8>, SdoAbortCode> {
+        let f = self.c.upload(index, sub, self.now).unwrap();
+        match self.sdo(f) {
+            SdoStep::Uploaded(v) => Ok(v),
+            SdoStep::Failed {
+                error: crate::canopen::CanOpenError::SdoAbort { abort, .. },
+                ..
+            } => Err(abort),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    fn cw(&mut self, cmd: Command) {
+        self.write(0x6040, 0, &cmd.controlword().to_le_bytes())
+            .unwrap();
+    }
+
+    fn state(&self) -> State402 {
+        State402::from_statusword(self.s.statusword())
+    }
+
+    fn enable(&mut self, mode: i8) {
+        self.write(0x6060, 0, &[mode as u8]).unwrap();
+        for c in [
+            Command::Shutdown,
+            Command::SwitchOn,
+            Command::EnableOperation,
+        ] {
+            self.cw(c);
+        }
+        assert_eq!(self.state(), State402::OperationEnabled);
+    }
+
+    fn start(&mut self) {
+        self.feed(&NmtCommand::Start.frame(Some(n1())));
+    }
+
+    fn sync(&mut self) -> Vec<CanFrame> {
+        self.now += MS;
+        self.feed(&crate::canopen::sync::SyncProducer::new().next_frame())
+    }
+}
+
+#[test]
+fn od_refuses_with_the_right_abort_codes() {
+    let mut t = T::new(SlaveConfig::default());
+    assert_eq!(t.write(0x1000, 0, &[0; 4]), Err(SdoAbortCode::ReadOnly));
+    assert_eq!(t.read(0x1234, 0), Err(SdoAbortCode::ObjectDoesNotExist));
+    assert_eq!(t.read(0x1018, 9), Err(SdoAbortCode::SubIndexDoesNotExist));
+    assert_eq!(
+        t.write(0x6040, 0, &[1, 2, 3]),
+        Err(SdoAbortCode::LengthTooHigh)
+    );
+    assert_eq!(t.write(0x6040, 0, &[1]), Err(SdoAbortCode::LengthTooLow));
+    assert_eq!(
+        t.write(0x6060, 0, &[3]),
+        Err(SdoAbortCode::InvalidValue),
+        "PV unsupported"
+    );
+    assert_eq!(t.read(0x6502, 0).unwrap(), 0xA1u32.to_le_bytes());
+}
+
+#[test]
+fn pdo_mapping_follows_the_cia301_rules() {
+    let mut t = T::new(SlaveConfig::default());
+    // RPDO1 is valid by default: its mapping is locked.
+    assert_eq!(
+        t.write(0x1600, 0, &[0]),
+        Err(SdoAbortCode::CannotStoreDeviceState)
+    );
+    assert_eq!(
+        t.write(0x1400, 1, &0x181u32.to_le_bytes()),
+        Err(SdoAbortCode::InvalidValue)
+    );
+    t.write(0x1400, 1, &(0x201u32 | 0x8000_0000).to_le_bytes())
+        .unwrap();
+    // Entries only while the count is 0.
+    assert_eq!(
+        t.write(0x1600, 1, &0x607A_0020u32.to_le_bytes()),
+        Err(SdoAbortCode::CannotStoreDeviceState)
+    );
+    t.write(0x1600, 0, &[0]).unwrap();
+    assert_eq!(
+        t.write(0x1600, 1, &0x6041_0010u32.to_le_bytes()),
+        Err(SdoAbortCode::NotMappable),
+        "statusword is not an RPDO object"
+    );
+    assert_eq!(
+        t.write(0x1600, 1, &0x607A_0010u32.to_le_bytes()),
+        Err(SdoAbortCode::NotMappable),
+        "wrong length"
+    );
+    for (i, e) in [0x607A_0020u32, 0x60FF_0020, 0x6040_0010]
+        .iter()
+        .enumerate()
+    {
+        t.write(0x1600, i as u8 + 1, &e.to_le_bytes()).unwrap();
+    }
+    assert_eq!(
+        t.write(0x1600, 0, &[3]),
+        Err(SdoAbortCode::PdoLengthExceeded)
+    );
+    t.write(0x1600, 0, &[2]).unwrap();
+    t.write(0x1400, 1, &0x201u32.to_le_bytes()).unwrap();
+    assert_eq!(t.read(0x1600, 0).unwrap(), [2]);
+}
+
+#[test]
+fn nmt_gates_pdos_and_resets_reboot() {
+    let mut t = T::new(SlaveConfig::default());
+    assert!(t.sync().is_empty(), "no TPDO in pre-operational");
+    t.start();
+    let out = t.sync();
+    assert_eq!(out.len(), 1);
+    assert_eq!(out[0].id().raw(), u32::from(COB_TPDO1) + 1);
+    assert_eq!(out[0].data(), &t.s.statusword().to_le_bytes());
+    t.feed(&NmtCommand::Stop.frame(None));
+    assert!(t.sync().is_empty());
+    assert_eq!(t.s.nmt_state(), Some(NmtState::Stopped));
+    t.feed(&NmtCommand::EnterPreOperational.frame(None));
+    t.write(0x1017, 0, &50u16.to_le_bytes()).unwrap();
+    let out = t.feed(&NmtCommand::ResetCommunication.frame(Some(n1())));
+    assert_eq!(out[0].data(), &[0], "boot-up");
+    assert_eq!(
+        t.read(0x1017, 0).unwrap(),
+        [0, 0],
+        "communication parameters reset"
+    );
+    t.write(0x6060, 0, &[8]).unwrap();
+    t.feed(&NmtCommand::ResetNode.frame(None));
+    assert_eq!(t.read(0x6061, 0).unwrap(), [0], "application reset");
+}
+
+#[test]
+fn heartbeat_follows_0x1017_and_can_be_stopped() {
+    let mut t = T::new(SlaveConfig {
+        heartbeat_ms: 10,
+        ..SlaveConfig::default()
+    });
+    let count = |t: &mut T, ms: u64| {
+        let mut n = 0;
+        for _ in 0..ms {
+            t.now += MS;
+            let mut out = Outbox::default();
+            t.s.tick(t.now, &mut out);
+            n += out.iter().filter(|f| f.id().raw() == 0x701).count();
+        }
+        n
+    };
+    assert_eq!(count(&mut t, 100), 10);
+    t.write(od::INJECT, 2, &[1]).unwrap();
+    assert_eq!(count(&mut t, 100), 0);
+    t.write(od::INJECT, 2, &[0]).unwrap();
+    assert_eq!(count(&mut t, 100), 10);
+}
+
+#[test]
+fn quick_stop_brakes_then_disable_voltage_leaves() {
+    let mut t = T::new(SlaveConfig::default());
+    t.start();
+    t.enable(8);
+    for k in 1..=50 {
+        t.write(0x607A, 0, &(k * 100i32).to_le_bytes()).unwrap();
+        t.sync();
+    }
+    t.cw(Command::QuickStop);
+    assert_eq!(t.state(), State402::QuickStopActive);
+    for _ in 0..100 {
+        t.sync();
+    }
+    let p = t.s.position();
+    t.sync();
+    assert_eq!(t.s.position(), p, "stopped");
+    t.cw(Command::EnableOperation);
+    assert_eq!(
+        t.state(),
+        State402::QuickStopActive,
+        "stays until disable voltage"
+    );
+    t.cw(Command::DisableVoltage);
+    assert_eq!(t.state(), State402::SwitchOnDisabled);
+}
+
+#[test]
+fn following_error_faults_with_emcy_and_fault_reset_clears_it() {
+    let mut t = T::new(SlaveConfig::default());
+    t.start();
+    t.write(0x6065, 0, &100u32.to_le_bytes()).unwrap();
+    t.enable(8);
+    // A 10 000 count step: the loop cannot follow, the window is 100.
+    t.write(0x607A, 0, &10_000i32.to_le_bytes()).unwrap();
+    let out = t.sync();
+    let emcy = out
+        .iter()
+        .find(|f| f.id().raw() == u32::from(COB_EMCY) + 1)
+        .expect("EMCY");
+    assert_eq!(&emcy.data()[..3], &[0x11, 0x86, 0x21]);
+    assert!(t.s.statusword() & crate::canopen::cia402::SW_OP_MODE_13 != 0);
+    for _ in 0..200 {
+        t.sync();
+    }
+    assert_eq!(t.state(), State402::Fault);
+    t.cw(Command::DisableVoltage);
+    let f =
+        t.c.download(0x6040, 0, &0x80u16.to_le_bytes(), t.now)
+            .unwrap();
+    let replies = t.feed(&f);
+    assert!(
+        replies
+            .iter()
+            .any(|r| r.id().raw() == 0x81 && r.data()[..3] == [0, 0, 0]),
+        "EMCY error reset"
+    );
+    assert_eq!(t.state(), State402::SwitchOnDisabled);
+}
+
+#[test]
+fn rpdo_applies_at_sync_and_short_rpdo_is_reported() {
+    let mut t = T::new(SlaveConfig::default());
+    t.start();
+    let cob = crate::canopen::cob_id(COB_RPDO1 + 1);
+    t.feed(&crate::canopen::frame(
+        cob,
+        &Command::Shutdown.controlword().to_le_bytes(),
+    ));
+    assert_eq!(
+        t.state(),
+        State402::SwitchOnDisabled,
+        "synchronous RPDO waits for SYNC"
+    );
+    t.sync();
+    assert_eq!(t.state(), State402::ReadyToSwitchOn);
+    let out = t.feed(&crate::canopen::frame(cob, &[6]));
+    assert_eq!(out[0].id().raw(), 0x81);
+    assert_eq!(
+        &out[0].data()[..2],
+        &[0x10, 0x82],
+        "EMCY 0x8210 PDO length error"
+    );
+}
+
+#[test]
+fn profile_position_and_homing_on_current_position() {
+    let mut t = T::new(SlaveConfig::default());
+    t.start();
+    t.enable(1);
+    t.write(0x607A, 0, &3000i32.to_le_bytes()).unwrap();
+    t.write(0x6040, 0, &0x1Fu16.to_le_bytes()).unwrap();
+    for _ in 0..20 {
+        t.now += Duration::from_millis(10);
+        let mut out = Outbox::default();
+        t.s.tick(t.now, &mut out);
+    }
+    assert_eq!(t.s.position(), 3000, "PP move free-runs without SYNC");
+    assert!(t.s.statusword() & crate::canopen::cia402::SW_TARGET_REACHED != 0);
+    t.write(0x6060, 0, &[6]).unwrap();
+    t.write(0x6098, 0, &[37]).unwrap();
+    t.write(0x6040, 0, &0x0Fu16.to_le_bytes()).unwrap();
+    t.write(0x6040, 0, &0x1Fu16.to_le_bytes()).unwrap();
+    assert_eq!(t.s.position(), 0);
+    assert!(
+        t.s.statusword() & crate::canopen::cia402::SW_OP_MODE_12 != 0,
+        "homing attained"
+    );
+    t.write(0x6098, 0, &[19]).unwrap();
+    t.write(0x6040, 0, &0x0Fu16.to_le_bytes()).unwrap();
+    t.write(0x6040, 0, &0x1Fu16.to_le_bytes()).unwrap();
+    assert!(
+        t.s.statusword() & crate::canopen::cia402::SW_OP_MODE_13 != 0,
+        "switch homing not modelled: homing error"
+    );
+}
