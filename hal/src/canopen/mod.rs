@@ -1,7 +1,7 @@
 //! A sans-IO CANopen (CiA 301) layer with the CiA 402 drive profile.
 //!
 //! Every codec and state machine here takes frames in, gives frames out and is told the time
-//! (`now`, a [`Duration`] since any fixed epoch); nothing opens a socket or reads a clock.
+//! (`now`, a [`Duration`](std::time::Duration) since any fixed epoch); nothing opens a socket or reads a clock.
 //! That keeps the protocol logic unit-testable without a bus, and lets the same code run on
 //! SocketCAN, on the in-memory [`SimCanBus`](crate::sim::SimCanBus) or inside a test.
 //!
@@ -14,13 +14,18 @@
 //! | [`pdo`] | PDO communication/mapping parameters, configuration as SDO writes, encode/decode |
 //! | [`emcy`] | EMCY codec and consumer, CiA 301 error-code classes |
 //! | [`cia402`] | CiA 402 power state machine, controlword, modes of operation |
+//! | [`master`] | the cyclic CSP master: process image of N drives, TPDOs in, RPDOs + SYNC out |
 //! | [`slave`] | a CiA 402 slave core (the loopback drive) with its object dictionary |
 //! | [`busload`] | bus-load budget of SYNC + PDOs, and the table of what fits |
 //!
-//! Realtime rule: the per-cycle path ([`pdo::PdoMapping::encode`]/[`decode`](pdo::PdoMapping::decode),
+//! Order in a servo cycle and the resulting feedback delay: see [`master`] (read the
+//! TPDOs that arrived since the last SYNC, run the tasks, write RPDOs, send SYNC; the tasks
+//! see positions one servo period old).
+//!
+//! Realtime rule: the per-cycle path ([`master::CspMaster`], [`pdo::PdoMapping::encode`]/[`decode`](pdo::PdoMapping::decode),
 //! [`sync::SyncProducer::next_frame`], [`heartbeat::HeartbeatConsumer::check`],
 //! [`cia402::PowerController::step`], [`emcy::Emergency::decode`]) works on fixed arrays and
-//! never allocates. SDO transfers allocate (their payloads are `Vec`s); they run at
+//! never allocates (checked by `hal/tests/canopen_no_alloc.rs`). SDO transfers allocate (their payloads are `Vec`s); they run at
 //! configuration time or on a non-realtime path, never in the servo step.
 //!
 //! Not yet here (issue 9): SDO block transfer (the server answers a block request with abort
@@ -35,6 +40,7 @@ pub mod cia402;
 pub mod emcy;
 pub mod error;
 pub mod heartbeat;
+pub mod master;
 pub mod nmt;
 pub mod pdo;
 pub mod sdo;

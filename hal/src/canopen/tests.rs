@@ -315,3 +315,160 @@ fn master_configures_enables_runs_csp_and_reports_each_injected_fault() {
         "{lost}"
     );
 }
+
+/// Configures `slave` with `layout` over SDO through `master` (non-realtime path).
+fn configure(
+    master: &mut SimCanPort,
+    slave: &mut DriveSlave,
+    port: &mut SimCanPort,
+    writes: &[super::pdo::SdoWrite],
+) {
+    let mut sdo = SdoClient::new(slave.node());
+    for w in writes {
+        let mut f = sdo
+            .download(w.index, w.sub, &w.data, Duration::ZERO)
+            .unwrap();
+        loop {
+            master.try_send(&f).unwrap();
+            slave.poll(port, Duration::ZERO).unwrap();
+            let reply = master.try_recv().unwrap().unwrap();
+            match sdo.on_frame(&reply, Duration::ZERO) {
+                SdoStep::Send(next) => f = next,
+                SdoStep::Downloaded => break,
+                other => panic!("{:04X}:{}: {other:?}", w.index, w.sub),
+            }
+        }
+    }
+}
+
+#[test]
+fn csp_master_runs_three_drives_and_names_the_lost_and_rebooted_node() {
+    use super::master::{CspMaster, MasterEvent};
+    use super::pdo::SdoWrite;
+    let (_bus, mut ports) = SimCanBus::new(4, 256).unwrap();
+    let mut port = ports.remove(0);
+    let mut slaves: Vec<DriveSlave> = (1..=3)
+        .map(|n| {
+            DriveSlave::new(
+                NodeId::new(n).unwrap(),
+                SlaveConfig {
+                    heartbeat_ms: 10,
+                    ..SlaveConfig::default()
+                },
+            )
+        })
+        .collect();
+    let mut m = CspMaster::<8>::new(SyncProducer::with_counter(16));
+    let mut now = Duration::ZERO;
+    let mut events = Vec::new();
+    for (s, p) in slaves.iter_mut().zip(ports.iter_mut()) {
+        s.poll(p, now).unwrap();
+    }
+    while let Some(f) = port.try_recv().unwrap() {
+        events.extend(m.read_frame(&f, now));
+    }
+    assert_eq!(events.len(), 3, "three boot-ups: {events:?}");
+    for (s, p) in slaves.iter_mut().zip(ports.iter_mut()) {
+        let layout = CspLayout::new(s.node(), true).unwrap();
+        let mut writes = layout.sdo_writes();
+        writes.push(SdoWrite {
+            index: 0x6060,
+            sub: 0,
+            data: vec![8],
+        });
+        configure(&mut port, s, p, &writes);
+        m.add(layout, Some(Duration::from_millis(30)), now).unwrap();
+    }
+    port.try_send(&NmtCommand::Start.frame(None)).unwrap();
+    m.request_all(PowerRequest::Enable);
+    events.clear();
+
+    let run = |m: &mut CspMaster<8>,
+               slaves: &mut [DriveSlave],
+               ports: &mut [SimCanPort],
+               port: &mut SimCanPort,
+               now: &mut Duration,
+               cycles: usize,
+               events: &mut Vec<MasterEvent>| {
+        for _ in 0..cycles {
+            *now += MS;
+            while let Some(f) = port.try_recv().unwrap() {
+                events.extend(m.read_frame(&f, *now));
+            }
+            while let Some(e) = m.check(*now) {
+                events.push(MasterEvent::Fault(e));
+            }
+            for i in 0..3 {
+                let d = m.drive_mut(i).unwrap();
+                if d.state() == State402::OperationEnabled {
+                    d.target += 10 * (i as i32 + 1);
+                }
+            }
+            m.write(port).unwrap();
+            for (s, p) in slaves.iter_mut().zip(ports.iter_mut()) {
+                s.poll(p, *now).unwrap();
+            }
+        }
+    };
+    run(
+        &mut m,
+        &mut slaves,
+        &mut ports,
+        &mut port,
+        &mut now,
+        300,
+        &mut events,
+    );
+    assert!(events.is_empty(), "{events:?}");
+    for i in 0..3 {
+        let d = m.drive(i).unwrap();
+        assert_eq!(d.state(), State402::OperationEnabled);
+        assert_eq!(d.mode_display, 8);
+        let speed = 10_000 * (i as i32 + 1);
+        assert!((d.velocity - speed).abs() <= 1, "drive {i}: {}", d.velocity);
+        assert!(
+            (d.target - d.position).abs() < speed / 100 + 20 * (i as i32 + 1) + 2,
+            "drive {i}"
+        );
+    }
+
+    // Node 2 stops its heartbeat: the master names it, and only it.
+    let mut out = super::Outbox::default();
+    let stop = {
+        let mut c = SdoClient::new(slaves[1].node());
+        c.download(od::INJECT, 2, &[1], now).unwrap()
+    };
+    slaves[1].on_frame(&stop, now, &mut out);
+    run(
+        &mut m,
+        &mut slaves,
+        &mut ports,
+        &mut port,
+        &mut now,
+        40,
+        &mut events,
+    );
+    let lost: Vec<String> = events.iter().map(|e| format!("{e:?}")).collect();
+    assert!(
+        matches!(&events[..], [MasterEvent::Fault(CanOpenError::HeartbeatLost { node, .. })] if node.get() == 2),
+        "{lost:?}"
+    );
+    events.clear();
+
+    // Node 3 resets: an unexpected boot-up, a fault naming it.
+    port.try_send(&NmtCommand::ResetNode.frame(Some(slaves[2].node())))
+        .unwrap();
+    run(
+        &mut m,
+        &mut slaves,
+        &mut ports,
+        &mut port,
+        &mut now,
+        3,
+        &mut events,
+    );
+    assert!(
+        events.iter().any(|e| matches!(e, MasterEvent::Fault(CanOpenError::UnexpectedBootUp { node }) if node.get() == 3)),
+        "{events:?}"
+    );
+}

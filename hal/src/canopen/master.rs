@@ -1,0 +1,244 @@
+//! The realtime side of the master for CSP drives: a fixed process image of up to `N`
+//! drives, fed by received frames and written out as RPDOs + SYNC once per servo cycle.
+//!
+//! One servo cycle, in this order (the servo thread owns bus timing):
+//! 1. [`CspMaster::read_frame`] for every frame received since the last SYNC (TPDOs into the
+//!    image, heartbeats, EMCYs → events), then [`CspMaster::check`] (heartbeat timeouts,
+//!    drives entering Fault);
+//! 2. the tasks run on the image (targets, power requests);
+//! 3. [`CspMaster::write`]: one RPDO per drive, then SYNC.
+//!
+//! Feedback delay: a drive samples its actual values when it receives the SYNC of cycle k
+//! and its TPDOs arrive during cycle k; the master reads them at the start of cycle k + 1.
+//! So the tasks of cycle k + 1 see the position of the SYNC of cycle k (one servo period
+//! old), and the target written in cycle k + 1 takes effect at that cycle's SYNC: the
+//! loop through the master has two periods of dead time (plus the drive's own loop lag).
+//!
+//! Nothing here allocates; SDO configuration happens before, on the non-realtime path.
+
+use super::cia402::{PowerController, PowerRequest, State402};
+use super::emcy::{EmcyConsumer, EmcyEvent};
+use super::heartbeat::{HeartbeatConsumer, HeartbeatEvent};
+use super::pdo::CspLayout;
+use super::sync::SyncProducer;
+use super::{CanOpenError, NodeId};
+use crate::can::{CanBus, CanFrame};
+use std::time::Duration;
+
+/// The process image of one CSP drive.
+#[derive(Debug, Clone, Copy)]
+pub struct DriveImage {
+    /// The drive's node id.
+    pub node: NodeId,
+    /// Its PDO layout (as configured over SDO).
+    pub layout: CspLayout,
+    /// Master side of its power state machine.
+    pub power: PowerController,
+    /// Last statusword received.
+    pub statusword: u16,
+    /// Last position actual, counts.
+    pub position: i32,
+    /// Last velocity actual, counts/s (0 without the velocity TPDO).
+    pub velocity: i32,
+    /// Last modes of operation display (0 without the velocity TPDO).
+    pub mode_display: i8,
+    /// Target position sent with the next RPDO, counts.
+    pub target: i32,
+    /// TPDO1 frames received since the last [`CspMaster::write`].
+    pub fresh: u32,
+    fault_reported: bool,
+    seen: bool,
+}
+
+impl DriveImage {
+    /// The drive's CiA 402 state.
+    pub fn state(&self) -> State402 {
+        State402::from_statusword(self.statusword)
+    }
+}
+
+/// What a received frame or a check reported.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MasterEvent {
+    /// A fault to act on (heartbeat lost, EMCY, drive fault, unexpected boot-up).
+    Fault(CanOpenError),
+    /// A node booted (first start or it reset).
+    BootUp(NodeId),
+    /// A node cleared its emergency (EMCY 0x0000).
+    EmcyCleared(NodeId),
+    /// A lost node is heard again.
+    Recovered(NodeId),
+}
+
+/// The cyclic CSP master for up to `N` drives.
+#[derive(Debug, Clone)]
+pub struct CspMaster<const N: usize> {
+    drives: [Option<DriveImage>; N],
+    heartbeat: HeartbeatConsumer,
+    emcy: EmcyConsumer,
+    sync: SyncProducer,
+}
+
+impl<const N: usize> CspMaster<N> {
+    /// A master sending `sync` every cycle.
+    pub fn new(sync: SyncProducer) -> Self {
+        CspMaster {
+            drives: [None; N],
+            heartbeat: HeartbeatConsumer::default(),
+            emcy: EmcyConsumer::default(),
+            sync,
+        }
+    }
+
+    /// Adds a drive; returns its index. The heartbeat of the node is watched from `now`
+    /// with `heartbeat_timeout` (`None`: not watched).
+    pub fn add(
+        &mut self,
+        layout: CspLayout,
+        heartbeat_timeout: Option<Duration>,
+        now: Duration,
+    ) -> Result<usize, CanOpenError> {
+        let node = NodeId::from_cob(u32::from(layout.tpdo1.cob_id), 0x180)
+            .ok_or(CanOpenError::Mapping("TPDO1 is not on a predefined COB-ID"))?;
+        let slot = self
+            .drives
+            .iter()
+            .position(Option::is_none)
+            .ok_or(CanOpenError::Mapping("no free drive slot in the master"))?;
+        self.drives[slot] = Some(DriveImage {
+            node,
+            layout,
+            power: PowerController::default(),
+            statusword: 0,
+            position: 0,
+            velocity: 0,
+            mode_display: 0,
+            target: 0,
+            fresh: 0,
+            fault_reported: false,
+            seen: false,
+        });
+        if let Some(t) = heartbeat_timeout {
+            self.heartbeat.watch(node, t, now);
+        }
+        Ok(slot)
+    }
+
+    /// The image of drive `i`.
+    pub fn drive(&self, i: usize) -> Option<&DriveImage> {
+        self.drives.get(i)?.as_ref()
+    }
+
+    /// The image of drive `i`, to set its target and power request.
+    pub fn drive_mut(&mut self, i: usize) -> Option<&mut DriveImage> {
+        self.drives.get_mut(i)?.as_mut()
+    }
+
+    /// Sets the power request of every drive.
+    pub fn request_all(&mut self, r: PowerRequest) {
+        for d in self.drives.iter_mut().flatten() {
+            d.power.request(r);
+        }
+    }
+
+    /// The heartbeat consumer (NMT states of the nodes).
+    pub fn heartbeat(&self) -> &HeartbeatConsumer {
+        &self.heartbeat
+    }
+
+    /// Handles one received frame. Never allocates.
+    pub fn read_frame(&mut self, f: &CanFrame, now: Duration) -> Option<MasterEvent> {
+        let mut v = [0i64; 8];
+        for d in self.drives.iter_mut().flatten() {
+            let l = &d.layout;
+            if f.id() == l.tpdo1.can_id() {
+                // A malformed TPDO keeps the last image; the drive's RPDO length EMCY or
+                // the stale `fresh` count tells.
+                if l.tpdo1
+                    .mapping
+                    .decode(f.data(), &[false, true], &mut v)
+                    .is_ok()
+                {
+                    // Truncations are the mapped widths (u16 statusword, i32 position).
+                    d.statusword = v[0] as u16;
+                    d.position = v[1] as i32;
+                    d.fresh += 1;
+                    d.seen = true;
+                }
+                return None;
+            }
+            if let Some(t2) = &l.tpdo2 {
+                if f.id() == t2.can_id() {
+                    if t2.mapping.decode(f.data(), &[true, true], &mut v).is_ok() {
+                        d.velocity = v[0] as i32;
+                        d.mode_display = v[1] as i8;
+                    }
+                    return None;
+                }
+            }
+        }
+        if let Some(ev) = self.heartbeat.on_frame(f, now) {
+            return match ev {
+                HeartbeatEvent::BootUp(node) => {
+                    // A drive that already ran PDOs and boots again has lost its configuration.
+                    if self
+                        .drives
+                        .iter()
+                        .flatten()
+                        .any(|d| d.node == node && d.seen)
+                    {
+                        Some(MasterEvent::Fault(CanOpenError::UnexpectedBootUp { node }))
+                    } else {
+                        Some(MasterEvent::BootUp(node))
+                    }
+                }
+                HeartbeatEvent::Recovered(node) => Some(MasterEvent::Recovered(node)),
+                HeartbeatEvent::StateChanged { .. } => None,
+            };
+        }
+        match self.emcy.on_frame(f)? {
+            EmcyEvent::Fault(e) => Some(MasterEvent::Fault(e)),
+            EmcyEvent::Cleared(n) => Some(MasterEvent::EmcyCleared(n)),
+        }
+    }
+
+    /// Heartbeat timeouts and drives that entered Fault, one per call (call until `None`).
+    /// Never allocates.
+    pub fn check(&mut self, now: Duration) -> Option<CanOpenError> {
+        if let Some(e) = self.heartbeat.check(now) {
+            return Some(e);
+        }
+        for d in self.drives.iter_mut().flatten() {
+            let fault = d.state().is_fault();
+            if fault && !d.fault_reported {
+                d.fault_reported = true;
+                return Some(CanOpenError::DriveFault {
+                    node: d.node,
+                    statusword: d.statusword,
+                });
+            }
+            if !fault {
+                d.fault_reported = false;
+            }
+        }
+        None
+    }
+
+    /// Sends one RPDO per drive (controlword from its power state machine, target), then
+    /// SYNC. Never allocates.
+    pub fn write<B: CanBus>(&mut self, bus: &mut B) -> Result<(), B::Error> {
+        for d in self.drives.iter_mut().flatten() {
+            let cw = d.power.step(d.statusword);
+            let r = &d.layout.rpdo1;
+            // The default layout's RPDO1 maps exactly controlword + target.
+            if let Ok(f) = r
+                .mapping
+                .encode(r.can_id(), &[i64::from(cw), i64::from(d.target)])
+            {
+                bus.try_send(&f)?;
+            }
+            d.fresh = 0;
+        }
+        bus.try_send(&self.sync.next_frame())
+    }
+}
