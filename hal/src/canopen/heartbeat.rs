@@ -37,6 +37,9 @@ pub enum HeartbeatEvent {
 #[derive(Debug, Clone)]
 pub struct HeartbeatConsumer {
     watch: [Option<Watch>; 128],
+    /// The watched node ids, so the per-cycle check visits only them.
+    watched: [u8; 128],
+    n_watched: usize,
     state: [Option<NmtState>; 128],
 }
 
@@ -44,6 +47,8 @@ impl Default for HeartbeatConsumer {
     fn default() -> Self {
         HeartbeatConsumer {
             watch: [None; 128],
+            watched: [0; 128],
+            n_watched: 0,
             state: [None; 128],
         }
     }
@@ -53,6 +58,10 @@ impl HeartbeatConsumer {
     /// Starts watching `node`: from `now` on it must send a heartbeat at least every
     /// `timeout` (the consumer time, 0x1016; typically 1.5–3 × its producer time).
     pub fn watch(&mut self, node: NodeId, timeout: Duration, now: Duration) {
+        if self.watch[usize::from(node.get())].is_none() {
+            self.watched[self.n_watched] = node.get();
+            self.n_watched += 1;
+        }
         self.watch[usize::from(node.get())] = Some(Watch {
             timeout,
             last: now,
@@ -62,7 +71,15 @@ impl HeartbeatConsumer {
 
     /// Stops watching `node` (its state is still tracked).
     pub fn unwatch(&mut self, node: NodeId) {
-        self.watch[usize::from(node.get())] = None;
+        if self.watch[usize::from(node.get())].take().is_some() {
+            if let Some(i) = self.watched[..self.n_watched]
+                .iter()
+                .position(|&n| n == node.get())
+            {
+                self.watched.copy_within(i + 1..self.n_watched, i);
+                self.n_watched -= 1;
+            }
+        }
     }
 
     /// The last NMT state `node` reported (boot-up reads as pre-operational: a node enters
@@ -102,13 +119,15 @@ impl HeartbeatConsumer {
     /// Returns the next node whose heartbeat is overdue at `now`, once per loss (call until
     /// `None`). Never allocates.
     pub fn check(&mut self, now: Duration) -> Option<CanOpenError> {
-        for (i, slot) in self.watch.iter_mut().enumerate() {
-            let Some(w) = slot else { continue };
+        for &id in &self.watched[..self.n_watched] {
+            let i = usize::from(id);
+            let Some(w) = &mut self.watch[i] else {
+                continue;
+            };
             let silent = now.saturating_sub(w.last);
             if !w.lost && silent > w.timeout {
                 w.lost = true;
-                // Cannot truncate: index < 128.
-                let node = NodeId::new(i as u8).ok()?;
+                let node = NodeId::new(id).ok()?;
                 return Some(CanOpenError::HeartbeatLost {
                     node,
                     silent_ms: u64::try_from(silent.as_millis()).unwrap_or(u64::MAX),
@@ -217,6 +236,21 @@ mod tests {
             c.check(ms(1051)),
             Some(CanOpenError::HeartbeatLost { node, .. }) if node == n(9)
         ));
+    }
+
+    #[test]
+    fn unwatched_nodes_are_not_reported() {
+        let mut c = HeartbeatConsumer::default();
+        c.watch(n(1), ms(10), ms(0));
+        c.watch(n(2), ms(10), ms(0));
+        c.watch(n(3), ms(10), ms(0));
+        c.unwatch(n(2));
+        c.watch(n(1), ms(10), ms(0));
+        let mut lost = Vec::new();
+        while let Some(CanOpenError::HeartbeatLost { node, .. }) = c.check(ms(11)) {
+            lost.push(node.get());
+        }
+        assert_eq!(lost, [1, 3]);
     }
 
     #[test]

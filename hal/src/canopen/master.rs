@@ -74,6 +74,9 @@ pub enum MasterEvent {
 #[derive(Debug, Clone)]
 pub struct CspMaster<const N: usize> {
     drives: [Option<DriveImage>; N],
+    /// COB-ID → 1 + 2 · drive index + (0 for TPDO1, 1 for TPDO2); 0 = not a TPDO of ours.
+    /// Makes routing a received frame O(1) instead of a scan over the drives.
+    route: [u16; 0x800],
     heartbeat: HeartbeatConsumer,
     emcy: EmcyConsumer,
     sync: SyncProducer,
@@ -84,6 +87,7 @@ impl<const N: usize> CspMaster<N> {
     pub fn new(sync: SyncProducer) -> Self {
         CspMaster {
             drives: [None; N],
+            route: [0; 0x800],
             heartbeat: HeartbeatConsumer::default(),
             emcy: EmcyConsumer::default(),
             sync,
@@ -118,6 +122,12 @@ impl<const N: usize> CspMaster<N> {
             fault_reported: false,
             seen: false,
         });
+        // Cannot truncate: slot < N, and a route entry is only used for N < 32 767.
+        let code = 1 + 2 * slot as u16;
+        self.route[usize::from(layout.tpdo1.cob_id & 0x7FF)] = code;
+        if let Some(t2) = &layout.tpdo2 {
+            self.route[usize::from(t2.cob_id & 0x7FF)] = code + 1;
+        }
         if let Some(t) = heartbeat_timeout {
             self.heartbeat.watch(node, t, now);
         }
@@ -149,12 +159,18 @@ impl<const N: usize> CspMaster<N> {
     /// Handles one received frame. Never allocates.
     pub fn read_frame(&mut self, f: &CanFrame, now: Duration) -> Option<MasterEvent> {
         let mut v = [0i64; 8];
-        for d in self.drives.iter_mut().flatten() {
-            let l = &d.layout;
-            if f.id() == l.tpdo1.can_id() {
-                // A malformed TPDO keeps the last image; the drive's RPDO length EMCY or
-                // the stale `fresh` count tells.
-                if l.tpdo1
+        let route = if f.id().is_extended() {
+            0
+        } else {
+            self.route.get(f.id().raw() as usize).copied().unwrap_or(0)
+        };
+        if route != 0 {
+            let slot = usize::from((route - 1) / 2);
+            let d = self.drives.get_mut(slot).and_then(Option::as_mut)?;
+            if route % 2 == 1 {
+                // A malformed TPDO keeps the last image; the stale `fresh` count tells.
+                if d.layout
+                    .tpdo1
                     .mapping
                     .decode(f.data(), &[false, true], &mut v)
                     .is_ok()
@@ -165,17 +181,13 @@ impl<const N: usize> CspMaster<N> {
                     d.fresh += 1;
                     d.seen = true;
                 }
-                return None;
-            }
-            if let Some(t2) = &l.tpdo2 {
-                if f.id() == t2.can_id() {
-                    if t2.mapping.decode(f.data(), &[true, true], &mut v).is_ok() {
-                        d.velocity = v[0] as i32;
-                        d.mode_display = v[1] as i8;
-                    }
-                    return None;
+            } else if let Some(t2) = &d.layout.tpdo2 {
+                if t2.mapping.decode(f.data(), &[true, true], &mut v).is_ok() {
+                    d.velocity = v[0] as i32;
+                    d.mode_display = v[1] as i8;
                 }
             }
+            return None;
         }
         if let Some(ev) = self.heartbeat.on_frame(f, now) {
             return match ev {

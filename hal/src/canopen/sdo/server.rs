@@ -7,6 +7,10 @@ use crate::can::CanFrame;
 use crate::canopen::NodeId;
 use std::time::Duration;
 
+/// The largest segmented download the server buffers (a client without size indication
+/// cannot make it grow without bound).
+pub const MAX_SEGMENTED: usize = 1 << 16;
+
 /// An object dictionary as the SDO server sees it: values as little-endian bytes.
 pub trait ObjectAccess {
     /// The value of `index:sub`, or why it cannot be read.
@@ -109,7 +113,7 @@ impl SdoServer {
                     usize::try_from(u32::from_le_bytes([d[4], d[5], d[6], d[7]]))
                         .unwrap_or(usize::MAX)
                 });
-                if size.is_some_and(|s| s > 1 << 16) {
+                if size.is_some_and(|s| s > MAX_SEGMENTED) {
                     return self.abort(SdoAbortCode::OutOfMemory);
                 }
                 self.phase = Phase::Down {
@@ -128,6 +132,9 @@ impl SdoServer {
                     return self.abort(SdoAbortCode::ToggleBitNotAlternated);
                 }
                 let unused = usize::from((cmd >> 1) & 0x07);
+                if buf.len() > MAX_SEGMENTED {
+                    return self.abort(SdoAbortCode::OutOfMemory);
+                }
                 buf.extend_from_slice(&d[1..8 - unused]);
                 let t = *toggle;
                 *toggle = !t;
