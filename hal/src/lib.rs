@@ -22,7 +22,9 @@
 //! hold a lock across I/O inside them.
 //!
 //! Backends: [`sim`] (simulated axis with a motor model, simulated I/O, in-memory CAN bus)
-//! now; CANopen CiA 402 over SocketCAN and Modbus come later and implement the same traits.
+//! now; [`canopen`] holds the sans-IO CANopen (CiA 301) master and CiA 402 layer with a
+//! loopback drive, tested on the in-memory bus; its SocketCAN wiring and Modbus come later
+//! and implement the same traits.
 //! Backends chosen by configuration live side by side behind [`Erased`] / [`DynAxis`],
 //! which give every backend the same error type ([`HalError`]) without allocating.
 //! This crate depends on nothing of the daemon.

@@ -63,6 +63,18 @@ impl CycleTraffic {
         }
     }
 
+    /// The traffic of drives configured with `layout` (every PDO of it travels each
+    /// cycle) and SYNC from `sync`: what the configuration check must budget.
+    pub fn from_layout(
+        layout: &super::pdo::CspLayout,
+        sync: &super::sync::SyncProducer,
+    ) -> CycleTraffic {
+        CycleTraffic {
+            sync_len: sync.data_len(),
+            pdo_lens: layout.pdos().map(|p| p.mapping.data_len()).collect(),
+        }
+    }
+
     /// Bits on the wire per cycle for `drives` drives.
     pub fn bits_per_cycle(&self, drives: usize) -> u64 {
         let per_drive: u64 = self.pdo_lens.iter().map(|&l| frame_bits(l)).sum();
@@ -271,6 +283,25 @@ mod tests {
         assert_eq!(t.max_drives(250, 1_000_000, DEFAULT_LIMIT), 13);
         let v = CycleTraffic::csp_default(true);
         assert_eq!(v.bits_per_cycle(1), 55 + 335);
+    }
+
+    #[test]
+    fn traffic_follows_the_configured_layout() {
+        use crate::canopen::{pdo::CspLayout, sync::SyncProducer, NodeId};
+        let l = CspLayout::new(NodeId::new(1).unwrap(), true).unwrap();
+        let t = CycleTraffic::from_layout(&l, &SyncProducer::with_counter(10));
+        assert_eq!(
+            t,
+            CycleTraffic {
+                sync_len: 1,
+                pdo_lens: vec![6, 6, 5]
+            }
+        );
+        let l = CspLayout::new(NodeId::new(1).unwrap(), false).unwrap();
+        assert_eq!(
+            CycleTraffic::from_layout(&l, &SyncProducer::new()),
+            CycleTraffic::csp_default(false)
+        );
     }
 
     #[test]
