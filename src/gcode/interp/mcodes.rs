@@ -479,6 +479,12 @@ impl Interp<'_> {
         })?;
         let k = self.s.units.mm_per_unit() / self.s.machine_units.mm_per_unit();
         const AX: &[u8; 6] = b"xyzabc";
+        // L11 measures against G59.3 (system 9), whatever system is active; its stored
+        // offset is in machine units.
+        let g593: [f64; 6] = std::array::from_fn(|i| {
+            self.p.numbered[crate::gcode::params::g5x_base(9) + i]
+                * super::motion::lin(i, self.s.k_mp())
+        });
         let spindle_tool = self.s.tool == n;
         let Some(t) = self.tools.tools.get_mut(slot - 1) else {
             return Err(self.err(col, "Tool table slot out of range"));
@@ -496,7 +502,7 @@ impl Interp<'_> {
                         let base = if l == 10 {
                             cur_machine - self.s.g5x[i] - self.s.g92[i]
                         } else {
-                            cur_machine
+                            cur_machine - g593[i]
                         };
                         (base - v) * kk
                     }
@@ -527,6 +533,9 @@ impl Interp<'_> {
         };
         self.emit(entry(u32::try_from(slot).unwrap_or(u32::MAX)))?;
         if spindle_tool {
+            // The spindle's copy (LinuxCNC's pocket 0) changes too: a G43 without H
+            // after this uses the new offsets.
+            self.s.spindle_tool = Some(t.clone());
             self.emit(entry(0))?;
         }
         Ok(())

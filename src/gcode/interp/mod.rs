@@ -8,10 +8,12 @@
 mod arcs;
 mod block;
 mod cycles;
+mod frame;
 mod mcodes;
 mod motion;
 mod ocode;
 mod state;
+mod unsupported;
 
 use super::canon::{Canon, CanonCmd, SourceLoc};
 use super::expr::{self, ParamSource};
@@ -112,6 +114,8 @@ impl Source {
                 }
             }
         }
+        // Subroutine being defined (rs274 refuses a `sub` inside another's definition).
+        let mut defining: Option<Box<str>> = None;
         for i in 0..src.end {
             let (a, b) = src.lines[i];
             let t = &src.text[a..b];
@@ -133,6 +137,22 @@ impl Source {
                 let l = parser::parse_line(t, opts.limits.max_expr_depth)
                     .map_err(|(c, m)| mkerr(i, c, m))?;
                 if let Some(o) = l.o {
+                    match o.kind {
+                        OKind::Sub if defining.is_some() => {
+                            return Err(mkerr(
+                                i,
+                                o.col,
+                                format!(
+                                    "Nested subroutine definition: o<{}> sub inside o<{}>",
+                                    o.label,
+                                    defining.as_deref().unwrap_or("")
+                                ),
+                            ));
+                        }
+                        OKind::Sub => defining = Some(o.label.clone()),
+                        OKind::EndSub if defining.as_deref() == Some(&*o.label) => defining = None,
+                        _ => {}
+                    }
                     src.by_label.entry(o.label.clone()).or_default().push(i);
                     src.olines.insert(i, o);
                 }
