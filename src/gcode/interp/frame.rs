@@ -20,7 +20,7 @@ pub(crate) fn rotate(x: f64, y: f64, deg: f64) -> (f64, f64) {
 impl Interp<'_> {
     /// Machine position (program units) of program position `p` in the active frame.
     /// `with_tool`: add the tool length offset (the tool tip's frame), as canon does.
-    pub(crate) fn to_machine(&self, p: &[f64; 6], with_tool: bool) -> [f64; 6] {
+    pub(crate) fn machine_of_program(&self, p: &[f64; 6], with_tool: bool) -> [f64; 6] {
         let s = &self.s;
         let mut m = [0.0; 6];
         for (i, v) in m.iter_mut().enumerate() {
@@ -34,9 +34,9 @@ impl Interp<'_> {
     }
 
     /// Program position in the active frame of machine position `m` (program units),
-    /// the inverse of [`Self::to_machine`]. `with_tool`: `m` includes the tool length
+    /// the inverse of [`Self::machine_of_program`]. `with_tool`: `m` includes the tool length
     /// offset.
-    pub(crate) fn from_machine(&self, m: &[f64; 6], with_tool: bool) -> [f64; 6] {
+    pub(crate) fn program_of_machine(&self, m: &[f64; 6], with_tool: bool) -> [f64; 6] {
         let s = &self.s;
         let mut p = [0.0; 6];
         for (i, v) in p.iter_mut().enumerate() {

@@ -26,13 +26,13 @@ impl Interp<'_> {
         if g53 && self.s.rotation != 0.0 {
             // G53 names machine coordinates, which the XY rotation does not turn: the axes
             // not named keep their machine position.
-            let mut m = self.to_machine(&self.s.pos, true);
+            let mut m = self.machine_of_program(&self.s.pos, true);
             for (i, &c) in AXES.iter().enumerate() {
                 if let Some(v) = b.get(c) {
                     m[i] = v;
                 }
             }
-            return self.from_machine(&m, true);
+            return self.program_of_machine(&m, true);
         }
         for (i, &c) in AXES.iter().enumerate() {
             if let Some(v) = b.get(c) {
@@ -310,10 +310,10 @@ impl Interp<'_> {
             // The tool stays where it is on the machine; its program position is that
             // machine position seen through the new (rotated) frame.
             // (Without the tool length offset, which cancels: LinuxCNC's order.)
-            let m = self.to_machine(&self.s.pos, false);
+            let m = self.machine_of_program(&self.s.pos, false);
             self.s.g5x = o;
             self.s.rotation = rot;
-            self.s.pos = self.from_machine(&m, false);
+            self.s.pos = self.program_of_machine(&m, false);
         } else {
             for (i, v) in o.iter().enumerate() {
                 self.s.pos[i] += self.s.g5x[i] - v;
@@ -354,7 +354,7 @@ impl Interp<'_> {
                 };
                 let k = 1.0 / self.s.k_mp();
                 let m = if self.s.rotation != 0.0 {
-                    self.to_machine(&self.s.pos, true)
+                    self.machine_of_program(&self.s.pos, true)
                 } else {
                     std::array::from_fn(|i| {
                         self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i]
@@ -436,7 +436,7 @@ impl Interp<'_> {
         // the home both depend on the rotation (LinuxCNC then moves the named axes to it).
         let home_prog = (self.s.rotation != 0.0).then(|| {
             let h: [f64; 6] = std::array::from_fn(|i| self.p.numbered[base + i] * lin(i, k));
-            self.from_machine(&h, true)
+            self.program_of_machine(&h, true)
         });
         for (i, &c) in AXES.iter().enumerate() {
             if !any || b.has(c) {
@@ -504,7 +504,7 @@ impl Interp<'_> {
                     // L20 with a rotation: the origin is where the tool is on the machine
                     // less the wanted position turned by the system's rotation; X and Y
                     // both change even if only one is named, as in LinuxCNC.
-                    let m = self.to_machine(&self.s.pos, false);
+                    let m = self.machine_of_program(&self.s.pos, false);
                     let want = |c: u8, i: usize| b.get(c).unwrap_or(self.s.pos[i]) + self.s.g92[i];
                     let (wx, wy) = frame::rotate(want(b'x', 0), want(b'y', 1), target_rot);
                     self.p.numbered[base] = (m[0] - wx) * to_param;
