@@ -2,13 +2,12 @@
 //! (M7–M9), overrides (M48–M53), I/O (M62–M68), modal state (M70–M73), user commands
 //! (M100–M199) and program stops (M0, M1, M2, M30, M60).
 
-use super::motion::pose6;
 use super::Interp;
 use crate::gcode::canon::{
     CanonCmd, FeedMode, InputKind, OverrideKind, Plane, SpindleDir, WaitKind,
 };
 use crate::gcode::modal::Block;
-use crate::gcode::params::{self, g5x_base};
+use crate::gcode::params;
 use crate::gcode::GcodeError;
 
 fn int_word(v: f64) -> Option<u32> {
@@ -393,24 +392,8 @@ impl Interp<'_> {
                 self.emit(CanonCmd::ProgramStop)
             }
             _ => {
-                // LinuxCNC's reset on program end.
-                let base = g5x_base(1);
-                let k = self.s.k_mp();
-                let mut o = [0.0; 6];
-                for (i, v) in o.iter_mut().enumerate() {
-                    *v = self.p.numbered[base + i] * super::motion::lin(i, k);
-                }
-                for (i, v) in o.iter().enumerate() {
-                    self.s.pos[i] += self.s.g5x[i] - v;
-                }
-                self.s.g5x = o;
-                self.s.origin_index = 1;
-                self.s.rotation = self.p.numbered[base + 9];
-                self.p.numbered[params::COORD_INDEX] = 1.0;
-                self.emit(CanonCmd::SetG5xOffset {
-                    index: 1,
-                    offset: pose6(&o),
-                })?;
+                // LinuxCNC's reset on program end: back to G54 (through its rotation).
+                self.activate_g5x(1)?;
                 self.emit(CanonCmd::SetXyRotation(self.s.rotation))?;
                 if self.s.plane != Plane::Xy {
                     self.s.plane = Plane::Xy;

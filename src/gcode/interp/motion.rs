@@ -304,7 +304,7 @@ impl Interp<'_> {
     }
 
     /// Makes `index`'s stored offset the active one and reports it to canon.
-    fn activate_g5x(&mut self, index: u8) -> Result<(), GcodeError> {
+    pub(super) fn activate_g5x(&mut self, index: u8) -> Result<(), GcodeError> {
         let (o, rot) = self.load_g5x(index);
         if rot != 0.0 || self.s.rotation != 0.0 {
             // The tool stays where it is on the machine; its program position is that
