@@ -521,3 +521,21 @@ fn mdi_mode_needs_no_program_end_and_keeps_modes() {
     let e = err_with("G1 X1 G0\n", &mdi);
     assert_eq!((e.file.as_str(), e.line), ("t.ngc", 1));
 }
+
+/// End to end through the planner: after `G10 L2 P1 R45`, `G53 G0 X10 Y0` reaches machine
+/// (10, 0) and `G28` the stored machine home, not the point turned by 45 degrees.
+#[test]
+fn machine_positions_survive_an_xy_rotation_through_the_planner() {
+    let cfg = hytask::motion::MotionConfig::default();
+    let end = |text: &str| {
+        let p = run(text);
+        hytask::motion::plan(&p.canon, &cfg).unwrap().end_mm
+    };
+    let e = end("G21\nG10 L2 P1 X1 Y2 R45\nG53 G0 X10 Y0\nM2\n");
+    assert!((e[0] - 10.0).abs() < 1e-9 && e[1].abs() < 1e-9, "{e:?}");
+    let e = end("G21\nG0 X3 Y4\nG28.1\nG10 L2 P1 X1 Y2 R45\nG0 X7 Y-2\nG28\nM2\n");
+    assert!(
+        (e[0] - 3.0).abs() < 1e-9 && (e[1] - 4.0).abs() < 1e-9,
+        "{e:?}"
+    );
+}
