@@ -308,12 +308,6 @@ impl Parser<'_> {
             }
             None => return err(kcol, format!("Unknown O-word keyword '{kw}'")),
         };
-        if label_expr.is_some() && kind != OKind::Call {
-            return err(
-                col,
-                "A computed O-word label (o[…]) is supported only with call by hytask",
-            );
-        }
         let mut args = Vec::new();
         loop {
             // Comments may stand between call arguments, as rs274 allows; comments on an
@@ -595,7 +589,7 @@ mod tests {
             Some(OKind::ProgramNumber)
         );
         assert!(parse_line("O32123 G0 X1", 32).is_err());
-        assert!(parse_line("o[10] sub", 32).is_err());
+        assert!(o("o[10] sub").is_some_and(|c| c.kind == OKind::Sub && c.label_expr.is_some()));
         assert!(parse_line("o100 call [1] (open [2]", 32).is_err());
     }
 

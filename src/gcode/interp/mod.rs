@@ -49,6 +49,9 @@ pub(crate) struct Source {
     olines: HashMap<usize, OStmt>,
     /// Lines of each O label, in file order.
     by_label: HashMap<Box<str>, Vec<usize>>,
+    /// O-word lines whose label is computed (`o[#1*10] sub`): their label is known only
+    /// when evaluated, so label searches evaluate them (they are rare).
+    computed: Vec<usize>,
 }
 
 impl Source {
@@ -100,6 +103,7 @@ impl Source {
             kind: Vec::new(),
             olines: HashMap::new(),
             by_label: HashMap::new(),
+            computed: Vec::new(),
         };
         src.kind = vec![0; src.lines.len()];
         src.end = src.lines.len();
@@ -137,6 +141,7 @@ impl Source {
                 let l = parser::parse_line(t, opts.limits.max_expr_depth)
                     .map_err(|(c, m)| mkerr(i, c, m))?;
                 if let Some(o) = l.o {
+                    let computed = o.label_expr.is_some();
                     match o.kind {
                         OKind::Sub if defining.is_some() => {
                             return Err(mkerr(
@@ -149,11 +154,18 @@ impl Source {
                                 ),
                             ));
                         }
+                        OKind::Sub if computed => defining = Some("[computed]".into()),
                         OKind::Sub => defining = Some(o.label.clone()),
-                        OKind::EndSub if defining.as_deref() == Some(&*o.label) => defining = None,
+                        OKind::EndSub if computed || defining.as_deref() == Some(&*o.label) => {
+                            defining = None
+                        }
                         _ => {}
                     }
-                    src.by_label.entry(o.label.clone()).or_default().push(i);
+                    if computed {
+                        src.computed.push(i);
+                    } else {
+                        src.by_label.entry(o.label.clone()).or_default().push(i);
+                    }
                     src.olines.insert(i, o);
                 }
             }

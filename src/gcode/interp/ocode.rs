@@ -29,11 +29,26 @@ impl Interp<'_> {
 
     /// Same-label statement lines of file `f`.
     fn label_lines(&self, f: usize, label: &str) -> Vec<usize> {
-        self.files[f]
-            .by_label
-            .get(label)
-            .cloned()
-            .unwrap_or_default()
+        let src = &self.files[f];
+        let mut v = src.by_label.get(label).cloned().unwrap_or_default();
+        if !src.computed.is_empty() {
+            // Computed labels take the parameters' values at the time of the search, as
+            // rs274 evaluates them when it reads the line.
+            for &l in &src.computed {
+                let matches = src
+                    .olines
+                    .get(&l)
+                    .and_then(|o| o.label_expr.as_ref().map(|e| (e, o.col)))
+                    .is_some_and(|(e, col)| {
+                        self.computed_label(e, col).is_ok_and(|c| &*c == label)
+                    });
+                if matches {
+                    v.push(l);
+                }
+            }
+            v.sort_unstable();
+        }
+        v
     }
 
     fn kind_at(&self, f: usize, l: usize) -> Option<OKind> {
