@@ -539,3 +539,17 @@ fn machine_positions_survive_an_xy_rotation_through_the_planner() {
         "{e:?}"
     );
 }
+
+/// Bytes that are not UTF-8 are named with their line and column: a Latin-1 comment still
+/// runs (as in rs274), a bad byte in a word is refused saying what it is.
+#[test]
+fn bytes_that_are_not_utf8_are_located() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("latin1.ngc");
+    std::fs::write(&f, b"G21 (caf\xe9)\nG0 X1\nG0 X\xff2\nM2\n").unwrap();
+    let e = load_file(&f, &InterpOptions::default()).unwrap_err();
+    assert_eq!((e.line, e.col), (3, 5), "{e}");
+    assert!(e.message.contains("not UTF-8"), "{e}");
+    std::fs::write(&f, b"G21 (caf\xe9)\nG0 X1\nM2\n").unwrap();
+    assert!(load_file(&f, &InterpOptions::default()).is_ok());
+}

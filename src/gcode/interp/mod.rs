@@ -464,6 +464,10 @@ impl<'a> Interp<'a> {
         };
         self.pc = (f, l + 1);
         let r = match parsed {
+            Err((c, m)) if self.files[f].line_text(l).contains('\u{FFFD}') => Err(self.err(
+                c,
+                format!("{m} (the line holds bytes that are not UTF-8 text)"),
+            )),
             Err((c, m)) => Err(self.err(c, m)),
             Ok(()) if line.block_delete && self.opts.block_delete => Ok(()),
             Ok(()) => self.exec_line(&line),
