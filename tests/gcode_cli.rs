@@ -80,3 +80,30 @@ fn errors_fail_with_file_line_column() {
     assert!(out.status.success());
     assert!(String::from_utf8(out.stdout).unwrap().contains("ok"));
 }
+
+/// `hytask plan` plans a program that changes tools with `--tool-table`; without a table
+/// it refuses it with the line of the unknown tool, as `gcode canon` does.
+#[test]
+fn plan_takes_a_tool_table() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("t.tbl"), "T4 P1 Z10\n").unwrap();
+    let f = dir.path().join("p.ngc");
+    std::fs::write(&f, "G21 F600 T4 M6 G43\nG1 X10 Z-1\nM2\n").unwrap();
+    let without = hytask().arg("plan").arg(&f).output().unwrap();
+    assert!(!without.status.success());
+    let err = String::from_utf8_lossy(&without.stderr);
+    assert!(err.contains("p.ngc:1:"), "{err}");
+    let with = hytask()
+        .arg("plan")
+        .arg(&f)
+        .arg("--tool-table")
+        .arg(dir.path().join("t.tbl"))
+        .output()
+        .unwrap();
+    assert!(
+        with.status.success(),
+        "{}",
+        String::from_utf8_lossy(&with.stderr)
+    );
+    assert!(String::from_utf8_lossy(&with.stdout).contains("job time:"));
+}

@@ -130,7 +130,17 @@ fn units_and_offsets_arrive_as_their_own_commands() {
 
 #[test]
 fn m_codes_io_wait_and_user_commands() {
-    let p = run("M62 P3\nM65 P1\nM66 P2 L3 Q1.5\nM66 E1 L0\nM67 E0 Q2\nM105 P1 Q2\nM2\n");
+    let text = "M62 P3\nM65 P1\nM66 P2 L3 Q1.5\nM66 E1 L0\nM67 E0 Q2\nM105 P1 Q2\nM2\n";
+    // A user M code runs only on a machine that defines it; elsewhere it is unknown, as
+    // in rs274 without an M105 program.
+    let e = err(text);
+    assert_eq!((e.line, e.col), (6, 1));
+    assert!(e.message.contains("Unknown m code used: M105"), "{e}");
+    let opts = InterpOptions {
+        user_mcodes: vec![105],
+        ..InterpOptions::default()
+    };
+    let p = load_str("t.ngc", text, &opts).unwrap();
     let b = body(&p);
     assert!(b.contains(&CanonCmd::DigitalOutput {
         index: 3,
@@ -309,6 +319,125 @@ fn cutter_compensation_is_refused_clearly() {
 }
 
 #[test]
+fn unsupported_g_codes_say_their_name() {
+    for (line, name) in [
+        (
+            "G5.1 X1 Y1 I1 J1",
+            "G5.1 (quadratic B-spline) is not supported",
+        ),
+        ("G5 X1 Y1 I1 J1 P1 Q1", "G5 (cubic spline) is not supported"),
+        ("G5.2 X1 Y1 P1 L3", "G5.2 (NURBS block) is not supported"),
+        ("G33.1 Z-1 K0.1", "G33.1 (rigid tapping) is not supported"),
+        (
+            "G33 Z-1 K0.1",
+            "G33 (spindle-synchronised motion) is not supported",
+        ),
+        (
+            "G76 Z-1 P1 I-0.1 J0.1 K0.2",
+            "G76 (threading cycle) is not supported",
+        ),
+        (
+            "G87 X1 Z-1 R1 I1 J1 K1",
+            "G87 (back boring cycle) is not supported",
+        ),
+        ("G7", "G7 (lathe diameter mode) is not supported"),
+        (
+            "G42 D1",
+            "G41/G42 (cutter radius compensation) is not supported",
+        ),
+        (
+            "G41.1 D1",
+            "G41.1/G42.1 (dynamic cutter radius compensation)",
+        ),
+        (
+            "G43.2 H1",
+            "G43.2 (additional tool length offset) is not supported",
+        ),
+    ] {
+        let e = err(&format!("G21 F100 S100 M3\n{line}\nM2\n"));
+        assert_eq!((e.line, e.col), (2, 1), "{line}: {e}");
+        assert!(e.message.starts_with(name), "{line}: {e}");
+    }
+}
+
+#[test]
+fn arcs_are_modal_like_g0_and_g1() {
+    let p = run("G21 F100\nG0 X10 Y0\nG3 X0 Y10 I-10 J0\nX-10 Y0 I0 J-10\nX0 Y-10 Z-1 R10\nM2\n");
+    let arcs: Vec<_> = body(&p)
+        .into_iter()
+        .filter_map(|c| match c {
+            CanonCmd::ArcFeed {
+                first_end,
+                second_end,
+                first_center,
+                second_center,
+                rotation,
+                ..
+            } => Some([
+                first_end,
+                second_end,
+                first_center,
+                second_center,
+                rotation.into(),
+            ]),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(arcs.len(), 3);
+    assert_eq!(arcs[1], [-10.0, 0.0, 0.0, 0.0, 1.0]);
+    assert!((arcs[2][0]).abs() < 1e-12 && (arcs[2][1] + 10.0).abs() < 1e-12);
+    // The words of an arc still need a motion that uses them.
+    assert!(err("G21 F100\nG0 X10\nG3 X0 Y10 I-10 J0\nG1 X1 I1\nM2\n")
+        .message
+        .starts_with("I word with no G2"));
+}
+
+#[test]
+fn g53_and_homes_are_not_rotated_by_g10_r() {
+    let p = run("G21\nG10 L2 P1 R45\nG53 G0 X10 Y0\nG28.1\nG0 X0 Y0\nG28\nM2\n");
+    let ends: Vec<[f64; 2]> = body(&p)
+        .into_iter()
+        .filter_map(|c| match c {
+            CanonCmd::StraightTraverse(e) => Some([e[0], e[1]]),
+            _ => None,
+        })
+        .collect();
+    // Program (7.07, -7.07) turned by 45 degrees is machine (10, 0).
+    let h = 50f64.sqrt();
+    let near = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-9 && (a[1] - b[1]).abs() < 1e-9;
+    assert!(near(ends[0], [h, -h]), "{ends:?}");
+    // G28.1 stored machine (10, 0); G28 goes back there through the rotated frame.
+    assert!(near(ends[3], [h, -h]), "{ends:?}");
+}
+
+#[test]
+fn o_word_forms_that_cam_and_people_write() {
+    let p = run(concat!(
+        "O32123 (program number)\n",
+        "o100 sub\no110 if [#1 GT 5]\no110 return\no110 endif\nG0 X#1\no100 endsub\n",
+        "#2 = 10\no[#2 * 10] call [3] (then) [4]\no100 call [7]\nM2\n"
+    ));
+    let xs: Vec<f64> = body(&p)
+        .into_iter()
+        .filter_map(|c| match c {
+            CanonCmd::StraightTraverse(e) => Some(e[0]),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(xs, vec![3.0]);
+    let e = err("o100 sub\n  o200 sub\n  o200 endsub\no100 endsub\nM2\n");
+    assert_eq!((e.line, e.col), (2, 3));
+    assert!(e.message.starts_with("Nested subroutine definition"), "{e}");
+}
+
+#[test]
+fn abort_comment_stops_the_program_with_its_text() {
+    let e = err("G0 X1\n(abort, tool not measured)\nG0 X2\nM2\n");
+    assert_eq!((e.line, e.col), (2, 1));
+    assert_eq!(e.message, "Program aborted: tool not measured");
+}
+
+#[test]
 fn each_limit_has_its_own_error() {
     let tight = InterpOptions {
         limits: Limits {
@@ -391,4 +520,36 @@ fn mdi_mode_needs_no_program_end_and_keeps_modes() {
     assert!(e.message.contains("program end"), "{e}");
     let e = err_with("G1 X1 G0\n", &mdi);
     assert_eq!((e.file.as_str(), e.line), ("t.ngc", 1));
+}
+
+/// End to end through the planner: after `G10 L2 P1 R45`, `G53 G0 X10 Y0` reaches machine
+/// (10, 0) and `G28` the stored machine home, not the point turned by 45 degrees.
+#[test]
+fn machine_positions_survive_an_xy_rotation_through_the_planner() {
+    let cfg = hytask::motion::MotionConfig::default();
+    let end = |text: &str| {
+        let p = run(text);
+        hytask::motion::plan(&p.canon, &cfg).unwrap().end_mm
+    };
+    let e = end("G21\nG10 L2 P1 X1 Y2 R45\nG53 G0 X10 Y0\nM2\n");
+    assert!((e[0] - 10.0).abs() < 1e-9 && e[1].abs() < 1e-9, "{e:?}");
+    let e = end("G21\nG0 X3 Y4\nG28.1\nG10 L2 P1 X1 Y2 R45\nG0 X7 Y-2\nG28\nM2\n");
+    assert!(
+        (e[0] - 3.0).abs() < 1e-9 && (e[1] - 4.0).abs() < 1e-9,
+        "{e:?}"
+    );
+}
+
+/// Bytes that are not UTF-8 are named with their line and column: a Latin-1 comment still
+/// runs (as in rs274), a bad byte in a word is refused saying what it is.
+#[test]
+fn bytes_that_are_not_utf8_are_located() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("latin1.ngc");
+    std::fs::write(&f, b"G21 (caf\xe9)\nG0 X1\nG0 X\xff2\nM2\n").unwrap();
+    let e = load_file(&f, &InterpOptions::default()).unwrap_err();
+    assert_eq!((e.line, e.col), (3, 5), "{e}");
+    assert!(e.message.contains("not UTF-8"), "{e}");
+    std::fs::write(&f, b"G21 (caf\xe9)\nG0 X1\nM2\n").unwrap();
+    assert!(load_file(&f, &InterpOptions::default()).is_ok());
 }

@@ -22,6 +22,18 @@ pub struct CheckArgs {
 
 /// Runs the subcommand.
 pub fn run(args: CheckArgs) -> anyhow::Result<ExitCode> {
+    if let Some(path) = &args.config {
+        // The TOML reader only says "stream did not contain valid UTF-8": name the place.
+        if let Ok(bytes) = std::fs::read(path) {
+            if let Some((line, col, byte)) = invalid_utf8_at(&bytes) {
+                eprintln!(
+                    "{}:{line}:{col}: invalid UTF-8 (byte 0x{byte:02X}); a machine file must be UTF-8 text",
+                    path.display()
+                );
+                return Ok(ExitCode::FAILURE);
+            }
+        }
+    }
     let (origin, result) = match &args.config {
         Some(path) => (path.display().to_string(), config::load(path)),
         None => ("built-in sim".to_string(), config::builtin_sim()),
@@ -67,5 +79,46 @@ fn report(e: &ConfigError) {
             }
         }
         other => eprintln!("{other}"),
+    }
+}
+
+/// Where `bytes` stop being UTF-8: 1-based line, 1-based byte column in that line, and the
+/// offending byte. None for valid UTF-8.
+pub fn invalid_utf8_at(bytes: &[u8]) -> Option<(usize, usize, u8)> {
+    let e = std::str::from_utf8(bytes).err()?;
+    let at = e.valid_up_to();
+    let before = &bytes[..at];
+    let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+    let line_start = before
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(0, |i| i + 1);
+    Some((line, at - line_start + 1, bytes[at]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn invalid_utf8_is_located_by_line_and_column() {
+        assert_eq!(invalid_utf8_at(b"[machine]\nname = \"ok\"\n"), None);
+        assert_eq!(
+            invalid_utf8_at(b"[machine]\nname = \"caf\xe9\"\n"),
+            Some((2, 12, 0xE9))
+        );
+        assert_eq!(invalid_utf8_at(b"\xff"), Some((1, 1, 0xFF)));
+    }
+
+    #[test]
+    fn check_fails_on_invalid_utf8_without_parsing() {
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        std::io::Write::write_all(&mut f, b"[machine]\nname = \"caf\xe9\"\n").unwrap();
+        let code = run(CheckArgs {
+            config: Some(f.path().into()),
+            quiet: true,
+        })
+        .unwrap();
+        assert_eq!(code, ExitCode::FAILURE);
     }
 }

@@ -20,34 +20,48 @@ pub struct GcodeArgs {
 pub struct InterpArgs {
     /// The program.
     pub file: PathBuf,
-    /// LinuxCNC tool table (`.tbl`).
+    /// LinuxCNC tool table (`.tbl`). Default: the `[tool_table]` of `--config`, else none
+    /// (the same default as `hytask plan`).
     #[arg(long)]
     pub tool_table: Option<PathBuf>,
+    /// Machine description (TOML, as for `hytask serve`): interpret with its tool table and
+    /// millimetre machine units, as the daemon does.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Directory searched for `o<name> call` files (repeatable).
     #[arg(long)]
     pub subroutine_path: Vec<PathBuf>,
     /// Honour `/` block delete.
     #[arg(long)]
     pub block_delete: bool,
-    /// Units of the tool table: `inch` (rs274 without an INI file, the default so traces
-    /// diff cleanly) or `mm`.
-    #[arg(long, default_value = "inch")]
-    pub machine_units: String,
+    /// Units of the tool table: `inch` or `mm`. Default: `inch` (rs274 without an INI
+    /// file, so traces diff cleanly), or `mm` with `--config` (the daemon's units).
+    #[arg(long)]
+    pub machine_units: Option<String>,
 }
 
 impl InterpArgs {
     fn options(&self) -> anyhow::Result<InterpOptions> {
-        let machine_units = match self.machine_units.as_str() {
+        let machine = match &self.config {
+            Some(p) => Some(crate::config::load(p)?),
+            None => None,
+        };
+        let default_units = if machine.is_some() { "mm" } else { "inch" };
+        let machine_units = match self.machine_units.as_deref().unwrap_or(default_units) {
             "inch" | "in" => LengthUnits::Inches,
             "mm" => LengthUnits::Millimeters,
             other => anyhow::bail!("--machine-units must be inch or mm, not {other:?}"),
         };
+        let base = match &machine {
+            Some(m) => crate::machine::job::interp_options(m),
+            None => InterpOptions::default(),
+        };
         Ok(InterpOptions {
-            tool_table: self.tool_table.clone(),
+            tool_table: super::plan::tool_table(self.tool_table.as_deref(), machine.as_ref()),
             subroutine_path: self.subroutine_path.clone(),
             block_delete: self.block_delete,
             machine_units,
-            ..InterpOptions::default()
+            ..base
         })
     }
 }
@@ -82,5 +96,53 @@ pub fn run(args: GcodeArgs) -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(config: Option<PathBuf>, tool_table: Option<PathBuf>) -> InterpArgs {
+        InterpArgs {
+            file: PathBuf::from("p.ngc"),
+            tool_table,
+            config,
+            subroutine_path: Vec::new(),
+            block_delete: false,
+            machine_units: None,
+        }
+    }
+
+    /// `gcode canon` picks its table as `plan` does: the flag, else the machine's, else
+    /// none; with a machine file the table is in the daemon's millimetres.
+    #[test]
+    fn tool_table_default_is_the_one_plan_uses() {
+        let dir = tempfile::tempdir().unwrap();
+        let sim = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim.toml"),
+        )
+        .unwrap();
+        let cfg = dir.path().join("machine.toml");
+        std::fs::write(&cfg, format!("{sim}\n[tool_table]\npath = \"tools.tbl\"\n")).unwrap();
+
+        let none = args(None, None).options().unwrap();
+        assert_eq!(none.tool_table, None);
+        assert_eq!(none.machine_units, LengthUnits::Inches);
+        let from_cfg = args(Some(cfg.clone()), None).options().unwrap();
+        assert_eq!(from_cfg.tool_table, Some(dir.path().join("tools.tbl")));
+        assert_eq!(from_cfg.machine_units, LengthUnits::Millimeters);
+        let plan_args = crate::cli::plan::MotionArgs {
+            config: Some(cfg.clone()),
+            ..Default::default()
+        };
+        assert_eq!(
+            plan_args.interp_options().unwrap().tool_table,
+            from_cfg.tool_table
+        );
+        let flag = args(Some(cfg), Some(PathBuf::from("other.tbl")))
+            .options()
+            .unwrap();
+        assert_eq!(flag.tool_table, Some(PathBuf::from("other.tbl")));
     }
 }

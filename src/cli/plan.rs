@@ -3,6 +3,7 @@
 //! bounds and a stop-at-every-corner planner) and, from the trace interpolated at the servo
 //! period, each axis' peak velocity, acceleration and jerk against its limit.
 
+use crate::gcode::InterpOptions;
 use crate::motion::{self, bounds, trace, MotionConfig, AXIS_NAMES};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
@@ -54,6 +55,10 @@ pub struct MotionArgs {
     /// Fraction of the G64 tolerance used to merge short collinear moves (0 = off).
     #[arg(long)]
     pub merge_fraction: Option<f64>,
+    /// LinuxCNC tool table (`.tbl`, millimetres as in the daemon) for M6/G43. Default: the
+    /// `[tool_table]` of `--config`, else none (the same default as `hytask gcode canon`).
+    #[arg(long)]
+    pub tool_table: Option<PathBuf>,
 }
 
 /// Keys accepted in the `--config` file.
@@ -125,16 +130,46 @@ impl MotionArgs {
     }
 }
 
-/// Interprets `file` into canonical commands.
-pub fn load(file: &Path) -> anyhow::Result<Vec<crate::gcode::Canon>> {
-    let prog = crate::gcode::load_file(file, &crate::gcode::InterpOptions::default())?;
+impl MotionArgs {
+    /// Interpreter options as the daemon would use them for this machine: the tool table
+    /// of `--tool-table`, else of the `--config` machine (see [`tool_table`]).
+    pub fn interp_options(&self) -> anyhow::Result<InterpOptions> {
+        let machine = match &self.config {
+            Some(p) => Some(crate::config::load(p)?),
+            None => None,
+        };
+        let mut o = match &machine {
+            Some(m) => crate::machine::job::interp_options(m),
+            None => InterpOptions::default(),
+        };
+        o.tool_table = tool_table(self.tool_table.as_deref(), machine.as_ref());
+        Ok(o)
+    }
+}
+
+/// The tool table a CLI command interprets with: the one named on the command line, else
+/// the machine configuration's `[tool_table]`, else none. `hytask plan`, `hytask plot` and
+/// `hytask gcode` all choose it this way, so they agree with each other and with the
+/// daemon running that configuration.
+pub fn tool_table(
+    explicit: Option<&Path>,
+    machine: Option<&crate::config::MachineConfig>,
+) -> Option<PathBuf> {
+    explicit
+        .map(Path::to_path_buf)
+        .or_else(|| machine.and_then(|m| m.tool_table.as_ref().map(|t| t.path.clone())))
+}
+
+/// Interprets `file` into canonical commands with the options of `motion`'s machine.
+pub fn load(file: &Path, motion: &MotionArgs) -> anyhow::Result<Vec<crate::gcode::Canon>> {
+    let prog = crate::gcode::load_file(file, &motion.interp_options()?)?;
     Ok(prog.canon)
 }
 
 /// Runs the subcommand.
 pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     let cfg = args.motion.config()?;
-    let canon = load(&args.file)?;
+    let canon = load(&args.file, &args.motion)?;
     let mut out = String::new();
     let within = report(&args.file.display().to_string(), &canon, &cfg, &mut out)?;
     print!("{out}");
@@ -318,6 +353,48 @@ mod tests {
             out.lines().any(|l| l.starts_with("X ")) && out.lines().any(|l| l.starts_with("Y "))
         );
         assert!(!out.lines().any(|l| l.starts_with("Z ")));
+    }
+
+    /// A program that changes tools plans with the config's tool table, or one given on
+    /// the command line; without either its M6 fails as in `hytask gcode canon`.
+    #[test]
+    fn plan_uses_the_tool_table_of_the_command_line_or_the_config() {
+        let dir = tempfile::tempdir().unwrap();
+        let tbl = dir.path().join("tools.tbl");
+        std::fs::write(&tbl, "T4 P4 Z12.5 D6 ;end mill\n").unwrap();
+        let sim = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim.toml"),
+        )
+        .unwrap();
+        let cfg_path = dir.path().join("machine.toml");
+        std::fs::write(
+            &cfg_path,
+            format!("{sim}\n[tool_table]\npath = \"tools.tbl\"\n"),
+        )
+        .unwrap();
+        let prog = dir.path().join("p.ngc");
+        std::fs::write(&prog, "G21 T4 M6\nG43 H4\nG0 X10 Z0\nM2\n").unwrap();
+
+        assert!(
+            load(&prog, &MotionArgs::default()).is_err(),
+            "no table: tool 4 unknown"
+        );
+        let with_cfg = MotionArgs {
+            config: Some(cfg_path),
+            ..MotionArgs::default()
+        };
+        let offset = |canon: &[crate::gcode::Canon]| {
+            canon.iter().find_map(|c| match &c.cmd {
+                crate::gcode::CanonCmd::UseToolLengthOffset(o) if o[2] != 0.0 => Some(o[2]),
+                _ => None,
+            })
+        };
+        assert_eq!(offset(&load(&prog, &with_cfg).unwrap()), Some(12.5));
+        let with_flag = MotionArgs {
+            tool_table: Some(tbl),
+            ..MotionArgs::default()
+        };
+        assert_eq!(offset(&load(&prog, &with_flag).unwrap()), Some(12.5));
     }
 
     #[test]

@@ -22,7 +22,7 @@ pub struct PlotArgs {
 /// Runs the subcommand.
 pub fn run(args: PlotArgs) -> anyhow::Result<ExitCode> {
     let cfg = args.motion.config()?;
-    let canon = load(&args.file)?;
+    let canon = load(&args.file, &args.motion)?;
     let plan = crate::motion::plan(&canon, &cfg)?;
     let svg = crate::motion::svg::render(&plan, &args.file.display().to_string());
     std::fs::write(&args.output, svg)

@@ -100,6 +100,11 @@ pub struct InterpOptions {
     /// end of the text, with no `%` or M2 needed and none of M2's resets, as in LinuxCNC's
     /// MDI mode.
     pub mdi: bool,
+    /// User M codes (M100–M199) the machine defines. Any other M1xx is refused as an unknown
+    /// M code, as rs274 refuses one with no `M1xx` program on its user path: a CAM program
+    /// written for another machine (`M107` fan off) must not run with the code silently
+    /// doing nothing.
+    pub user_mcodes: Vec<u16>,
     /// Resource limits.
     pub limits: Limits,
 }
@@ -115,6 +120,7 @@ impl Default for InterpOptions {
             initial_units: LengthUnits::Millimeters,
             initial_position: None,
             mdi: false,
+            user_mcodes: Vec::new(),
             limits: Limits::default(),
         }
     }

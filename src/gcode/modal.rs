@@ -119,8 +119,15 @@ impl Block {
                 let code = t as u16;
                 let grp = g_group(code)
                     .ok_or_else(|| (col, format!("Unknown g code used: G{}", fmt_code(v))))?;
-                if self.g[grp].is_some() {
-                    return Err((col, "Two g codes used from same modal group".into()));
+                if let Some((prev, _)) = self.g[grp] {
+                    // G80 beside another motion code (`G00 X1 G80`, as some CAM posts write
+                    // it) is dropped and the other code kept, as LinuxCNC does.
+                    if grp == 1 && code == 800 {
+                        return Ok(());
+                    }
+                    if !(grp == 1 && prev == 800) {
+                        return Err((col, "Two g codes used from same modal group".into()));
+                    }
                 }
                 self.g[grp] = Some((code, col));
             }
@@ -180,5 +187,18 @@ mod tests {
         assert!(b.add(b'm', 8.0, 1).is_err());
         assert!(b.add(b'x', 1.0, 1).is_ok());
         assert!(b.add(b'x', 1.0, 1).is_err());
+    }
+
+    #[test]
+    fn g80_beside_a_motion_code_is_dropped() {
+        let mut b = Block::default();
+        assert!(b.add(b'g', 0.0, 1).is_ok());
+        assert!(b.add(b'g', 80.0, 5).is_ok());
+        assert_eq!(b.gcode(1), Some(0));
+        let mut b = Block::default();
+        assert!(b.add(b'g', 80.0, 1).is_ok());
+        assert!(b.add(b'g', 1.0, 5).is_ok());
+        assert_eq!(b.gcode(1), Some(10));
+        assert!(b.add(b'g', 0.0, 9).is_err());
     }
 }

@@ -78,6 +78,9 @@ pub enum OKind {
     Repeat,
     /// `endrepeat`
     EndRepeat,
+    /// A bare `O123` line: a program number as some CAM posts write it at the top, which
+    /// rs274 accepts and ignores.
+    ProgramNumber,
 }
 
 impl OKind {
@@ -106,8 +109,11 @@ impl OKind {
 /// An O-word statement.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OStmt {
-    /// Label: the name inside `o<…>` or the number of `o123`, normalised.
+    /// Label: the name inside `o<…>` or the number of `o123`, normalised. Empty for a
+    /// computed label.
     pub label: Box<str>,
+    /// A computed label (`o[#2*10] call`, `o#5 call`), evaluated when the statement runs.
+    pub label_expr: Option<Expr>,
     /// Keyword.
     pub kind: OKind,
     /// Bracketed arguments (condition, count, return value or call arguments).
@@ -276,8 +282,12 @@ impl Parser<'_> {
     fn ostmt(&mut self) -> Result<OStmt, ParseError> {
         let col = self.c.col();
         self.c.next_char();
+        let mut label_expr = None;
         let label: Box<str> = if self.c.eat(b'<') {
             self.name(col)?
+        } else if matches!(self.c.peek(), Some(b'[' | b'#')) {
+            label_expr = Some(self.value(0)?);
+            "".into()
         } else {
             match self.c.number() {
                 Some(n) if n.fract() == 0.0 => format!("{}", n as u64).into(),
@@ -286,11 +296,34 @@ impl Parser<'_> {
         };
         let kcol = self.c.col();
         let kw = self.c.word();
-        let Some(kind) = OKind::from_name(&kw) else {
-            return err(kcol, format!("Unknown O-word keyword '{kw}'"));
+        let kind = match OKind::from_name(&kw) {
+            Some(k) => k,
+            // `O32123` alone (or with a comment): a program number.
+            None if kw.is_empty()
+                && label_expr.is_none()
+                && label.bytes().all(|b| b.is_ascii_digit())
+                && matches!(self.c.peek(), None | Some(b'(' | b';')) =>
+            {
+                OKind::ProgramNumber
+            }
+            None => return err(kcol, format!("Unknown O-word keyword '{kw}'")),
         };
         let mut args = Vec::new();
-        while self.c.peek() == Some(b'[') {
+        loop {
+            // Comments may stand between call arguments, as rs274 allows; comments on an
+            // O-word line are not executed.
+            if kind == OKind::Call && self.c.peek() == Some(b'(') {
+                let ccol = self.c.col();
+                self.c.next_char();
+                match self.c.raw_until(b')') {
+                    Some(body) if body.contains('(') => return err(ccol, "Nested comment found"),
+                    Some(_) => continue,
+                    None => return err(ccol, "Unclosed comment found"),
+                }
+            }
+            if self.c.peek() != Some(b'[') {
+                break;
+            }
             self.c.next_char();
             args.push(self.expr_after_bracket(1)?);
             if kind != OKind::Call {
@@ -299,6 +332,7 @@ impl Parser<'_> {
         }
         Ok(OStmt {
             label,
+            label_expr,
             kind,
             args,
             col,
@@ -531,6 +565,7 @@ mod tests {
         let l = parse_line("o<My Sub> call [1] [2]", 32).unwrap_or_default();
         let o = l.o.unwrap_or(OStmt {
             label: "".into(),
+            label_expr: None,
             kind: OKind::Do,
             args: vec![],
             col: 0,
@@ -539,6 +574,23 @@ mod tests {
         assert_eq!(o.kind, OKind::Call);
         assert_eq!(o.args.len(), 2);
         assert!(parse_line("o100 frob", 32).is_err());
+    }
+
+    #[test]
+    fn ostatements_from_cam_posts() {
+        let o = |t: &str| parse_line(t, 32).ok().and_then(|l| l.o);
+        let call = o("o[#2*10] call [1] (first) [2]");
+        assert!(call
+            .as_ref()
+            .is_some_and(|c| c.label_expr.is_some() && c.args.len() == 2));
+        assert_eq!(o("O32123").map(|c| c.kind), Some(OKind::ProgramNumber));
+        assert_eq!(
+            o("O32123 (part)").map(|c| c.kind),
+            Some(OKind::ProgramNumber)
+        );
+        assert!(parse_line("O32123 G0 X1", 32).is_err());
+        assert!(o("o[10] sub").is_some_and(|c| c.kind == OKind::Sub && c.label_expr.is_some()));
+        assert!(parse_line("o100 call [1] (open [2]", 32).is_err());
     }
 
     #[test]

@@ -9,14 +9,18 @@ use super::Interp;
 use crate::gcode::canon::{CanonCmd, FeedMode, LengthUnits, Plane};
 use crate::gcode::modal::Block;
 use crate::gcode::GcodeError;
-use std::f64::consts::{FRAC_PI_2, PI};
+use std::f64::consts::{FRAC_PI_2, PI, SQRT_2};
 
 /// Tolerance for R-format arcs (LinuxCNC `RADIUS_TOLERANCE_INCH`).
 const RADIUS_TOLERANCE_INCH: f64 = 0.00005;
 /// Absolute tolerance for centre-format arcs, inch (`CENTER_ARC_RADIUS_TOLERANCE_INCH`).
-const CENTER_TOL_INCH: f64 = 2.0 * 0.001;
-/// Absolute tolerance for centre-format arcs, mm (`CENTER_ARC_RADIUS_TOLERANCE_MM`).
-const CENTER_TOL_MM: f64 = 2.0 * 0.01;
+/// LinuxCNC's value carries a factor √2 (the worst rounding of a centre whose two offsets
+/// are each rounded by CAM); without it arcs that rs274 accepts are refused. Measured
+/// against rs274: an end-radius error of 0.0025 in passes, 0.0029 in fails.
+const CENTER_TOL_INCH: f64 = 2.0 * 0.001 * SQRT_2;
+/// Absolute tolerance for centre-format arcs, mm (`CENTER_ARC_RADIUS_TOLERANCE_MM`), with
+/// the same √2.
+const CENTER_TOL_MM: f64 = 2.0 * 0.01 * SQRT_2;
 /// Relative tolerance for centre-format arcs (`SPIRAL_RELATIVE_TOLERANCE`).
 const SPIRAL_RELATIVE_TOLERANCE: f64 = 0.001;
 /// `TINY` of arc_data_r.
@@ -313,6 +317,19 @@ mod tests {
             0.02,
         );
         assert!(ok.is_ok());
+        // 0.025 mm off on a 10 mm radius: beyond 0.02, within 0.02·√2 (rs274 accepts it).
+        let sqrt2 = arc_data_ijk(
+            false,
+            n,
+            (10.0, 0.0),
+            (-10.025, 0.0),
+            false,
+            (-10.0, 0.0),
+            1,
+            0.00127,
+            CENTER_TOL_MM,
+        );
+        assert!(sqrt2.is_ok());
         let bad = arc_data_ijk(
             true,
             n,

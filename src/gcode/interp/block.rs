@@ -102,11 +102,8 @@ impl Interp<'_> {
         // 16. cutter compensation
         if let Some((g, col)) = b.g[7] {
             self.loc.col = col;
-            if g != 400 {
-                return Err(self.err(
-                    col,
-                    "Cutter radius compensation (G41/G42) is not supported by hytask; use a CAM-compensated path",
-                ));
+            if let Some(what) = super::unsupported::g_code(g) {
+                return Err(self.err(col, what));
             }
             self.emit(CanonCmd::Comment(
                 "interpreter: cutter radius compensation off".into(),
@@ -194,6 +191,22 @@ impl Interp<'_> {
     /// LinuxCNC's block checks that do not depend on execution (check_g_codes,
     /// check_m_codes, check_other_codes).
     fn check_block(&self, b: &Block) -> Result<(), GcodeError> {
+        // An unsupported feature says its name before any word check can blame its words.
+        for grp in [1, 7, 8, 15] {
+            if let Some((g, col)) = b.g[grp] {
+                if let Some(what) = super::unsupported::g_code(g) {
+                    return Err(self.err(col, what));
+                }
+            }
+        }
+        if let Some((m, col)) = b.m[10] {
+            if !self.opts.user_mcodes.contains(&m) {
+                return Err(self.err(
+                    col,
+                    format!("Unknown m code used: M{m} (not a user M code of this machine)"),
+                ));
+            }
+        }
         let g0 = b.gcode(0);
         let g1 = b.gcode(1);
         let axis = b.has_axis();
@@ -245,7 +258,17 @@ impl Interp<'_> {
             }
         }
         let motion = g1.unwrap_or(self.s.motion);
-        let arc = g1.is_some_and(|g| g == 20 || g == 30);
+        // G2/G3 is modal: a line with only coordinates and I/J/K or R after an arc is the
+        // next arc (as CAM posts write arcs), when its axis words make a move.
+        let arc = match g1 {
+            Some(g) => g == 20 || g == 30,
+            None => {
+                matches!(self.s.motion, 20 | 30)
+                    && axis
+                    && !g0.is_some_and(g0_uses_axes)
+                    && b.gcode(8) != Some(431)
+            }
+        };
         let cycle = matches!(g1, Some(730 | 810..=890));
         let g10 = g0 == Some(100);
         let user_m = b.m[10].is_some();
@@ -323,6 +346,11 @@ impl Interp<'_> {
     fn comment(&mut self, text: &str) -> Result<(), GcodeError> {
         let lower = text.trim_start().to_ascii_lowercase();
         let skip = text.len() - text.trim_start().len();
+        if lower.starts_with("abort,") {
+            // rs274 stops the program with the comment's text as the error.
+            let body = self.substitute(&text[skip + 6..]);
+            return Err(self.err(self.loc.col, format!("Program aborted: {}", body.trim())));
+        }
         if lower.starts_with("msg,") {
             let body = &text[skip + 4..];
             return self.emit(CanonCmd::Message(body.to_string()));

@@ -2,13 +2,12 @@
 //! (M7–M9), overrides (M48–M53), I/O (M62–M68), modal state (M70–M73), user commands
 //! (M100–M199) and program stops (M0, M1, M2, M30, M60).
 
-use super::motion::pose6;
 use super::Interp;
 use crate::gcode::canon::{
     CanonCmd, FeedMode, InputKind, OverrideKind, Plane, SpindleDir, WaitKind,
 };
 use crate::gcode::modal::Block;
-use crate::gcode::params::{self, g5x_base};
+use crate::gcode::params;
 use crate::gcode::GcodeError;
 
 fn int_word(v: f64) -> Option<u32> {
@@ -393,24 +392,8 @@ impl Interp<'_> {
                 self.emit(CanonCmd::ProgramStop)
             }
             _ => {
-                // LinuxCNC's reset on program end.
-                let base = g5x_base(1);
-                let k = self.s.k_mp();
-                let mut o = [0.0; 6];
-                for (i, v) in o.iter_mut().enumerate() {
-                    *v = self.p.numbered[base + i] * super::motion::lin(i, k);
-                }
-                for (i, v) in o.iter().enumerate() {
-                    self.s.pos[i] += self.s.g5x[i] - v;
-                }
-                self.s.g5x = o;
-                self.s.origin_index = 1;
-                self.s.rotation = self.p.numbered[base + 9];
-                self.p.numbered[params::COORD_INDEX] = 1.0;
-                self.emit(CanonCmd::SetG5xOffset {
-                    index: 1,
-                    offset: pose6(&o),
-                })?;
+                // LinuxCNC's reset on program end: back to G54 (through its rotation).
+                self.activate_g5x(1)?;
                 self.emit(CanonCmd::SetXyRotation(self.s.rotation))?;
                 if self.s.plane != Plane::Xy {
                     self.s.plane = Plane::Xy;
@@ -479,6 +462,12 @@ impl Interp<'_> {
         })?;
         let k = self.s.units.mm_per_unit() / self.s.machine_units.mm_per_unit();
         const AX: &[u8; 6] = b"xyzabc";
+        // L11 measures against G59.3 (system 9), whatever system is active; its stored
+        // offset is in machine units.
+        let g593: [f64; 6] = std::array::from_fn(|i| {
+            self.p.numbered[crate::gcode::params::g5x_base(9) + i]
+                * super::motion::lin(i, self.s.k_mp())
+        });
         let spindle_tool = self.s.tool == n;
         let Some(t) = self.tools.tools.get_mut(slot - 1) else {
             return Err(self.err(col, "Tool table slot out of range"));
@@ -496,7 +485,7 @@ impl Interp<'_> {
                         let base = if l == 10 {
                             cur_machine - self.s.g5x[i] - self.s.g92[i]
                         } else {
-                            cur_machine
+                            cur_machine - g593[i]
                         };
                         (base - v) * kk
                     }
@@ -527,6 +516,9 @@ impl Interp<'_> {
         };
         self.emit(entry(u32::try_from(slot).unwrap_or(u32::MAX)))?;
         if spindle_tool {
+            // The spindle's copy (LinuxCNC's pocket 0) changes too: a G43 without H
+            // after this uses the new offsets.
+            self.s.spindle_tool = Some(t.clone());
             self.emit(entry(0))?;
         }
         Ok(())

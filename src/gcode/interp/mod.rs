@@ -8,10 +8,12 @@
 mod arcs;
 mod block;
 mod cycles;
+mod frame;
 mod mcodes;
 mod motion;
 mod ocode;
 mod state;
+mod unsupported;
 
 use super::canon::{Canon, CanonCmd, SourceLoc};
 use super::expr::{self, ParamSource};
@@ -47,6 +49,9 @@ pub(crate) struct Source {
     olines: HashMap<usize, OStmt>,
     /// Lines of each O label, in file order.
     by_label: HashMap<Box<str>, Vec<usize>>,
+    /// O-word lines whose label is computed (`o[#1*10] sub`): their label is known only
+    /// when evaluated, so label searches evaluate them (they are rare).
+    computed: Vec<usize>,
 }
 
 impl Source {
@@ -98,6 +103,7 @@ impl Source {
             kind: Vec::new(),
             olines: HashMap::new(),
             by_label: HashMap::new(),
+            computed: Vec::new(),
         };
         src.kind = vec![0; src.lines.len()];
         src.end = src.lines.len();
@@ -112,6 +118,8 @@ impl Source {
                 }
             }
         }
+        // Subroutine being defined (rs274 refuses a `sub` inside another's definition).
+        let mut defining: Option<Box<str>> = None;
         for i in 0..src.end {
             let (a, b) = src.lines[i];
             let t = &src.text[a..b];
@@ -133,7 +141,31 @@ impl Source {
                 let l = parser::parse_line(t, opts.limits.max_expr_depth)
                     .map_err(|(c, m)| mkerr(i, c, m))?;
                 if let Some(o) = l.o {
-                    src.by_label.entry(o.label.clone()).or_default().push(i);
+                    let computed = o.label_expr.is_some();
+                    match o.kind {
+                        OKind::Sub if defining.is_some() => {
+                            return Err(mkerr(
+                                i,
+                                o.col,
+                                format!(
+                                    "Nested subroutine definition: o<{}> sub inside o<{}>",
+                                    o.label,
+                                    defining.as_deref().unwrap_or("")
+                                ),
+                            ));
+                        }
+                        OKind::Sub if computed => defining = Some("[computed]".into()),
+                        OKind::Sub => defining = Some(o.label.clone()),
+                        OKind::EndSub if computed || defining.as_deref() == Some(&*o.label) => {
+                            defining = None
+                        }
+                        _ => {}
+                    }
+                    if computed {
+                        src.computed.push(i);
+                    } else {
+                        src.by_label.entry(o.label.clone()).or_default().push(i);
+                    }
                     src.olines.insert(i, o);
                 }
             }
@@ -432,6 +464,10 @@ impl<'a> Interp<'a> {
         };
         self.pc = (f, l + 1);
         let r = match parsed {
+            Err((c, m)) if self.files[f].line_text(l).contains('\u{FFFD}') => Err(self.err(
+                c,
+                format!("{m} (the line holds bytes that are not UTF-8 text)"),
+            )),
             Err((c, m)) => Err(self.err(c, m)),
             Ok(()) if line.block_delete && self.opts.block_delete => Ok(()),
             Ok(()) => self.exec_line(&line),

@@ -2,6 +2,7 @@
 //! probing, units (G20/G21), tool length offsets (G43/G43.1/G49), coordinate systems
 //! (G54–G59.3, G10 L2/L20) and axis offsets (G92 family), G28/G30 homes.
 
+use super::frame;
 use super::Interp;
 use crate::gcode::canon::{CanonCmd, FeedMode, LengthUnits, Pose, ProbeKind};
 use crate::gcode::modal::Block;
@@ -22,6 +23,17 @@ impl Interp<'_> {
     pub(crate) fn find_ends(&self, b: &Block) -> [f64; 6] {
         let mut end = self.s.pos;
         let g53 = b.gcode(0) == Some(530);
+        if g53 && self.s.rotation != 0.0 {
+            // G53 names machine coordinates, which the XY rotation does not turn: the axes
+            // not named keep their machine position.
+            let mut m = self.machine_of_program(&self.s.pos, true);
+            for (i, &c) in AXES.iter().enumerate() {
+                if let Some(v) = b.get(c) {
+                    m[i] = v;
+                }
+            }
+            return self.program_of_machine(&m, true);
+        }
         for (i, &c) in AXES.iter().enumerate() {
             if let Some(v) = b.get(c) {
                 end[i] = if g53 {
@@ -62,7 +74,12 @@ impl Interp<'_> {
                 ))
             }
             730 | 810 | 820 | 830 | 840 | 850 | 860 | 880 | 890 => self.cycle(m, b),
-            _ => Err(self.err(col, format!("G{} is not supported by hytask", fmt_g(m)))),
+            _ => Err(self.err(
+                col,
+                super::unsupported::g_code(m)
+                    .map(str::to_string)
+                    .unwrap_or_else(|| format!("G{} is not supported by hytask", fmt_g(m))),
+            )),
         }
     }
 
@@ -261,7 +278,12 @@ impl Interp<'_> {
                     }
                 }
             }
-            432 => return Err(self.err(self.loc.col, "G43.2 is not supported by hytask")),
+            432 => {
+                return Err(self.err(
+                    self.loc.col,
+                    super::unsupported::g_code(g).unwrap_or("G43.2 is not supported by hytask"),
+                ))
+            }
             _ => {}
         }
         for (i, p) in self.s.pos.iter_mut().enumerate() {
@@ -282,13 +304,23 @@ impl Interp<'_> {
     }
 
     /// Makes `index`'s stored offset the active one and reports it to canon.
-    fn activate_g5x(&mut self, index: u8) -> Result<(), GcodeError> {
+    pub(super) fn activate_g5x(&mut self, index: u8) -> Result<(), GcodeError> {
         let (o, rot) = self.load_g5x(index);
-        for (i, v) in o.iter().enumerate() {
-            self.s.pos[i] += self.s.g5x[i] - v;
+        if rot != 0.0 || self.s.rotation != 0.0 {
+            // The tool stays where it is on the machine; its program position is that
+            // machine position seen through the new (rotated) frame.
+            // (Without the tool length offset, which cancels: LinuxCNC's order.)
+            let m = self.machine_of_program(&self.s.pos, false);
+            self.s.g5x = o;
+            self.s.rotation = rot;
+            self.s.pos = self.program_of_machine(&m, false);
+        } else {
+            for (i, v) in o.iter().enumerate() {
+                self.s.pos[i] += self.s.g5x[i] - v;
+            }
+            self.s.g5x = o;
+            self.s.rotation = rot;
         }
-        self.s.g5x = o;
-        self.s.rotation = rot;
         self.s.origin_index = index;
         self.p.numbered[params::COORD_INDEX] = f64::from(index);
         self.emit(CanonCmd::SetG5xOffset {
@@ -321,10 +353,15 @@ impl Interp<'_> {
                     params::G30_BASE
                 };
                 let k = 1.0 / self.s.k_mp();
-                for i in 0..6 {
-                    self.p.numbered[base + i] =
-                        (self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i])
-                            * lin(i, k);
+                let m = if self.s.rotation != 0.0 {
+                    self.machine_of_program(&self.s.pos, true)
+                } else {
+                    std::array::from_fn(|i| {
+                        self.s.pos[i] + self.s.g5x[i] + self.s.g92[i] + self.s.tool_offset[i]
+                    })
+                };
+                for (i, v) in m.iter().enumerate() {
+                    self.p.numbered[base + i] = v * lin(i, k);
                 }
                 Ok(())
             }
@@ -394,12 +431,24 @@ impl Interp<'_> {
         self.s.pos = mid;
         let any = b.has_axis();
         let mut end = mid;
+        let k = self.s.k_mp();
+        // The stored home is a machine position: seen through a rotated frame, X and Y of
+        // the home both depend on the rotation (LinuxCNC then moves the named axes to it).
+        let home_prog = (self.s.rotation != 0.0).then(|| {
+            let h: [f64; 6] = std::array::from_fn(|i| self.p.numbered[base + i] * lin(i, k));
+            self.program_of_machine(&h, true)
+        });
         for (i, &c) in AXES.iter().enumerate() {
             if !any || b.has(c) {
-                end[i] = self.p.numbered[base + i] * lin(i, self.s.k_mp())
-                    - self.s.g5x[i]
-                    - self.s.g92[i]
-                    - self.s.tool_offset[i];
+                end[i] = match home_prog {
+                    Some(h) => h[i],
+                    None => {
+                        self.p.numbered[base + i] * lin(i, k)
+                            - self.s.g5x[i]
+                            - self.s.g92[i]
+                            - self.s.tool_offset[i]
+                    }
+                };
             }
         }
         self.emit(CanonCmd::StraightTraverse(pose6(&end)))?;
@@ -434,7 +483,13 @@ impl Interp<'_> {
                 } else {
                     p as u8
                 };
+                if l == 20 && b.has(b'r') {
+                    return Err(self.err(b.col_of(b'r'), "R not allowed in G10 L20"));
+                }
                 let base = g5x_base(index);
+                let to_param = lin(0, 1.0 / self.s.k_mp());
+                let target_rot = self.p.numbered[base + 9];
+                let rotated = l == 20 && (target_rot != 0.0 || self.s.rotation != 0.0);
                 for (i, &c) in AXES.iter().enumerate() {
                     if let Some(v) = b.get(c) {
                         let prog = if l == 2 {
@@ -442,8 +497,18 @@ impl Interp<'_> {
                         } else {
                             self.s.pos[i] + self.s.g5x[i] - v
                         };
-                        self.p.numbered[base + i] = prog * lin(i, 1.0 / self.s.k_mp());
+                        self.p.numbered[base + i] = prog * lin(i, to_param);
                     }
+                }
+                if rotated && (b.has(b'x') || b.has(b'y')) {
+                    // L20 with a rotation: the origin is where the tool is on the machine
+                    // less the wanted position turned by the system's rotation; X and Y
+                    // both change even if only one is named, as in LinuxCNC.
+                    let m = self.machine_of_program(&self.s.pos, false);
+                    let want = |c: u8, i: usize| b.get(c).unwrap_or(self.s.pos[i]) + self.s.g92[i];
+                    let (wx, wy) = frame::rotate(want(b'x', 0), want(b'y', 1), target_rot);
+                    self.p.numbered[base] = (m[0] - wx) * to_param;
+                    self.p.numbered[base + 1] = (m[1] - wy) * to_param;
                 }
                 if let Some(r) = b.get(b'r') {
                     self.p.numbered[base + 9] = r;

@@ -29,11 +29,26 @@ impl Interp<'_> {
 
     /// Same-label statement lines of file `f`.
     fn label_lines(&self, f: usize, label: &str) -> Vec<usize> {
-        self.files[f]
-            .by_label
-            .get(label)
-            .cloned()
-            .unwrap_or_default()
+        let src = &self.files[f];
+        let mut v = src.by_label.get(label).cloned().unwrap_or_default();
+        if !src.computed.is_empty() {
+            // Computed labels take the parameters' values at the time of the search, as
+            // rs274 evaluates them when it reads the line.
+            for &l in &src.computed {
+                let matches = src
+                    .olines
+                    .get(&l)
+                    .and_then(|o| o.label_expr.as_ref().map(|e| (e, o.col)))
+                    .is_some_and(|(e, col)| {
+                        self.computed_label(e, col).is_ok_and(|c| &*c == label)
+                    });
+                if matches {
+                    v.push(l);
+                }
+            }
+            v.sort_unstable();
+        }
+        v
     }
 
     fn kind_at(&self, f: usize, l: usize) -> Option<OKind> {
@@ -94,6 +109,19 @@ impl Interp<'_> {
         self.repeats.remove(&key);
     }
 
+    /// The label of `o[expr]`: the value as an integer label, like `o123`.
+    fn computed_label(&self, e: &expr::Expr, col: u32) -> Result<Box<str>, GcodeError> {
+        let v = expr::eval(e, self).map_err(|m| self.err(col, m))?;
+        let n = v.round();
+        if (v - n).abs() > 1e-4 || !(0.0..4.0e9).contains(&n) {
+            return Err(self.err(
+                col,
+                format!("Computed O-word label {v} is not a non-negative integer"),
+            ));
+        }
+        Ok(format!("{}", n as u64).into())
+    }
+
     pub(super) fn exec_o(
         &mut self,
         f: usize,
@@ -104,7 +132,10 @@ impl Interp<'_> {
         // Comments on O lines are not executed (as in LinuxCNC).
         let _ = line;
         self.loc.col = o.col;
-        let label = o.label.clone();
+        let label = match &o.label_expr {
+            Some(e) => self.computed_label(e, o.col)?,
+            None => o.label.clone(),
+        };
         let missing = |me: &Self, what: &str| me.err(o.col, format!("o<{label}> {what}"));
         match o.kind {
             OKind::Sub => {
@@ -125,11 +156,14 @@ impl Interp<'_> {
                 self.pc = (f, end + 1);
                 Ok(())
             }
+            OKind::ProgramNumber => Ok(()),
             OKind::EndSub | OKind::Return => {
                 let Some(top) = self.frames.last() else {
                     return Err(missing(self, "endsub/return outside of a subroutine call"));
                 };
-                if top.label != label {
+                // A return leaves the subroutine being executed whatever its label (CAM
+                // and hand-written code write `oN return` inside `oN if`), as in rs274.
+                if o.kind == OKind::EndSub && top.label != label {
                     return Err(missing(
                         self,
                         "return/endsub does not match the subroutine being executed",

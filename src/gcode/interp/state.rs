@@ -42,7 +42,8 @@ pub(crate) struct Settings {
     pub tlo_at_motion: Pose,
     /// A tool change happened: re-read the position before the next block.
     pub synch_pending: bool,
-    /// G98 (true, back to the old Z) / G99 (R plane).
+    /// G98 (true, back to the old Z) / G99 (R plane). Starts in G99, as LinuxCNC's
+    /// interpreter does (`#<_retract_r_plane>` is 1 in rs274 before any G98/G99).
     pub retract_old_z: bool,
     /// G61/G61.1/G64.
     pub control: MotionControl,
@@ -117,7 +118,7 @@ impl Settings {
             tool_offset: [0.0; 9],
             tlo_at_motion: [0.0; 9],
             synch_pending: false,
-            retract_old_z: true,
+            retract_old_z: false,
             control: MotionControl::Continuous { tolerance: 0.0 },
             naive_tol: 0.0,
             spindle: 0,
