@@ -280,6 +280,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         spindle,
         flood_output: config.coolant.flood_output.as_deref().and_then(dout),
         mist_output: config.coolant.mist_output.as_deref().and_then(dout),
+        safe_outputs: devs.io_map.safe_outputs(),
         max_feed_override: config.motion.max_feed_override,
         max_stale_io_cycles: (0.02 / period_s).ceil() as u32,
         enable_timeout_cycles: (2.0 / period_s) as u32,
@@ -443,6 +444,12 @@ impl Machine {
             .iter()
             .find(|(c, _)| *c == axis)
             .map(|(_, h)| h)
+    }
+
+    /// The simulated I/O device `device` (config order), if it is simulated: what the
+    /// outputs were told, for tests and demos.
+    pub fn sim_io(&self, device: usize) -> Option<&SimIoHandle> {
+        self.sim_io.get(device).and_then(Option::as_ref)
     }
 
     /// Sends a command and waits until the machine task accepted or rejected it.

@@ -27,6 +27,8 @@ pub mod io_task;
 pub mod machine_task;
 pub mod monitor_task;
 #[cfg(test)]
+mod output_tests;
+#[cfg(test)]
 mod probe_tests;
 #[cfg(test)]
 mod tests;

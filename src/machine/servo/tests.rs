@@ -28,9 +28,17 @@ pub(super) struct Rig {
 
 impl Rig {
     pub(super) fn new() -> Rig {
+        Rig::with_config(&Rig::config())
+    }
+
+    /// The fast-homing simulated mill of the end-to-end tests.
+    pub(super) fn config() -> crate::config::MachineConfig {
         let path =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
-        let cfg = crate::config::load(&path).expect("config");
+        crate::config::load(&path).expect("config")
+    }
+
+    pub(super) fn with_config(cfg: &crate::config::MachineConfig) -> Rig {
         let Built {
             mut app,
             machine,
@@ -39,7 +47,7 @@ impl Rig {
             sim_io,
             sim_axes,
             ..
-        } = build(&cfg).expect("build");
+        } = build(cfg).expect("build");
         app.configure().expect("topology");
         let rt = app.start_stepped(SimClock::new(0)).expect("start");
         let snap = rt.reader(ports::SNAPSHOT).expect("snapshot");
@@ -61,7 +69,7 @@ impl Rig {
         }
     }
 
-    fn send_until_done(&mut self, cmd: MachineCmd, max_cycles: u64) {
+    pub(super) fn send_until_done(&mut self, cmd: MachineCmd, max_cycles: u64) {
         let h = self.built_machine.send(cmd).expect("queue");
         for _ in 0..max_cycles {
             self.rt.run_cycles(1);
