@@ -13,6 +13,7 @@
 use super::api::*;
 use super::devices;
 use super::job::{self, PreparedJob};
+use super::mode::{ModeMachine, Request};
 use super::probing;
 use super::safety::{AxisGuard, Trip};
 use super::servo::axis_task::AxisTask;
@@ -528,8 +529,21 @@ impl Machine {
         pose
     }
 
+    /// Refuses a run or jog the machine cannot take now (e-stop, off, fault, not homed,
+    /// busy), with the machine task's own reason: checked before anything about the job, so
+    /// that the operator hears about the e-stop, not about a job planned elsewhere.
+    fn check_can_run(&self, manual: bool) -> Result<(), ApiError> {
+        let (snap, ..) = self.snapshot();
+        let all = self.axes().iter().fold(0u32, |m, &(_, i)| m | 1 << i);
+        let homed = snap.homed_mask & all == all;
+        let req = if manual { Request::Jog } else { Request::Run };
+        ModeMachine::check(snap.mode, req, homed || manual)
+            .map_err(|why| ApiError::Rejected(why.into()))
+    }
+
     /// Starts a prepared job (or jog/MDI) as job `id`: feeder first, then the `run` command.
     fn start_job(&self, job: Arc<PreparedJob>, manual: bool) -> Result<(), ApiError> {
+        self.check_can_run(manual)?;
         let pose = self.actual_pose();
         for &(c, i) in self.axes().iter() {
             if (job.plan.start_mm[i] - pose[i]).abs() > 0.01 {
@@ -993,6 +1007,7 @@ impl MachineApi for Machine {
     }
 
     fn jog(&self, req: &JogRequest) -> Result<(), ApiError> {
+        self.check_can_run(true)?;
         let up = req.axis.to_ascii_uppercase();
         let (_, i) = self
             .axes()
@@ -1046,6 +1061,7 @@ impl MachineApi for Machine {
     }
 
     fn mdi(&self, line: &str) -> Result<(), ApiError> {
+        self.check_can_run(false)?;
         let job = job::prepare_mdi(
             line,
             &self.interp_opts,
@@ -1081,6 +1097,7 @@ impl MachineApi for Machine {
     }
 
     fn job_run(&self) -> Result<(), ApiError> {
+        self.check_can_run(false)?;
         let job = lock(&self.book)
             .loaded
             .clone()

@@ -1060,8 +1060,14 @@ impl Task for MachineTask {
                 self.emit_job(JobEvent::Started);
             }
             MachineCmd::Pause => {
+                let running = self.mode.mode() == Mode::Running;
                 self.mode.request(Request::Pause, homed).map_err(reject)?;
                 self.motion.hold = true;
+                // The job holds too (`job.state` "holding" until `Resumed`), as on an M0.
+                if running {
+                    let line = self.setpoints.line;
+                    self.emit_job(JobEvent::Held { line });
+                }
             }
             MachineCmd::Step => {
                 match self.mode.mode() {

@@ -4,7 +4,7 @@
 //! within every axis' velocity and acceleration limit.
 
 use super::machine_task::MachineCmd;
-use super::{ports, AxisFeedback, MachineSnapshot, QueueItem, Setpoints};
+use super::{ports, AxisFeedback, JobEvent, MachineSnapshot, QueueItem, Setpoints};
 use crate::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
 use crate::machine::api::Mode;
 use crate::machine::runtime::{build, Built};
@@ -24,6 +24,8 @@ pub(super) struct Rig {
     pub(super) snap: DataReader<MachineSnapshot>,
     pub(super) sp: DataReader<Setpoints>,
     fb: Vec<DataReader<AxisFeedback>>,
+    /// The machine task's `job` events.
+    pub(super) jobs: EventReceiver<JobEvent>,
 }
 
 impl Rig {
@@ -49,6 +51,10 @@ impl Rig {
             ..
         } = build(cfg).expect("build");
         app.configure().expect("topology");
+        let jobs = app
+            .event::<JobEvent>("machine.job")
+            .expect("job event")
+            .subscribe(1024);
         let rt = app.start_stepped(SimClock::new(0)).expect("start");
         let snap = rt.reader(ports::SNAPSHOT).expect("snapshot");
         let sp = rt.reader(ports::SETPOINTS).expect("setpoints");
@@ -66,6 +72,7 @@ impl Rig {
             snap,
             sp,
             fb,
+            jobs,
         }
     }
 
@@ -350,4 +357,33 @@ fn single_block_holds_in_the_cycle_the_next_line_begins() {
     }
     assert_eq!(run.status(), CommandStatus::Done);
     assert!((r.feedback(0).actual - (start[0] - 30.0)).abs() < 0.01);
+}
+
+#[test]
+fn a_feed_hold_holds_the_job_and_resume_runs_it_again() {
+    let mut r = Rig::new();
+    r.ready();
+    r.start_move(1, [250.0, 200.0, -20.0], 3000.0);
+    r.rt.run_cycles(300);
+    let mut events = Vec::new();
+    while let Some(e) = r.jobs.pop() {
+        events.push(e);
+    }
+    assert_eq!(events, [JobEvent::Started]);
+    r.send_until_done(MachineCmd::Pause, 2000);
+    assert_eq!(r.mode(), Mode::Holding);
+    // A second pause while held is no second hold.
+    r.send_until_done(MachineCmd::Pause, 10);
+    r.send_until_done(MachineCmd::Resume, 10);
+    while let Some(e) = r.jobs.pop() {
+        events.push(e);
+    }
+    assert_eq!(
+        events,
+        [
+            JobEvent::Started,
+            JobEvent::Held { line: 7 },
+            JobEvent::Resumed
+        ]
+    );
 }
