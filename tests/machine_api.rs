@@ -95,3 +95,57 @@ fn job_run_reports_the_machine_state_before_anything_about_the_job() {
     }
     shutdown(&m);
 }
+
+/// `status` sampled all through a job: the commanded position and the job progress of each
+/// reply must come from the same servo cycle. On the cruise of a long straight feed the
+/// commanded X runs at exactly the feed rate, so `X + v · t_done` (t_done = progress ×
+/// planned time) is the same in every cycle; a reply whose progress is one cycle off its
+/// position is off by v × 1 ms = 0.05 mm.
+#[test]
+fn status_shows_position_and_progress_of_one_servo_cycle() {
+    let m = machine();
+    ready(&m);
+    let v = 50.0; // F3000, mm/s
+    let info = m
+        .job_load(&text("cruise.ngc", "G21 G90\nG1 X100 F3000\nM2\n"))
+        .unwrap();
+    let planned = info.planned_time_s;
+    m.job_run().unwrap();
+    let t0 = Instant::now();
+    let mut samples = Vec::new();
+    loop {
+        let s = m.status();
+        if s.job.state != "running" && s.job.state != "loaded" {
+            assert_eq!(s.job.state, "done", "{:?}", s.job);
+            break;
+        }
+        let done = s.job.progress * planned;
+        // The cruise, well clear of the ramps at both ends.
+        if done > 0.3 && done < planned - 0.3 {
+            let x = s.axes.iter().find(|a| a.name == "X").unwrap().commanded;
+            samples.push((s.servo_cycle, done, x + v * done));
+        }
+        assert!(t0.elapsed() < Duration::from_secs(120), "the job hangs");
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    assert!(
+        samples.len() > 100,
+        "{} samples on the cruise",
+        samples.len()
+    );
+    let mut sums: Vec<f64> = samples.iter().map(|s| s.2).collect();
+    sums.sort_by(f64::total_cmp);
+    let median = sums[sums.len() / 2];
+    let torn: Vec<_> = samples
+        .iter()
+        .filter(|s| (s.2 - median).abs() > 1e-3)
+        .collect();
+    assert!(
+        torn.is_empty(),
+        "{} of {} replies mix cycles (servo cycle, t_done, X + v·t_done; median {median}): {:?}",
+        torn.len(),
+        samples.len(),
+        &torn[..torn.len().min(5)]
+    );
+    shutdown(&m);
+}

@@ -177,6 +177,10 @@ pub struct Status {
     pub mode: Mode,
     /// Whether threads run with SCHED_FIFO and locked memory.
     pub realtime: bool,
+    /// The servo cycle this status was sampled in: the mode, axes, job line and progress,
+    /// spindle, overrides, inputs, outputs and probe result all belong to this one cycle.
+    #[serde(default)]
+    pub servo_cycle: u64,
     /// Axes.
     pub axes: Vec<AxisStatus>,
     /// Current or last job.

@@ -105,7 +105,7 @@ impl Rig {
     }
 
     /// Plans a straight feed from where the machine is to `target` and starts it as `job`.
-    fn start_move(&mut self, job: u32, target: [f64; 3], feed_mm_min: f64) {
+    pub(super) fn start_move(&mut self, job: u32, target: [f64; 3], feed_mm_min: f64) {
         let mut start = [0.0; NUM_AXES];
         for (i, s) in start.iter_mut().take(3).enumerate() {
             *s = self.feedback(i).actual;
