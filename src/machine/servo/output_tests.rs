@@ -201,3 +201,28 @@ fn a_stopped_servo_thread_leaves_every_output_in_its_safe_state() {
     );
     assert_eq!(io.analog_output(SPINDLE_SPEED).expect("output"), 150.0);
 }
+
+#[test]
+fn a_fault_stops_the_spindle_and_the_coolant() {
+    let mut r = Rig::new();
+    r.ready();
+    let run = cutting(&mut r, [100.0, 150.0, -30.0]);
+    r.sim_axis('X').set_stalled(true);
+    for _ in 0..5000 {
+        r.rt.run_cycles(1);
+        if r.mode() == Mode::Fault && !r.feedback(1).state.is_operational() {
+            break;
+        }
+    }
+    assert_eq!(r.mode(), Mode::Fault);
+    assert_eq!(
+        run.status(),
+        CommandStatus::Failed("stopped by a fault or e-stop")
+    );
+    r.rt.run_cycles(2);
+    assert_eq!(
+        device(&r),
+        ([false; 4], 0.0),
+        "spindle and coolant after a fault"
+    );
+}

@@ -89,6 +89,16 @@ impl Rig {
         panic!("{cmd:?} not done after {max_cycles} cycles");
     }
 
+    /// Fault-injection handle of a simulated drive.
+    pub(super) fn sim_axis(&self, axis: char) -> hytask_hal::sim::SimAxisHandle {
+        self.sim_axes
+            .iter()
+            .find(|(c, _)| *c == axis)
+            .expect("axis")
+            .1
+            .clone()
+    }
+
     pub(super) fn mode(&mut self) -> Mode {
         self.snap.latest().expect("snapshot").mode
     }
