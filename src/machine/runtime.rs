@@ -60,8 +60,9 @@ pub enum DeployError {
     Invalid(String),
 }
 
-/// Non-realtime readers of the tasks' data objects: one, the status task's snapshot, so
-/// that everything read together belongs to one servo cycle.
+/// Non-realtime readers of the tasks' data objects: one, the status snapshot the monitor
+/// publishes at the end of each servo cycle, so that everything read together belongs to
+/// one cycle.
 struct Readers {
     status: DataReader<StatusSnapshot>,
 }

@@ -103,7 +103,7 @@ static OPERATIONS: [OperationDescriptor; 12] = [
     },
     OperationDescriptor {
         name: "machine_off",
-        doc: "Stop under control, then disable the drives.",
+        doc: "Every output to its safe state, stop under control, then disable the drives.",
         params: NO_PARAMS,
         next: NextCommand::AfterAcceptance,
     },
@@ -149,7 +149,8 @@ static OPERATIONS: [OperationDescriptor; 12] = [
     },
     OperationDescriptor {
         name: "abort",
-        doc: "Controlled stop within the axis limits; the rest of the job is dropped.",
+        doc: "Controlled stop within the axis limits, spindle and coolant off (not for a \
+              jog); the rest of the job is dropped.",
         params: NO_PARAMS,
         next: NextCommand::AfterAcceptance,
     },
