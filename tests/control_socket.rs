@@ -25,6 +25,7 @@ impl MachineApi for Double {
             machine: "double".into(),
             mode: Mode::Idle,
             realtime: false,
+            servo_cycle: 0,
             axes: vec![],
             job: JobStatus::default(),
             overrides: Overrides::default(),

@@ -1,8 +1,9 @@
 //! Proves that the machine's own realtime tasks (io, machine, interpolator, axis.X/Y/Z,
 //! monitor) allocate nothing in steady state: the whole servo cycle runs on the stepped
 //! runtime on this thread, under a counting global allocator, through motion, a feed hold,
-//! a resume, aux commands and an e-stop; and through a probe move, its trip, the stop and
-//! the next piece of the program.
+//! a resume, aux commands and an e-stop; through an abort and a machine off with the spindle
+//! and coolant on (outputs to their safe state); and through a probe move, its trip, the stop
+//! and the next piece of the program.
 #![allow(clippy::unwrap_used)]
 
 use hytask::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
@@ -226,5 +227,82 @@ fn a_probe_move_its_trip_stop_and_the_next_piece_allocate_nothing() {
         (window1, window2),
         (0, 0),
         "allocations in the probing servo cycles"
+    );
+}
+
+/// Queues job `job`: M3 S8000, M8, then a feed to `target`; returns its `run` command.
+fn queue_cutting_job(h: &Homed, job: u32, from: [f64; NUM_AXES], target: [f64; 3]) -> MachineCmd {
+    let mut end = from;
+    end[..3].copy_from_slice(&target);
+    let loc = SourceLoc {
+        file: Arc::from("t"),
+        line: 1,
+        col: 1,
+    };
+    let canon: Vec<Canon> = [
+        CanonCmd::SetSpindleSpeed(8000.0),
+        CanonCmd::StartSpindle(hytask::gcode::canon::SpindleDir::Clockwise),
+        CanonCmd::FloodOn,
+        CanonCmd::SetFeedRate(3000.0),
+        CanonCmd::StraightFeed(end),
+    ]
+    .into_iter()
+    .map(|cmd| Canon {
+        loc: loc.clone(),
+        cmd,
+    })
+    .collect();
+    let plan = hytask::motion::plan_from(&canon, &h.motion_cfg, from).unwrap();
+    for &item in &plan.items {
+        h.queue.try_push(QueueItem { job, item }).unwrap();
+    }
+    MachineCmd::Run {
+        job,
+        items: plan.items.len() as u64,
+        manual: false,
+    }
+}
+
+#[test]
+fn an_abort_and_a_machine_off_with_spindle_and_coolant_on_allocate_nothing() {
+    let mut h = homed();
+    let sim_io = h.sim_io[0].clone().unwrap();
+    let spindle_and_flood = |io: &hytask_hal::sim::SimIoHandle| {
+        (io.digital_output(0).unwrap(), io.digital_output(2).unwrap())
+    };
+
+    // Window 1: a job cutting (spindle at speed, coolant on), aborted, to rest.
+    let run = queue_cutting_job(&h, 1, h.start, [100.0, 150.0, -30.0]);
+    let running = h.machine.send(run).unwrap();
+    h.rt.run_cycles(1500);
+    assert_eq!(spindle_and_flood(&sim_io), (true, true));
+    let before = allocations();
+    let abort = h.machine.send(MachineCmd::Abort).unwrap();
+    until_done(&mut h.rt, &abort, 5000);
+    h.rt.run_cycles(100);
+    let window1 = allocations() - before;
+    assert_eq!(running.status(), CommandStatus::Failed("aborted"));
+    assert_eq!(spindle_and_flood(&sim_io), (false, false));
+
+    // Window 2: the next job cutting, then machine off: stop, drives off, outputs safe.
+    let mut from = h.start;
+    for (i, f) in from.iter_mut().take(3).enumerate() {
+        *f = h.fb[i].latest().unwrap().actual;
+    }
+    let run = queue_cutting_job(&h, 2, from, [50.0, 100.0, -40.0]);
+    let _running = h.machine.send(run).unwrap();
+    h.rt.run_cycles(1500);
+    assert_eq!(spindle_and_flood(&sim_io), (true, true));
+    let before = allocations();
+    let off = h.machine.send(MachineCmd::Off).unwrap();
+    until_done(&mut h.rt, &off, 5000);
+    h.rt.run_cycles(100);
+    let window2 = allocations() - before;
+    assert_eq!(spindle_and_flood(&sim_io), (false, false));
+
+    assert_eq!(
+        (window1, window2),
+        (0, 0),
+        "allocations in the servo cycles of an abort and a machine off"
     );
 }

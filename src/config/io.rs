@@ -101,9 +101,19 @@ pub struct DigitalPoint {
     /// Modbus coil / discrete input number; Modbus only, default: the channel index.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub register: Option<u16>,
+    /// Outputs only: the logical state the output takes in the machine's safe state (e-stop,
+    /// machine off, daemon shutdown). Default `false` (inactive); set `true` for an output
+    /// whose safe state is active, such as a clamp that must hold when the machine stops.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safe: Option<bool>,
 }
 
 impl DigitalPoint {
+    /// The logical state of this output in the machine's safe state.
+    pub fn safe_state(&self) -> bool {
+        self.safe.unwrap_or(false)
+    }
+
     /// The channel's logical state ("active") from the level the device reports.
     pub fn active(&self, level: bool) -> bool {
         level != self.invert
@@ -130,6 +140,10 @@ pub struct AnalogPoint {
     /// Modbus register number; Modbus only, default: the channel index.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub register: Option<u16>,
+    /// Outputs only: the value (engineering units) the output takes in the machine's safe
+    /// state (e-stop, machine off, daemon shutdown). Default 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safe: Option<f64>,
 }
 
 fn default_scale() -> f64 {
@@ -307,10 +321,26 @@ impl IoConfig {
             }
         }
         for (i, p) in self.analog_inputs.iter().enumerate() {
-            p.validate(&format!("{key}.analog_inputs[{i}] ({})", p.name), issues);
+            let k = format!("{key}.analog_inputs[{i}] ({})", p.name);
+            p.validate(&k, issues);
+            if p.safe.is_some() {
+                issues.push(format!("{k}.safe"), SAFE_ON_INPUT);
+            }
         }
         for (i, p) in self.analog_outputs.iter().enumerate() {
-            p.validate(&format!("{key}.analog_outputs[{i}] ({})", p.name), issues);
+            let k = format!("{key}.analog_outputs[{i}] ({})", p.name);
+            p.validate(&k, issues);
+            if let Some(v) = p.safe {
+                issues.finite(format!("{k}.safe"), v);
+            }
+        }
+        for (i, p) in self.digital_inputs.iter().enumerate() {
+            if p.safe.is_some() {
+                issues.push(
+                    format!("{key}.digital_inputs[{i}] ({}).safe", p.name),
+                    SAFE_ON_INPUT,
+                );
+            }
         }
     }
 }
@@ -319,6 +349,11 @@ impl AnalogPoint {
     /// Engineering value from the device's raw value.
     pub fn to_engineering(&self, raw: f64) -> f64 {
         raw * self.scale + self.offset
+    }
+
+    /// The value of this output in the machine's safe state.
+    pub fn safe_value(&self) -> f64 {
+        self.safe.unwrap_or(0.0)
     }
 
     /// Raw device value for an engineering value (the inverse of
@@ -337,6 +372,8 @@ impl AnalogPoint {
         issues.finite(format!("{key}.offset"), self.offset);
     }
 }
+
+const SAFE_ON_INPUT: &str = "only outputs have a safe state";
 
 /// `host:port` with a non-empty host and a port in 1..=65535 (IPv6 hosts in brackets).
 fn valid_host_port(s: &str) -> bool {
@@ -391,7 +428,36 @@ pub(super) fn index(devices: &[IoConfig], issues: &mut Issues) -> HashMap<String
 
 #[cfg(test)]
 mod tests {
-    use super::valid_host_port;
+    use super::{valid_host_port, IoConfig};
+    use crate::config::error::Issues;
+
+    #[test]
+    fn a_safe_state_is_for_outputs_only() {
+        let dev: IoConfig = toml::from_str(
+            r#"
+            name = "panel"
+            backend = "sim"
+            digital_inputs = [{ name = "estop", safe = true }]
+            digital_outputs = [{ name = "clamp", safe = true }, { name = "lamp" }]
+            analog_inputs = [{ name = "load", safe = 1.0 }]
+            analog_outputs = [{ name = "speed", safe = 150.0 }]
+            "#,
+        )
+        .expect("parse");
+        assert!(dev.digital_outputs[0].safe_state());
+        assert!(!dev.digital_outputs[1].safe_state());
+        assert_eq!(dev.analog_outputs[0].safe_value(), 150.0);
+        let mut issues = Issues::default();
+        dev.validate("io[0] (panel)", &mut issues);
+        let keys: Vec<String> = issues.into_vec().into_iter().map(|i| i.key).collect();
+        assert_eq!(
+            keys,
+            [
+                "io[0] (panel).analog_inputs[0] (load).safe",
+                "io[0] (panel).digital_inputs[0] (estop).safe",
+            ]
+        );
+    }
 
     #[test]
     fn host_port_addresses() {

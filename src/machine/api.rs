@@ -112,7 +112,9 @@ pub struct AxisStatus {
 pub struct JobStatus {
     /// Job name (file name or "mdi").
     pub name: String,
-    /// State: none, loaded, running, holding, done, aborted, failed.
+    /// State: none, loaded, running, holding, done, aborted, failed. "holding" (as the
+    /// machine's mode) while the job stands in a feed hold (`job.pause`), a single-block stop
+    /// or an M0/M1 stop; "running" again after `job.resume`.
     pub state: String,
     /// Current source line.
     pub line: u32,
@@ -175,6 +177,10 @@ pub struct Status {
     pub mode: Mode,
     /// Whether threads run with SCHED_FIFO and locked memory.
     pub realtime: bool,
+    /// The servo cycle this status was sampled in: the mode, axes, job line and progress,
+    /// spindle, overrides, inputs, outputs and probe result all belong to this one cycle.
+    #[serde(default)]
+    pub servo_cycle: u64,
     /// Axes.
     pub axes: Vec<AxisStatus>,
     /// Current or last job.

@@ -7,7 +7,7 @@
 //! numbering is what M62–M68 `P`/`E` words and M66 address, and what the I/O task packs into
 //! [`super::servo::Inputs`]/[`super::servo::Outputs`].
 
-use super::servo::{MAX_ANALOG, MAX_DIGITAL};
+use super::servo::{Outputs, MAX_ANALOG, MAX_DIGITAL};
 use crate::config::{AnalogPoint, AxisName, ConfigError, DigitalPoint, IoKind, MachineConfig};
 use hytask_hal::erased::{DynAxis, Erased, HalError};
 use hytask_hal::error::ErrorType;
@@ -145,6 +145,19 @@ impl IoMap {
             ));
         }
         Ok(m)
+    }
+
+    /// Every output in its configured safe state (`safe` of each output channel; inactive and
+    /// 0 by default): what the e-stop, machine off and shutdown leave on the outputs.
+    pub fn safe_outputs(&self) -> Outputs {
+        let mut out = Outputs::default();
+        for (i, c) in self.dout.iter().enumerate() {
+            out.set_do(i, c.point.safe_state());
+        }
+        for (v, c) in out.analog.iter_mut().zip(&self.ao) {
+            *v = c.point.safe_value();
+        }
+        out
     }
 
     /// Machine-wide index of a named channel of `kind`.

@@ -96,6 +96,17 @@ impl ModeMachine {
         };
     }
 
+    /// Whether `req` would be accepted in `mode`, changing nothing: the non-realtime side
+    /// asks first so that the operator hears about the machine (e-stop, off, not homed)
+    /// before anything about a job. The machine task's own `request` stays the authority.
+    pub fn check(mode: Mode, req: Request, all_homed: bool) -> Result<(), &'static str> {
+        let mut m = ModeMachine {
+            mode,
+            estop_input: false,
+        };
+        m.request(req, all_homed).map(|_| ())
+    }
+
     /// Applies a request: `Ok(new mode)` or `Err(reason)`. `all_homed` matters for `Run`.
     pub fn request(&mut self, req: Request, all_homed: bool) -> Result<Mode, &'static str> {
         use Mode as M;
@@ -199,6 +210,27 @@ mod tests {
         let mut m = on_and_idle();
         m.fact(Fact::EstopInput);
         assert_eq!(m.mode(), M::Estop);
+    }
+
+    #[test]
+    fn check_answers_like_request_and_changes_nothing() {
+        for (mode, homed, expected) in [
+            (
+                Mode::Estop,
+                true,
+                Err("machine is in e-stop: reset it first"),
+            ),
+            (Mode::Off, true, Err("machine is off: switch it on first")),
+            (Mode::Idle, false, Err("axes are not homed")),
+            (Mode::Running, true, Err("machine is busy")),
+            (Mode::Idle, true, Ok(())),
+        ] {
+            assert_eq!(
+                ModeMachine::check(mode, Request::Run, homed),
+                expected,
+                "{mode:?}"
+            );
+        }
     }
 
     #[test]

@@ -13,6 +13,7 @@
 use super::api::*;
 use super::devices;
 use super::job::{self, PreparedJob};
+use super::mode::{ModeMachine, Request};
 use super::probing;
 use super::safety::{AxisGuard, Trip};
 use super::servo::axis_task::AxisTask;
@@ -20,10 +21,8 @@ use super::servo::interp_task::InterpolatorTask;
 use super::servo::io_task::{IoTask, SimPlate, SimSpindle};
 use super::servo::machine_task::{MachineCmd, MachineSetup, MachineTask, SpindleIo};
 use super::servo::monitor_task::MonitorTask;
-use super::servo::{
-    ports, AxisFeedback, FaultEvent, Inputs, JobEvent, MachineSnapshot, ModeEvent, MonitorSnapshot,
-    Outputs, QueueItem, Setpoints,
-};
+use super::servo::status::StatusSnapshot;
+use super::servo::{ports, FaultEvent, JobEvent, MachineSnapshot, ModeEvent, QueueItem, Setpoints};
 use crate::config::{ConfigError, IoKind, MachineConfig};
 use crate::gcode::{Canon, CanonCmd, InterpOptions, SourceLoc, NUM_AXES};
 use crate::motion::{self, MotionConfig, AXIS_NAMES};
@@ -61,14 +60,11 @@ pub enum DeployError {
     Invalid(String),
 }
 
-/// Non-realtime readers of the tasks' data objects.
+/// Non-realtime readers of the tasks' data objects: one, the status snapshot the monitor
+/// publishes at the end of each servo cycle, so that everything read together belongs to
+/// one cycle.
 struct Readers {
-    inputs: DataReader<Inputs>,
-    outputs: DataReader<Outputs>,
-    snapshot: DataReader<MachineSnapshot>,
-    setpoints: DataReader<Setpoints>,
-    monitor: DataReader<MonitorSnapshot>,
-    feedback: Vec<(char, usize, DataReader<AxisFeedback>)>,
+    status: DataReader<StatusSnapshot>,
 }
 
 /// A job that is running, and its feeder.
@@ -280,6 +276,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         spindle,
         flood_output: config.coolant.flood_output.as_deref().and_then(dout),
         mist_output: config.coolant.mist_output.as_deref().and_then(dout),
+        safe_outputs: devs.io_map.safe_outputs(),
         max_feed_override: config.motion.max_feed_override,
         max_stale_io_cycles: (0.02 / period_s).ceil() as u32,
         enable_timeout_cycles: (2.0 / period_s) as u32,
@@ -366,7 +363,7 @@ impl Machine {
             machine,
             queue: queue_w,
             motion_cfg,
-            axes,
+            axes: _,
             sim_io,
             io_map,
             sim_axes,
@@ -380,15 +377,7 @@ impl Machine {
         let job_rx = app.event::<JobEvent>("machine.job")?.subscribe(1024);
         let fault_rx = app.event::<FaultEvent>("machine.fault")?.subscribe(256);
         let readers = Readers {
-            inputs: app.reader(ports::INPUTS)?,
-            outputs: app.reader(ports::OUTPUTS)?,
-            snapshot: app.reader(ports::SNAPSHOT)?,
-            setpoints: app.reader(ports::SETPOINTS)?,
-            monitor: app.reader(ports::MONITOR)?,
-            feedback: axes
-                .iter()
-                .map(|&(c, i)| Ok((c, i, app.reader(&ports::feedback(c))?)))
-                .collect::<Result<_, crate::rt::deploy::DeployError>>()?,
+            status: app.reader(ports::STATUS)?,
         };
         let runtime = app.start()?;
         let servo_info = runtime
@@ -445,6 +434,12 @@ impl Machine {
             .map(|(_, h)| h)
     }
 
+    /// The simulated I/O device `device` (config order), if it is simulated: what the
+    /// outputs were told, for tests and demos.
+    pub fn sim_io(&self, device: usize) -> Option<&SimIoHandle> {
+        self.sim_io.get(device).and_then(Option::as_ref)
+    }
+
     /// Sends a command and waits until the machine task accepted or rejected it.
     fn command(&self, cmd: MachineCmd) -> Result<CommandHandle, ApiError> {
         let h = self
@@ -489,40 +484,38 @@ impl Machine {
         }
     }
 
-    fn snapshot(
-        &self,
-    ) -> (
-        MachineSnapshot,
-        Setpoints,
-        MonitorSnapshot,
-        Vec<(char, usize, AxisFeedback)>,
-    ) {
-        let mut r = lock(&self.readers);
-        let snap = r.snapshot.latest().unwrap_or_default();
-        let sp = r.setpoints.latest().unwrap_or_default();
-        let mon = r.monitor.latest().unwrap_or_default();
-        let fb = r
-            .feedback
-            .iter_mut()
-            .map(|(c, i, rd)| (*c, *i, rd.latest().unwrap_or_default()))
-            .collect();
-        (snap, sp, mon, fb)
+    /// What the realtime side published, all of it from one servo cycle.
+    fn snapshot(&self) -> StatusSnapshot {
+        lock(&self.readers).status.latest().unwrap_or_default()
     }
 
     /// The machine's actual pose (machine frame).
     fn actual_pose(&self) -> [f64; NUM_AXES] {
-        let (_, sp, _, fb) = self.snapshot();
-        let mut pose = sp.pose_mm;
-        for (_, i, f) in fb {
-            if f.valid {
-                pose[i] = f.actual;
+        let st = self.snapshot();
+        let mut pose = st.setpoints.pose_mm;
+        for (_, i) in self.axes() {
+            if st.feedback[i].valid {
+                pose[i] = st.feedback[i].actual;
             }
         }
         pose
     }
 
+    /// Refuses a run or jog the machine cannot take now (e-stop, off, fault, not homed,
+    /// busy), with the machine task's own reason: checked before anything about the job, so
+    /// that the operator hears about the e-stop, not about a job planned elsewhere.
+    fn check_can_run(&self, manual: bool) -> Result<(), ApiError> {
+        let snap = self.snapshot().machine;
+        let all = self.axes().iter().fold(0u32, |m, &(_, i)| m | 1 << i);
+        let homed = snap.homed_mask & all == all;
+        let req = if manual { Request::Jog } else { Request::Run };
+        ModeMachine::check(snap.mode, req, homed || manual)
+            .map_err(|why| ApiError::Rejected(why.into()))
+    }
+
     /// Starts a prepared job (or jog/MDI) as job `id`: feeder first, then the `run` command.
     fn start_job(&self, job: Arc<PreparedJob>, manual: bool) -> Result<(), ApiError> {
+        self.check_can_run(manual)?;
         let pose = self.actual_pose();
         for &(c, i) in self.axes().iter() {
             if (job.plan.start_mm[i] - pose[i]).abs() > 0.01 {
@@ -638,7 +631,7 @@ impl Machine {
             job: id,
             name: job.name.clone(),
             cancel: cancel.clone(),
-            seen_probe_seq: self.snapshot().0.probe.seq,
+            seen_probe_seq: self.snapshot().machine.probe.seq,
             messages: messages.clone(),
         };
         let book = self.book.clone();
@@ -767,20 +760,25 @@ fn bridge_loop(machine: std::sync::Weak<Machine>, stop: Arc<AtomicBool>) {
 }
 
 fn update_progress(m: &Machine) {
-    let (_, sp, _, _) = m.snapshot();
+    let sp = m.snapshot().setpoints;
     let mut book = lock(&m.book);
-    let Some(a) = &book.active else {
-        return;
-    };
+    let JobBook { active, status, .. } = &mut *book;
+    if let Some(a) = active {
+        apply_progress(status, a, &sp);
+    }
+}
+
+/// Job progress from the setpoints of one servo cycle: `status` applies the cycle it shows
+/// to its own copy, so its position and its progress never come from different cycles.
+fn apply_progress(status: &mut JobStatus, a: &ActiveJob, sp: &Setpoints) {
     if sp.job != a.id || sp.tracking {
         return;
     }
     let planned = a.job.plan.duration_s.max(1e-9);
-    let elapsed = a.started.elapsed().as_secs_f64();
-    book.status.line = sp.line;
-    book.status.progress = (sp.planned_time_done_s / planned).clamp(0.0, 1.0);
-    book.status.elapsed_s = elapsed;
-    book.status.distance_to_go_mm = book.status.distance_mm * (1.0 - book.status.progress);
+    status.line = sp.line;
+    status.progress = (sp.planned_time_done_s / planned).clamp(0.0, 1.0);
+    status.elapsed_s = a.started.elapsed().as_secs_f64();
+    status.distance_to_go_mm = status.distance_mm * (1.0 - status.progress);
 }
 
 fn handle_job_event(m: &Machine, e: JobEvent) {
@@ -841,20 +839,26 @@ fn handle_job_event(m: &Machine, e: JobEvent) {
 
 impl MachineApi for Machine {
     fn status(&self) -> Status {
-        let (snap, sp, mon, fb) = self.snapshot();
+        // One read: every value below belongs to servo cycle `st.cycle`.
+        let st = self.snapshot();
+        let (snap, sp, mon) = (&st.machine, &st.setpoints, &st.monitor);
         self.pump_events();
-        let axes = fb
-            .iter()
-            .map(|&(c, i, f)| AxisStatus {
-                name: c.to_string(),
-                commanded: sp.joints[i],
-                actual: f.actual,
-                velocity: f.velocity,
-                following_error: mon.following_error[i],
-                max_following_error: mon.max_following_error[i],
-                homed: f.homed,
-                drive_state: f.state.to_string(),
-                fault: f.fault.map(|c| format!("0x{c:04X}")),
+        let axes = self
+            .axes()
+            .into_iter()
+            .map(|(c, i)| {
+                let f = st.feedback[i];
+                AxisStatus {
+                    name: c.to_string(),
+                    commanded: sp.joints[i],
+                    actual: f.actual,
+                    velocity: f.velocity,
+                    following_error: mon.following_error[i],
+                    max_following_error: mon.max_following_error[i],
+                    homed: f.homed,
+                    drive_state: f.state.to_string(),
+                    fault: f.fault.map(|c| format!("0x{c:04X}")),
+                }
             })
             .collect();
         let threads = lock(&self.runtime)
@@ -886,13 +890,7 @@ impl MachineApi for Machine {
                     .collect()
             })
             .unwrap_or_default();
-        let (inputs, outputs) = {
-            let mut r = lock(&self.readers);
-            (
-                r.inputs.latest().unwrap_or_default(),
-                r.outputs.latest().unwrap_or_default(),
-            )
-        };
+        let (inputs, outputs) = (st.inputs, st.outputs);
         let map = &self.io_map;
         let mut in_map = std::collections::BTreeMap::new();
         for (i, c) in map.di.iter().enumerate() {
@@ -909,8 +907,11 @@ impl MachineApi for Machine {
         for (i, c) in map.ao.iter().enumerate() {
             out_map.insert(c.point.name.clone(), outputs.analog[i]);
         }
-        update_progress(self);
         let book = lock(&self.book);
+        let mut job = book.status.clone();
+        if let Some(a) = &book.active {
+            apply_progress(&mut job, a, sp);
+        }
         let mut faults: Vec<String> = book.faults.iter().cloned().collect();
         if matches!(snap.mode, Mode::Fault | Mode::Estop) {
             if let Some(t) = snap.last_trip {
@@ -926,8 +927,9 @@ impl MachineApi for Machine {
             machine: self.name.clone(),
             mode: snap.mode,
             realtime: self.servo.realtime(),
+            servo_cycle: st.cycle,
             axes,
-            job: book.status.clone(),
+            job,
             overrides: Overrides {
                 feed: snap.feed_override,
                 rapid: snap.rapid_override,
@@ -986,6 +988,7 @@ impl MachineApi for Machine {
     }
 
     fn jog(&self, req: &JogRequest) -> Result<(), ApiError> {
+        self.check_can_run(true)?;
         let up = req.axis.to_ascii_uppercase();
         let (_, i) = self
             .axes()
@@ -1039,6 +1042,7 @@ impl MachineApi for Machine {
     }
 
     fn mdi(&self, line: &str) -> Result<(), ApiError> {
+        self.check_can_run(false)?;
         let job = job::prepare_mdi(
             line,
             &self.interp_opts,
@@ -1074,6 +1078,7 @@ impl MachineApi for Machine {
     }
 
     fn job_run(&self) -> Result<(), ApiError> {
+        self.check_can_run(false)?;
         let job = lock(&self.book)
             .loaded
             .clone()
@@ -1098,7 +1103,7 @@ impl MachineApi for Machine {
     }
 
     fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError> {
-        let (snap, ..) = self.snapshot();
+        let snap = self.snapshot().machine;
         let feed = req.feed.unwrap_or(snap.feed_override);
         if feed > self.config.motion.max_feed_override {
             return Err(ApiError::InvalidParams(format!(
@@ -1309,7 +1314,7 @@ impl crate::daemon::Deployed for Machine {
 
     fn shutdown(&self) -> anyhow::Result<()> {
         // A controlled stop of whatever moves, then drives off, then threads down.
-        let (snap, ..) = self.snapshot();
+        let snap = self.snapshot().machine;
         if !matches!(snap.mode, Mode::Estop | Mode::Off) {
             if let Err(e) = self.command_done(MachineCmd::Off, Duration::from_secs(30)) {
                 tracing::warn!("controlled stop at shutdown: {e}; tripping the e-stop");

@@ -2,6 +2,8 @@
 //! [`Inputs`] value, and writes the [`Outputs`] the machine task asked for (one cycle of
 //! output latency, which keeps the reads at the very start of the cycle).
 //!
+//! When the task stops (daemon shutdown), it writes every output's configured safe state.
+//!
 //! A device that cannot be read keeps its last values and counts stale cycles; the machine
 //! task treats a stale e-stop input as pressed (fail-safe).
 //!
@@ -96,6 +98,9 @@ pub struct IoTask {
     outputs: Option<DataReader<Outputs>>,
     current: Inputs,
     written: Option<Outputs>,
+    /// Every output in its configured safe state: written until the machine task has
+    /// published outputs, and again when the task stops (daemon shutdown).
+    safe: Outputs,
     spindle: Option<SimSpindle>,
     plates: Vec<SimPlate>,
     overrun: Option<std::sync::Arc<std::sync::atomic::AtomicU32>>,
@@ -106,6 +111,7 @@ impl IoTask {
     pub fn new(devices: Vec<DynIo>, map: IoMap, spindle: Option<SimSpindle>) -> Self {
         IoTask {
             overrun: None,
+            safe: map.safe_outputs(),
             devices,
             map,
             inputs: None,
@@ -231,7 +237,7 @@ impl Task for IoTask {
 
     fn update(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         self.burn(ctx.period_ns);
-        let mut out = Outputs::default();
+        let mut out = self.safe;
         if let Some(r) = &mut self.outputs {
             r.get(&mut out);
         }
@@ -240,5 +246,16 @@ impl Task for IoTask {
             s.update(&out);
         }
         Ok(())
+    }
+
+    /// The last act of the servo thread (shutdown, or a stopped deployment): every output to
+    /// its safe state, whatever the machine task asked last, each channel written again.
+    fn stop(&mut self) {
+        self.written = None;
+        let safe = self.safe;
+        self.write_all(&safe);
+        if let Some(s) = &mut self.spindle {
+            s.update(&safe);
+        }
     }
 }

@@ -3,7 +3,7 @@
 //! It serves the operator's commands (each accepted or rejected by [`ModeMachine`] with a
 //! reason, then completed by its completion condition), and every cycle:
 //! 1. reads the e-stop input: pressed (or unreadable) → e-stop in this very cycle: drives
-//!    quick-stop, outputs go to their safe state (all off), motion is dropped;
+//!    quick-stop, outputs go to their configured safe state, motion is dropped;
 //! 2. executes the auxiliary command the interpolator reached (spindle, coolant, tool,
 //!    I/O, M0/M1, M66 waits, messages) and tells the interpolator when a barrier is done;
 //! 3. sequences homing group by group, in the configured order;
@@ -103,7 +103,7 @@ static OPERATIONS: [OperationDescriptor; 12] = [
     },
     OperationDescriptor {
         name: "machine_off",
-        doc: "Stop under control, then disable the drives.",
+        doc: "Every output to its safe state, stop under control, then disable the drives.",
         params: NO_PARAMS,
         next: NextCommand::AfterAcceptance,
     },
@@ -149,7 +149,8 @@ static OPERATIONS: [OperationDescriptor; 12] = [
     },
     OperationDescriptor {
         name: "abort",
-        doc: "Controlled stop within the axis limits; the rest of the job is dropped.",
+        doc: "Controlled stop within the axis limits, spindle and coolant off (not for a \
+              jog); the rest of the job is dropped.",
         params: NO_PARAMS,
         next: NextCommand::AfterAcceptance,
     },
@@ -267,6 +268,8 @@ pub struct MachineSetup {
     pub flood_output: Option<usize>,
     /// Mist output.
     pub mist_output: Option<usize>,
+    /// Every output in its configured safe state (e-stop, machine off, start-up).
+    pub safe_outputs: Outputs,
     /// Highest feed override.
     pub max_feed_override: f64,
     /// Cycles an e-stop input may stay unreadable before it counts as pressed.
@@ -391,7 +394,6 @@ impl MachineTask {
     pub fn new(setup: MachineSetup) -> Self {
         let motion = MotionControl::default();
         MachineTask {
-            setup,
             mode: ModeMachine::new(),
             inputs_in: None,
             setpoints_in: None,
@@ -410,7 +412,7 @@ impl MachineTask {
             monitor: MonitorSnapshot::default(),
             setpoints: Setpoints::default(),
             feedback: [AxisFeedback::default(); NUM_AXES],
-            outputs: Outputs::default(),
+            outputs: setup.safe_outputs,
             drive: DriveControl::default(),
             motion,
             snap: MachineSnapshot::default(),
@@ -430,6 +432,7 @@ impl MachineTask {
             job_id: 0,
             ended: None,
             step_from: None,
+            setup,
         }
     }
 
@@ -506,8 +509,7 @@ impl MachineTask {
         self.motion.track_actual = true;
         self.motion.abort_seq = self.motion.abort_seq.wrapping_add(1);
         self.motion.hold = false;
-        self.outputs = Outputs::default();
-        self.spindle_dir = None;
+        self.outputs_safe();
         self.barrier = Barrier::None;
         self.homing_group = None;
         self.stopping = None;
@@ -527,16 +529,34 @@ impl MachineTask {
         let end = (self.current != Motion::None).then_some(JobEvent::Failed { line, trip });
         self.current = Motion::None;
         self.mode.fact(Fact::Faulted);
-        self.spindle_stop();
+        self.spindle_and_coolant_off();
         self.drive.home_abort_seq = self.drive.home_abort_seq.wrapping_add(1);
         self.controlled_stop(true, end);
     }
 
     /// Ends the job with a program error: stop under control, drives stay enabled.
+    /// Spindle and coolant go off, as on an abort (LinuxCNC aborts on a program error).
     fn job_error(&mut self, error: JobError, line: u32) {
+        self.spindle_and_coolant_off();
         self.current = Motion::None;
         self.snap.probe.waiting = false;
         self.controlled_stop(false, Some(JobEvent::Error { line, error }));
+    }
+
+    /// Every output to its configured safe state, the spindle's commanded state with them
+    /// (e-stop, machine off).
+    fn outputs_safe(&mut self) {
+        self.outputs = self.setup.safe_outputs;
+        self.spindle_dir = None;
+        self.snap.spindle_rpm = 0.0;
+    }
+
+    /// What LinuxCNC's task abort does besides stopping motion (its spindle abort, and the
+    /// coolant off of its I/O abort): spindle and coolant off. The other outputs a program
+    /// set (M62–M68) keep their state, as they do there.
+    fn spindle_and_coolant_off(&mut self) {
+        self.spindle_stop();
+        self.coolant(self.setup.flood_output, self.setup.mist_output, false);
     }
 
     fn spindle_stop(&mut self) {
@@ -623,10 +643,7 @@ impl MachineTask {
                 done = false;
             }
             AuxKind::OptionalProgramStop => {}
-            AuxKind::ProgramEnd => {
-                self.spindle_stop();
-                self.coolant(self.setup.flood_output, self.setup.mist_output, false);
-            }
+            AuxKind::ProgramEnd => self.spindle_and_coolant_off(),
             AuxKind::ProbeArm { kind } => {
                 let error = match self.setup.probe_input {
                     None => Some(JobError::NoProbeInput),
@@ -1010,7 +1027,7 @@ impl Task for MachineTask {
             MachineCmd::Off => {
                 let moving = self.current != Motion::None || self.homing_group.is_some();
                 self.mode.request(Request::Off, homed).map_err(reject)?;
-                self.spindle_stop();
+                self.outputs_safe();
                 if moving {
                     let line = self.setpoints.line;
                     self.current = Motion::None;
@@ -1044,8 +1061,14 @@ impl Task for MachineTask {
                 self.emit_job(JobEvent::Started);
             }
             MachineCmd::Pause => {
+                let running = self.mode.mode() == Mode::Running;
                 self.mode.request(Request::Pause, homed).map_err(reject)?;
                 self.motion.hold = true;
+                // The job holds too (`job.state` "holding" until `Resumed`), as on an M0.
+                if running {
+                    let line = self.setpoints.line;
+                    self.emit_job(JobEvent::Held { line });
+                }
             }
             MachineCmd::Step => {
                 match self.mode.mode() {
@@ -1060,8 +1083,14 @@ impl Task for MachineTask {
                 self.step_from = None;
             }
             MachineCmd::Abort => {
+                let jog = self.mode.mode() == Mode::Manual;
                 self.mode.request(Request::Abort, homed).map_err(reject)?;
                 self.step_from = None;
+                // A jog's stop is an abort too here, but stopping a jog leaves the spindle
+                // and coolant alone (in LinuxCNC it is a jog stop, not a task abort).
+                if !jog {
+                    self.spindle_and_coolant_off();
+                }
                 let line = self.setpoints.line;
                 if self.homing_group.is_some() {
                     self.drive.home_abort_seq = self.drive.home_abort_seq.wrapping_add(1);

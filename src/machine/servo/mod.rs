@@ -17,6 +17,8 @@
 //! 5. [`monitor_task::MonitorTask`] `monitor`: checks this cycle's setpoints against this
 //!    cycle's feedback (following error, soft limits, drive faults, limit switches,
 //!    communication) and emits a `fault` event; tracks the largest following errors.
+//!    Last of all, it publishes the [`status::StatusSnapshot`] of the cycle: what every
+//!    task above published in it, the one value `status` reads.
 //!
 //! Every value exchanged is a fixed-size `Copy` type in a data object, written by exactly
 //! one task (the topology check enforces it).
@@ -27,7 +29,10 @@ pub mod io_task;
 pub mod machine_task;
 pub mod monitor_task;
 #[cfg(test)]
+mod output_tests;
+#[cfg(test)]
 mod probe_tests;
+pub mod status;
 #[cfg(test)]
 mod tests;
 
@@ -58,6 +63,8 @@ pub mod ports {
     pub const SETPOINTS: &str = "interpolator.setpoints";
     /// [`super::MonitorSnapshot`], written by `monitor`.
     pub const MONITOR: &str = "monitor.snapshot";
+    /// [`super::status::StatusSnapshot`], written by `monitor` at the end of the cycle.
+    pub const STATUS: &str = "monitor.status";
     /// [`super::AxisFeedback`] of axis `i`, written by `axis.<name>`.
     pub fn feedback(axis: char) -> String {
         format!("axis.{axis}.feedback")

@@ -2,11 +2,13 @@
 //! cycle's feedback through [`safety::check_axis`](crate::machine::safety::check_axis) and
 //! emits a `monitor.fault` event when an axis trips (once per trip: it re-arms when the
 //! condition has cleared). It also keeps the following errors and their maxima (reset when
-//! a new job starts) for status and the job summary.
+//! a new job starts) for status and the job summary. Last in its step it publishes the
+//! cycle's [`StatusSnapshot`](super::status::StatusSnapshot).
 //!
 //! The monitor only reports: the machine task decides the reaction (the error policy lives
 //! outside the task that finds the error).
 
+use super::status::StatusPublisher;
 use super::{ports, AxisFeedback, FaultEvent, MonitorSnapshot, MotionControl, Setpoints};
 use crate::gcode::NUM_AXES;
 use crate::machine::safety::{check_axis, AxisGuard, AxisSample};
@@ -28,6 +30,8 @@ pub struct MonitorTask {
     tripped: u32,
     snap: MonitorSnapshot,
     job: u32,
+    /// The status snapshot of the cycle, published last.
+    status: StatusPublisher,
 }
 
 impl MonitorTask {
@@ -46,6 +50,7 @@ impl MonitorTask {
             tripped: 0,
             snap: MonitorSnapshot::default(),
             job: 0,
+            status: StatusPublisher::default(),
         }
     }
 }
@@ -63,10 +68,12 @@ impl Task for MonitorTask {
             .collect();
         self.fault_ev = Some(ctx.event("fault"));
         self.out = Some(ctx.output(ports::MONITOR));
+        self.status.configure(ctx);
         Ok(())
     }
 
     fn read_inputs(&mut self, _ctx: &StepContext) {
+        self.status.read_inputs();
         if let Some(r) = &mut self.setpoints_in {
             r.get(&mut self.setpoints);
         }
@@ -80,7 +87,7 @@ impl Task for MonitorTask {
         }
     }
 
-    fn update(&mut self, _ctx: &StepContext) -> Result<(), TaskError> {
+    fn update(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         if self.control.job != self.job && !self.control.track_actual {
             self.job = self.control.job;
             self.snap.max_following_error = [0.0; NUM_AXES];
@@ -123,6 +130,8 @@ impl Task for MonitorTask {
         if let Some(w) = &mut self.out {
             w.set(self.snap);
         }
+        self.status
+            .publish(ctx.cycle, &self.setpoints, &self.feedback, &self.snap);
         Ok(())
     }
 }

@@ -4,7 +4,7 @@
 //! within every axis' velocity and acceleration limit.
 
 use super::machine_task::MachineCmd;
-use super::{ports, AxisFeedback, MachineSnapshot, QueueItem, Setpoints};
+use super::{ports, AxisFeedback, JobEvent, MachineSnapshot, QueueItem, Setpoints};
 use crate::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
 use crate::machine::api::Mode;
 use crate::machine::runtime::{build, Built};
@@ -24,13 +24,23 @@ pub(super) struct Rig {
     pub(super) snap: DataReader<MachineSnapshot>,
     pub(super) sp: DataReader<Setpoints>,
     fb: Vec<DataReader<AxisFeedback>>,
+    /// The machine task's `job` events.
+    pub(super) jobs: EventReceiver<JobEvent>,
 }
 
 impl Rig {
     pub(super) fn new() -> Rig {
+        Rig::with_config(&Rig::config())
+    }
+
+    /// The fast-homing simulated mill of the end-to-end tests.
+    pub(super) fn config() -> crate::config::MachineConfig {
         let path =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
-        let cfg = crate::config::load(&path).expect("config");
+        crate::config::load(&path).expect("config")
+    }
+
+    pub(super) fn with_config(cfg: &crate::config::MachineConfig) -> Rig {
         let Built {
             mut app,
             machine,
@@ -39,8 +49,12 @@ impl Rig {
             sim_io,
             sim_axes,
             ..
-        } = build(&cfg).expect("build");
+        } = build(cfg).expect("build");
         app.configure().expect("topology");
+        let jobs = app
+            .event::<JobEvent>("machine.job")
+            .expect("job event")
+            .subscribe(1024);
         let rt = app.start_stepped(SimClock::new(0)).expect("start");
         let snap = rt.reader(ports::SNAPSHOT).expect("snapshot");
         let sp = rt.reader(ports::SETPOINTS).expect("setpoints");
@@ -58,10 +72,11 @@ impl Rig {
             snap,
             sp,
             fb,
+            jobs,
         }
     }
 
-    fn send_until_done(&mut self, cmd: MachineCmd, max_cycles: u64) {
+    pub(super) fn send_until_done(&mut self, cmd: MachineCmd, max_cycles: u64) {
         let h = self.built_machine.send(cmd).expect("queue");
         for _ in 0..max_cycles {
             self.rt.run_cycles(1);
@@ -72,6 +87,16 @@ impl Rig {
             }
         }
         panic!("{cmd:?} not done after {max_cycles} cycles");
+    }
+
+    /// Fault-injection handle of a simulated drive.
+    pub(super) fn sim_axis(&self, axis: char) -> hytask_hal::sim::SimAxisHandle {
+        self.sim_axes
+            .iter()
+            .find(|(c, _)| *c == axis)
+            .expect("axis")
+            .1
+            .clone()
     }
 
     pub(super) fn mode(&mut self) -> Mode {
@@ -90,7 +115,7 @@ impl Rig {
     }
 
     /// Plans a straight feed from where the machine is to `target` and starts it as `job`.
-    fn start_move(&mut self, job: u32, target: [f64; 3], feed_mm_min: f64) {
+    pub(super) fn start_move(&mut self, job: u32, target: [f64; 3], feed_mm_min: f64) {
         let mut start = [0.0; NUM_AXES];
         for (i, s) in start.iter_mut().take(3).enumerate() {
             *s = self.feedback(i).actual;
@@ -342,4 +367,33 @@ fn single_block_holds_in_the_cycle_the_next_line_begins() {
     }
     assert_eq!(run.status(), CommandStatus::Done);
     assert!((r.feedback(0).actual - (start[0] - 30.0)).abs() < 0.01);
+}
+
+#[test]
+fn a_feed_hold_holds_the_job_and_resume_runs_it_again() {
+    let mut r = Rig::new();
+    r.ready();
+    r.start_move(1, [250.0, 200.0, -20.0], 3000.0);
+    r.rt.run_cycles(300);
+    let mut events = Vec::new();
+    while let Some(e) = r.jobs.pop() {
+        events.push(e);
+    }
+    assert_eq!(events, [JobEvent::Started]);
+    r.send_until_done(MachineCmd::Pause, 2000);
+    assert_eq!(r.mode(), Mode::Holding);
+    // A second pause while held is no second hold.
+    r.send_until_done(MachineCmd::Pause, 10);
+    r.send_until_done(MachineCmd::Resume, 10);
+    while let Some(e) = r.jobs.pop() {
+        events.push(e);
+    }
+    assert_eq!(
+        events,
+        [
+            JobEvent::Started,
+            JobEvent::Held { line: 7 },
+            JobEvent::Resumed
+        ]
+    );
 }

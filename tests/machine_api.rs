@@ -1,0 +1,151 @@
+//! The operator API of a deployed machine, called in this process (no socket): what
+//! `job.state` says through a feed hold, and which refusal `job.run` gives first.
+//!
+//! Real time, as the daemon runs the machine: the waits are hang guards of a minute, never
+//! timings.
+#![allow(clippy::unwrap_used)]
+
+use hytask::machine::api::{ApiError, JobSource, MachineApi, Mode, Status};
+use hytask::machine::Machine;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+fn machine() -> Arc<Machine> {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
+    Machine::deploy(hytask::config::load(&path).unwrap()).unwrap()
+}
+
+fn wait(m: &Machine, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
+    let t0 = Instant::now();
+    loop {
+        let s = m.status();
+        if pred(&s) {
+            return s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "timed out waiting for {what}: mode {:?}, job {:?}",
+            s.mode,
+            s.job
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+fn ready(m: &Machine) {
+    m.estop_reset().unwrap();
+    m.machine_on().unwrap();
+    m.home(None).unwrap();
+    wait(m, "homed and idle", |s| {
+        s.mode == Mode::Idle && s.axes.iter().all(|a| a.homed)
+    });
+}
+
+fn text(name: &str, program: &str) -> JobSource {
+    JobSource {
+        path: None,
+        text: Some(program.into()),
+        name: Some(name.into()),
+    }
+}
+
+fn shutdown(m: &Machine) {
+    hytask::daemon::Deployed::shutdown(m).unwrap();
+}
+
+#[test]
+fn a_feed_hold_shows_as_holding_in_the_job_state_and_resume_as_running() {
+    let m = machine();
+    ready(&m);
+    m.job_load(&text("hold.ngc", "G21 G90\nG1 X50 Y50 F600\nM2\n"))
+        .unwrap();
+    m.job_run().unwrap();
+    wait(&m, "running", |s| {
+        s.mode == Mode::Running && s.job.state == "running"
+    });
+    m.job_pause().unwrap();
+    let held = wait(&m, "the hold", |s| s.mode == Mode::Holding);
+    assert_eq!(held.job.state, "holding", "job state in a feed hold");
+    m.job_resume().unwrap();
+    let resumed = wait(&m, "the resume", |s| s.mode == Mode::Running);
+    assert_eq!(resumed.job.state, "running", "job state after resume");
+    m.job_abort().unwrap();
+    wait(&m, "the abort", |s| s.mode == Mode::Idle);
+    shutdown(&m);
+}
+
+#[test]
+fn job_run_reports_the_machine_state_before_anything_about_the_job() {
+    let m = machine();
+    // Loaded where the machine stands at power-up; homing then moves every axis away.
+    m.job_load(&text("old.ngc", "G21 G90\nG1 X10 Y10 F600\nM2\n"))
+        .unwrap();
+    ready(&m);
+    m.estop().unwrap();
+    wait(&m, "e-stop", |s| s.mode == Mode::Estop);
+    match m.job_run() {
+        Err(ApiError::Rejected(why)) => assert!(why.contains("e-stop"), "{why}"),
+        other => panic!("job.run in e-stop: {other:?}"),
+    }
+    m.estop_reset().unwrap();
+    match m.job_run() {
+        Err(ApiError::Rejected(why)) => assert!(why.contains("machine is off"), "{why}"),
+        other => panic!("job.run with the machine off: {other:?}"),
+    }
+    shutdown(&m);
+}
+
+/// `status` sampled all through a job: the commanded position and the job progress of each
+/// reply must come from the same servo cycle. On the cruise of a long straight feed the
+/// commanded X runs at exactly the feed rate, so `X + v · t_done` (t_done = progress ×
+/// planned time) is the same in every cycle; a reply whose progress is one cycle off its
+/// position is off by v × 1 ms = 0.05 mm.
+#[test]
+fn status_shows_position_and_progress_of_one_servo_cycle() {
+    let m = machine();
+    ready(&m);
+    let v = 50.0; // F3000, mm/s
+    let info = m
+        .job_load(&text("cruise.ngc", "G21 G90\nG1 X100 F3000\nM2\n"))
+        .unwrap();
+    let planned = info.planned_time_s;
+    m.job_run().unwrap();
+    let t0 = Instant::now();
+    let mut samples = Vec::new();
+    loop {
+        let s = m.status();
+        if s.job.state != "running" && s.job.state != "loaded" {
+            assert_eq!(s.job.state, "done", "{:?}", s.job);
+            break;
+        }
+        let done = s.job.progress * planned;
+        // The cruise, well clear of the ramps at both ends.
+        if done > 0.3 && done < planned - 0.3 {
+            let x = s.axes.iter().find(|a| a.name == "X").unwrap().commanded;
+            samples.push((s.servo_cycle, done, x + v * done));
+        }
+        assert!(t0.elapsed() < Duration::from_secs(120), "the job hangs");
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    assert!(
+        samples.len() > 100,
+        "{} samples on the cruise",
+        samples.len()
+    );
+    let mut sums: Vec<f64> = samples.iter().map(|s| s.2).collect();
+    sums.sort_by(f64::total_cmp);
+    let median = sums[sums.len() / 2];
+    let torn: Vec<_> = samples
+        .iter()
+        .filter(|s| (s.2 - median).abs() > 1e-3)
+        .collect();
+    assert!(
+        torn.is_empty(),
+        "{} of {} replies mix cycles (servo cycle, t_done, X + v·t_done; median {median}): {:?}",
+        torn.len(),
+        samples.len(),
+        &torn[..torn.len().min(5)]
+    );
+    shutdown(&m);
+}
