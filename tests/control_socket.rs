@@ -18,6 +18,35 @@ use tokio::sync::broadcast;
 struct Double {
     events: broadcast::Sender<MachineEvent>,
     estops: AtomicU32,
+    /// `job.load` of a job named "block" waits here until the sender is dropped.
+    gate: std::sync::Mutex<Option<std::sync::mpsc::Receiver<()>>>,
+    entered: std::sync::atomic::AtomicBool,
+}
+
+impl Double {
+    fn new() -> Double {
+        Double {
+            events: broadcast::channel(64).0,
+            estops: AtomicU32::new(0),
+            gate: std::sync::Mutex::new(None),
+            entered: std::sync::atomic::AtomicBool::new(false),
+        }
+    }
+}
+
+impl hytask::daemon::Deployed for Double {
+    fn name(&self) -> String {
+        "double".into()
+    }
+    fn realtime(&self) -> bool {
+        false
+    }
+    fn servo_cycles(&self) -> u64 {
+        0
+    }
+    fn shutdown(&self) -> anyhow::Result<()> {
+        Ok(())
+    }
 }
 
 impl MachineApi for Double {
@@ -66,6 +95,13 @@ impl MachineApi for Double {
         Ok(())
     }
     fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError> {
+        if src.name.as_deref() == Some("block") {
+            let gate = self.gate.lock().unwrap().take();
+            self.entered.store(true, Ordering::SeqCst);
+            if let Some(rx) = gate {
+                let _ = rx.recv();
+            }
+        }
         Ok(JobInfo {
             name: src.name.clone().unwrap_or_default(),
             lines: 1,
@@ -131,10 +167,7 @@ impl Server {
 
     fn start_in(dir: tempfile::TempDir, mode: u32, opts: ServerOptions) -> Server {
         let path = dir.path().join("control.sock");
-        let machine = Arc::new(Double {
-            events: broadcast::channel(64).0,
-            estops: AtomicU32::new(0),
-        });
+        let machine = Arc::new(Double::new());
         let listener = bind(&SocketOptions {
             path: path.clone(),
             mode,
@@ -702,4 +735,48 @@ fn the_path_is_claimed_before_anything_is_bound() {
     assert!(err.to_string().contains("already listening"), "{err}");
     drop(first);
     hytask::control::listen::claim(&opts).unwrap();
+}
+
+#[test]
+fn daemon_shutdown_does_not_wait_for_a_blocked_request() {
+    let machine = Arc::new(Double::new());
+    let (gate_tx, gate_rx) = std::sync::mpsc::channel::<()>();
+    *machine.gate.lock().unwrap() = Some(gate_rx);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    let listener = bind(&SocketOptions {
+        path: path.clone(),
+        mode: 0o600,
+        group: None,
+    })
+    .unwrap();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let (done_tx, done_rx) = std::sync::mpsc::channel();
+    let m: Arc<dyn hytask::daemon::Deployed> = machine.clone();
+    std::thread::spawn(move || {
+        let r = hytask::daemon::run(m, listener, async move {
+            let _ = stop_rx.await;
+        });
+        let _ = done_tx.send(r.is_ok());
+    });
+    let mut s = UnixStream::connect(&path).unwrap();
+    s.write_all(
+        b"{\"id\":1,\"method\":\"job.load\",\"params\":{\"text\":\"M2\",\"name\":\"block\"}}\n",
+    )
+    .unwrap();
+    let t0 = Instant::now();
+    while !machine.entered.load(Ordering::SeqCst) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "job.load never arrived"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    stop_tx.send(()).unwrap();
+    // The request is still blocked (gate_tx alive), yet the daemon returns.
+    let ok = done_rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("daemon::run waited for the blocked request");
+    assert!(ok);
+    drop(gate_tx);
 }

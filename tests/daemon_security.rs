@@ -159,21 +159,24 @@ fn jobs_outside_the_jobs_dir_are_refused_and_non_gcode_files_are_not_quoted() {
 #[test]
 fn a_second_daemon_stops_before_it_deploys_the_machine() {
     let d = Daemon::start(&fast_sim());
+    // The second daemon is the CANopen router: deploying it would open the CAN bus. In this
+    // build that deployment fails with "not available", so its error shows which step came
+    // first: finding the socket taken, or deploying.
+    let canopen = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/example-canopen.toml");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
         .args(["serve", "--config"])
-        .arg(fast_sim())
+        .arg(&canopen)
         .arg("--socket")
         .arg(&d.socket)
-        .env("RUST_LOG", "debug")
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(err.contains("already listening"), "{err}");
-    // Deploying logs the machine's mode and its threads; none of that may happen.
-    for deployed in ["mode:", "servo", "mlock", "SCHED_FIFO", "thread"] {
-        assert!(!err.contains(deployed), "deployed before refusing: {err}");
-    }
+    assert!(
+        !err.contains("not available"),
+        "deployed before refusing: {err}"
+    );
     // The first daemon is untouched.
     let mut c = d.client();
     ok(&mut c, "status", serde_json::Value::Null);

@@ -28,7 +28,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
     let machine = crate::machine::deploy_from(args.config.as_deref())?;
     let listener = claim.bind()?;
     tracing::info!("control socket at {}", socket.path.display());
-    crate::daemon::run(machine, listener, options, std::future::pending())?;
+    crate::daemon::run_with(machine, listener, options, std::future::pending())?;
     tracing::info!("machine stopped; exiting");
     Ok(ExitCode::SUCCESS)
 }

@@ -41,6 +41,15 @@ pub const SHUTDOWN_GRACE: Duration = Duration::from_secs(2);
 pub fn run(
     machine: Arc<dyn Deployed>,
     listener: Listener,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    run_with(machine, listener, ServerOptions::default(), shutdown)
+}
+
+/// [`run`] with the server options of `[control]` ([`ServerOptions::from_config`]).
+pub fn run_with(
+    machine: Arc<dyn Deployed>,
+    listener: Listener,
     options: ServerOptions,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
@@ -148,7 +157,7 @@ impl Embedded {
         let thread = std::thread::Builder::new()
             .name("embedded-daemon".into())
             .spawn(move || {
-                run(m, listener, options, async move {
+                run_with(m, listener, options, async move {
                     let _ = rx.await;
                 })
             })?;
