@@ -211,3 +211,107 @@ fn logs_to_a_pipe_carry_no_colour_codes() {
     assert!(err.contains("control socket at"), "{err}");
     assert!(!err.contains('\u{1b}'), "ANSI escape codes in: {err:?}");
 }
+
+#[test]
+fn serve_refuses_a_socket_in_a_directory_other_users_can_write() {
+    // /tmp-like: world-writable with the sticky bit.
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o1777)).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .args(["serve", "--config"])
+        .arg(fast_sim())
+        .arg("--socket")
+        .arg(dir.path().join("control.sock"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("writable by all users"), "{err}");
+    assert!(!dir.path().join("control.sock").exists());
+}
+
+#[test]
+fn the_client_and_the_daemon_default_to_the_same_private_socket_path() {
+    // root: the system path.
+    assert_eq!(
+        hytask::config::default_socket_path(),
+        PathBuf::from("/run/hytask/control.sock")
+    );
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .arg("status")
+        .env_remove("HYTASK_SOCKET")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/run/hytask/control.sock"), "{err}");
+    // Another user: its runtime directory, for the client and for `hytask serve`.
+    use std::os::unix::fs::PermissionsExt;
+    use std::os::unix::process::CommandExt;
+    let runtime = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(runtime.path(), std::fs::Permissions::from_mode(0o700)).unwrap();
+    nix::unistd::chown(
+        runtime.path(),
+        Some(nix::unistd::Uid::from_raw(65534)),
+        Some(nix::unistd::Gid::from_raw(65534)),
+    )
+    .unwrap();
+    let expected = runtime.path().join("hytask/control.sock");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .arg("status")
+        .env_remove("HYTASK_SOCKET")
+        .env("XDG_RUNTIME_DIR", runtime.path())
+        .uid(65534)
+        .gid(65534)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&expected.display().to_string()), "{err}");
+    // sim-fast without its socket_path, readable by that user.
+    let cfg = config_with_control(runtime.path(), "");
+    std::fs::set_permissions(&cfg, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let mut daemon = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .args(["serve", "--config"])
+        .arg(&cfg)
+        .env("XDG_RUNTIME_DIR", runtime.path())
+        .uid(65534)
+        .gid(65534)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while hytask::control::client::Client::connect(&expected).is_err() {
+        if let Some(status) = daemon.try_wait().unwrap() {
+            let mut e = String::new();
+            use std::io::Read;
+            daemon
+                .stderr
+                .take()
+                .unwrap()
+                .read_to_string(&mut e)
+                .unwrap();
+            panic!("daemon exited {status:?}: {e}");
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "no socket at {expected:?}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .args(["status", "--json"])
+        .env_remove("HYTASK_SOCKET")
+        .env("XDG_RUNTIME_DIR", runtime.path())
+        .uid(65534)
+        .gid(65534)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(daemon.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    let status = daemon.wait().unwrap();
+    assert!(status.success());
+}

@@ -363,3 +363,51 @@ impl SafetyConfig {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn issues_of(toml_text: &str) -> Vec<String> {
+        let c: ControlConfig = toml::from_str(toml_text).unwrap();
+        let mut issues = Issues::default();
+        c.validate(&mut issues);
+        issues.into_vec().iter().map(ToString::to_string).collect()
+    }
+
+    #[test]
+    fn control_defaults_are_bounded_and_private() {
+        let c: ControlConfig = toml::from_str("").unwrap();
+        assert_eq!(c.max_job_bytes, 256 * 1024 * 1024);
+        assert_eq!(c.idle_timeout_s, 300);
+        assert_eq!(c.max_clients, 512);
+        assert_eq!(c.max_buffered_bytes, 64 * 1024 * 1024);
+        assert_eq!((c.jobs_dir, c.operators, c.observers), (None, None, None));
+        assert_eq!(c.unlisted, UnlistedRole::Observer);
+        assert!(!c.socket_path.starts_with("/tmp"));
+    }
+
+    #[test]
+    fn roles_and_limits_parse_and_are_checked() {
+        let c: ControlConfig = toml::from_str(
+            "operators = { users = [\"ann\"], groups = [\"cnc\"] }\nunlisted = \"none\"\n",
+        )
+        .unwrap();
+        assert_eq!(c.operators.unwrap().groups, vec!["cnc".to_string()]);
+        assert_eq!(c.unlisted, UnlistedRole::None);
+        let issues = issues_of(
+            "jobs_dir = \"jobs\"\nmax_clients = 0\nmax_buffered_bytes = 10\nobservers = { users = [\"a b\"] }\n",
+        );
+        for key in [
+            "control.jobs_dir",
+            "control.max_clients",
+            "control.max_buffered_bytes",
+            "control.observers.users",
+        ] {
+            assert!(
+                issues.iter().any(|i| i.starts_with(key)),
+                "{key}: {issues:?}"
+            );
+        }
+    }
+}
