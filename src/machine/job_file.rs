@@ -121,9 +121,10 @@ pub fn read_with(path: &str, policy: &JobFilePolicy) -> Result<String, ApiError>
         return Err(too_big(bytes.len() as u64));
     }
     String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = 1 + e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count();
         refuse(format!(
-            "not UTF-8 text (invalid byte at offset {})",
-            e.utf8_error().valid_up_to()
+            "not UTF-8 text (invalid byte on line {line}, byte offset {at})"
         ))
     })
 }
@@ -235,7 +236,10 @@ mod tests {
         let e = read_with(p.to_str().unwrap(), &JobFilePolicy::default())
             .unwrap_err()
             .to_string();
-        assert!(e.contains("offset 6") && !e.contains("secret"), "{e}");
+        assert!(
+            e.contains("line 2, byte offset 6") && !e.contains("secret"),
+            "{e}"
+        );
     }
 
     #[test]
