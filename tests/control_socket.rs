@@ -3,8 +3,9 @@
 //! The real daemon is exercised end to end in `tests/daemon_e2e.rs`.
 #![allow(clippy::unwrap_used)]
 
+use hytask::control::access::{AccessPolicy, Ids};
 use hytask::control::client::{Client, ClientError};
-use hytask::control::server::{bind, serve, SocketOptions};
+use hytask::control::server::{bind, serve_with, ServerOptions, SocketOptions};
 use hytask::machine::api::*;
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader, Read, Write};
@@ -17,6 +18,35 @@ use tokio::sync::broadcast;
 struct Double {
     events: broadcast::Sender<MachineEvent>,
     estops: AtomicU32,
+    /// `job.load` of a job named "block" waits here until the sender is dropped.
+    gate: std::sync::Mutex<Option<std::sync::mpsc::Receiver<()>>>,
+    entered: std::sync::atomic::AtomicBool,
+}
+
+impl Double {
+    fn new() -> Double {
+        Double {
+            events: broadcast::channel(64).0,
+            estops: AtomicU32::new(0),
+            gate: std::sync::Mutex::new(None),
+            entered: std::sync::atomic::AtomicBool::new(false),
+        }
+    }
+}
+
+impl hytask::daemon::Deployed for Double {
+    fn name(&self) -> String {
+        "double".into()
+    }
+    fn realtime(&self) -> bool {
+        false
+    }
+    fn servo_cycles(&self) -> u64 {
+        0
+    }
+    fn shutdown(&self) -> anyhow::Result<()> {
+        Ok(())
+    }
 }
 
 impl MachineApi for Double {
@@ -66,6 +96,13 @@ impl MachineApi for Double {
         Ok(())
     }
     fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError> {
+        if src.name.as_deref() == Some("block") {
+            let gate = self.gate.lock().unwrap().take();
+            self.entered.store(true, Ordering::SeqCst);
+            if let Some(rx) = gate {
+                let _ = rx.recv();
+            }
+        }
         Ok(JobInfo {
             name: src.name.clone().unwrap_or_default(),
             lines: 1,
@@ -122,21 +159,26 @@ struct Server {
 
 impl Server {
     fn start() -> Server {
-        let dir = tempfile::tempdir().unwrap();
+        Self::start_with(ServerOptions::default())
+    }
+
+    fn start_with(opts: ServerOptions) -> Server {
+        Self::start_in(tempfile::tempdir().unwrap(), 0o660, opts)
+    }
+
+    fn start_in(dir: tempfile::TempDir, mode: u32, opts: ServerOptions) -> Server {
         let path = dir.path().join("control.sock");
-        let machine = Arc::new(Double {
-            events: broadcast::channel(64).0,
-            estops: AtomicU32::new(0),
-        });
+        let machine = Arc::new(Double::new());
         let listener = bind(&SocketOptions {
             path: path.clone(),
-            mode: 0o660,
+            mode,
             group: None,
         })
         .unwrap();
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
         let m: Arc<dyn MachineApi> = machine.clone();
         let thread = std::thread::spawn(move || {
+            let (listener, claim) = listener.into_parts();
             let rt = tokio::runtime::Builder::new_multi_thread()
                 .worker_threads(2)
                 .enable_all()
@@ -144,11 +186,12 @@ impl Server {
                 .unwrap();
             rt.block_on(async move {
                 let l = tokio::net::UnixListener::from_std(listener).unwrap();
-                serve(l, m, async {
+                serve_with(l, m, opts, async {
                     let _ = rx.await;
                 })
                 .await;
             });
+            drop(claim);
         });
         Server {
             _dir: dir,
@@ -383,4 +426,358 @@ fn vanished_clients_do_not_disturb_others_and_fifty_clients_are_served() {
     for h in handles {
         h.join().unwrap();
     }
+}
+
+/// Reads until the daemon closes the connection (hang guard 60 s); returns what it sent.
+fn read_to_close(s: &mut UnixStream) -> String {
+    s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    let mut all = Vec::new();
+    let mut chunk = [0u8; 4096];
+    loop {
+        match s.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => all.extend_from_slice(&chunk[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => break,
+            Err(e) => panic!(
+                "connection not closed: {e}; got {:?}",
+                String::from_utf8_lossy(&all)
+            ),
+        }
+    }
+    String::from_utf8_lossy(&all).into_owned()
+}
+
+#[test]
+fn a_final_request_without_newline_is_answered_at_end_of_input() {
+    let srv = Server::start();
+    let mut s = UnixStream::connect(&srv.path).unwrap();
+    s.write_all(br#"{"id":1,"method":"estop"}"#).unwrap();
+    s.shutdown(std::net::Shutdown::Write).unwrap();
+    let reply = read_to_close(&mut s);
+    let v: Value = serde_json::from_str(reply.trim()).unwrap();
+    assert_eq!(v, json!({"id": 1, "result": {"ok": true}}));
+    assert_eq!(srv.machine.estops.load(Ordering::SeqCst), 1);
+}
+
+#[test]
+fn estop_gets_through_while_every_client_slot_is_held_by_idle_connections() {
+    let srv = Server::start_with(ServerOptions {
+        max_clients: 8,
+        ..ServerOptions::default()
+    });
+    // Fill every slot, and make sure each is being served (not just queued in the backlog).
+    let mut held: Vec<Client> = (0..8)
+        .map(|_| Client::connect(&srv.path).unwrap())
+        .collect();
+    for c in &mut held {
+        c.call("status", Value::Null).unwrap();
+    }
+    let mut s = UnixStream::connect(&srv.path).unwrap();
+    s.write_all(b"{\"id\":7,\"method\":\"estop\"}\n").unwrap();
+    let v: Value = serde_json::from_str(read_to_close(&mut s).trim()).unwrap();
+    assert_eq!(v, json!({"id": 7, "result": {"ok": true}}));
+    assert_eq!(srv.machine.estops.load(Ordering::SeqCst), 1);
+    // Anything else on an over-limit connection is refused, and says why.
+    let mut s = UnixStream::connect(&srv.path).unwrap();
+    s.write_all(b"{\"id\":8,\"method\":\"status\"}\n").unwrap();
+    let v: Value = serde_json::from_str(read_to_close(&mut s).trim()).unwrap();
+    let m = v["error"]["message"].as_str().unwrap();
+    assert!(m.contains("too many clients") && m.contains("estop"), "{m}");
+    // The held connections still work.
+    held[0].call("status", Value::Null).unwrap();
+}
+
+#[test]
+fn idle_connections_are_closed_and_free_their_slot() {
+    let srv = Server::start_with(ServerOptions {
+        max_clients: 1,
+        idle_timeout: Some(Duration::from_millis(500)),
+        ..ServerOptions::default()
+    });
+    let mut idle = UnixStream::connect(&srv.path).unwrap();
+    let said = read_to_close(&mut idle);
+    assert!(said.contains("control.idle_timeout_s"), "{said}");
+    // The slot is free again: a normal client is served.
+    let t0 = Instant::now();
+    loop {
+        let mut c = Client::connect(&srv.path).unwrap();
+        match c.call("status", Value::Null) {
+            Ok(s) => {
+                assert_eq!(s["machine"], json!("double"));
+                break;
+            }
+            Err(e) => assert!(t0.elapsed() < Duration::from_secs(60), "{e}"),
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_subscriber_receiving_events_is_not_idle() {
+    let srv = Server::start_with(ServerOptions {
+        idle_timeout: Some(Duration::from_secs(3)),
+        ..ServerOptions::default()
+    });
+    let mut c = Client::connect(&srv.path).unwrap();
+    c.call("subscribe", json!({"topics": ["progress"]}))
+        .unwrap();
+    // Events for twice the idle timeout, without a request.
+    for n in 0..120 {
+        let _ = srv.machine.events.send(MachineEvent {
+            topic: "progress".into(),
+            data: json!({"n": n}),
+        });
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let mut last = None;
+    while let Some(e) = c.next_event(Duration::from_millis(200)).unwrap() {
+        last = Some(e.data["n"].clone());
+    }
+    assert_eq!(last, Some(json!(119)));
+    c.call("status", Value::Null).unwrap();
+}
+
+#[test]
+fn a_stalled_subscriber_is_disconnected_and_frees_its_slot() {
+    let srv = Server::start_with(ServerOptions {
+        max_clients: 1,
+        write_timeout: Duration::from_millis(200),
+        ..ServerOptions::default()
+    });
+    let (mut r, mut w) = raw(&srv.path);
+    w.write_all(b"{\"id\":1,\"method\":\"subscribe\"}\n")
+        .unwrap();
+    assert_eq!(read_json(&mut r)["id"], json!(1));
+    // Never read again; flood it until its socket buffer fills and the write stalls.
+    let big = "x".repeat(16 * 1024);
+    let t0 = Instant::now();
+    loop {
+        for _ in 0..50 {
+            let _ = srv.machine.events.send(MachineEvent {
+                topic: "progress".into(),
+                data: json!({"pad": big}),
+            });
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        let mut c = Client::connect(&srv.path).unwrap();
+        if c.call("status", Value::Null).is_ok() {
+            break; // served: the stalled client's slot was freed
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the stalled subscriber still holds the only slot"
+        );
+    }
+    drop((r, w));
+}
+
+#[test]
+fn unfinished_lines_are_capped_in_total_across_clients() {
+    let srv = Server::start_with(ServerOptions {
+        max_buffered_bytes: 2 * 1024 * 1024,
+        ..ServerOptions::default()
+    });
+    // Eight clients each send 1 MiB without a newline: 8 MiB against a 2 MiB budget.
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    let streams: Vec<UnixStream> = (0..8)
+        .map(|_| {
+            let s = UnixStream::connect(&srv.path).unwrap();
+            let mut w = s.try_clone().unwrap();
+            std::thread::spawn(move || {
+                let _ = w.write_all(&vec![b' '; 1024 * 1024]);
+            });
+            let r = s.try_clone().unwrap();
+            let tx = tx.clone();
+            std::thread::spawn(move || {
+                let mut line = String::new();
+                if BufReader::new(r).read_line(&mut line).is_ok() && !line.is_empty() {
+                    let _ = tx.send(line);
+                }
+            });
+            s
+        })
+        .collect();
+    // Clients over the budget are told and closed; those within it wait for the rest of
+    // their line (they get no answer).
+    let mut refused = 0;
+    while refused < 5 {
+        let line = rx
+            .recv_timeout(Duration::from_secs(60))
+            .unwrap_or_else(|_| panic!("only {refused} of 8 clients were refused"));
+        let v: Value = serde_json::from_str(line.trim()).unwrap();
+        let m = v["error"]["message"].as_str().unwrap();
+        assert!(m.contains("control.max_buffered_bytes"), "{m}");
+        refused += 1;
+    }
+    // Others are still served, small requests within their free allowance.
+    let mut c = Client::connect(&srv.path).unwrap();
+    c.call("status", Value::Null).unwrap();
+    for s in streams {
+        let _ = s.shutdown(std::net::Shutdown::Both);
+    }
+}
+
+#[test]
+fn observers_may_watch_and_estop_but_not_move_operators_may() {
+    // A client process running as `nobody` against roles that list only uid 65534's
+    // group as observers; root (this test) is always an operator.
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let mut access = AccessPolicy {
+        enabled: true,
+        operators: Ids::default(),
+        observers: Ids::default(),
+        unlisted: Some(hytask::control::access::Role::Observer),
+        daemon_uid: 0,
+    };
+    access.operators.uids.insert(4242);
+    let srv = Server::start_in(
+        dir,
+        0o666,
+        ServerOptions {
+            access,
+            ..ServerOptions::default()
+        },
+    );
+    let as_nobody = |args: &[&str]| {
+        use std::os::unix::process::CommandExt;
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+            .args(args)
+            .arg("--socket")
+            .arg(&srv.path)
+            .uid(65534)
+            .gid(65534)
+            .output()
+            .unwrap();
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned()
+                + &String::from_utf8_lossy(&out.stderr),
+        )
+    };
+    let (ok, out) = as_nobody(&["status", "--json"]);
+    assert!(ok && out.contains("double"), "{out}");
+    let (ok, out) = as_nobody(&["on"]);
+    assert!(!ok && out.contains("operator role"), "{out}");
+    let (ok, out) = as_nobody(&["home"]);
+    assert!(!ok && out.contains("operator role"), "{out}");
+    let (ok, out) = as_nobody(&["estop"]);
+    assert!(ok, "{out}");
+    assert_eq!(srv.machine.estops.load(Ordering::SeqCst), 1);
+    // root is an operator.
+    let mut c = Client::connect(&srv.path).unwrap();
+    c.call("machine.on", Value::Null).unwrap();
+}
+
+#[test]
+fn bind_never_removes_a_file_that_is_not_a_socket() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("precious");
+    std::fs::write(&path, "data").unwrap();
+    let err = bind(&SocketOptions {
+        path: path.clone(),
+        mode: 0o660,
+        group: None,
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("not a socket"), "{err}");
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "data");
+}
+
+#[test]
+fn bind_replaces_a_stale_socket() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    drop(std::os::unix::net::UnixListener::bind(&path).unwrap());
+    assert!(path.exists());
+    let l = bind(&SocketOptions {
+        path: path.clone(),
+        mode: 0o660,
+        group: None,
+    })
+    .unwrap();
+    UnixStream::connect(&path).unwrap();
+    drop(l);
+    assert!(
+        !path.exists(),
+        "the daemon's own socket is removed when it stops"
+    );
+}
+
+#[test]
+fn bind_refuses_a_directory_other_users_can_write() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    for mode in [0o777, 0o1777, 0o775] {
+        std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(mode)).unwrap();
+        let err = bind(&SocketOptions {
+            path: dir.path().join("control.sock"),
+            mode: 0o660,
+            group: None,
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("writable by"), "{mode:o}: {err}");
+    }
+}
+
+#[test]
+fn the_path_is_claimed_before_anything_is_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = SocketOptions {
+        path: dir.path().join("control.sock"),
+        mode: 0o660,
+        group: None,
+    };
+    let first = hytask::control::listen::claim(&opts).unwrap();
+    // No socket exists yet, but the path is taken.
+    let err = hytask::control::listen::claim(&opts).unwrap_err();
+    assert!(err.to_string().contains("already listening"), "{err}");
+    drop(first);
+    hytask::control::listen::claim(&opts).unwrap();
+}
+
+#[test]
+fn daemon_shutdown_does_not_wait_for_a_blocked_request() {
+    let machine = Arc::new(Double::new());
+    let (gate_tx, gate_rx) = std::sync::mpsc::channel::<()>();
+    *machine.gate.lock().unwrap() = Some(gate_rx);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    let listener = bind(&SocketOptions {
+        path: path.clone(),
+        mode: 0o600,
+        group: None,
+    })
+    .unwrap();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let (done_tx, done_rx) = std::sync::mpsc::channel();
+    let m: Arc<dyn hytask::daemon::Deployed> = machine.clone();
+    std::thread::spawn(move || {
+        let r = hytask::daemon::run(m, listener, async move {
+            let _ = stop_rx.await;
+        });
+        let _ = done_tx.send(r.is_ok());
+    });
+    let mut s = UnixStream::connect(&path).unwrap();
+    s.write_all(
+        b"{\"id\":1,\"method\":\"job.load\",\"params\":{\"text\":\"M2\",\"name\":\"block\"}}\n",
+    )
+    .unwrap();
+    let t0 = Instant::now();
+    while !machine.entered.load(Ordering::SeqCst) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "job.load never arrived"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    stop_tx.send(()).unwrap();
+    // The request is still blocked (gate_tx alive), yet the daemon returns.
+    let ok = done_rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("daemon::run waited for the blocked request");
+    assert!(ok);
+    drop(gate_tx);
 }

@@ -11,10 +11,12 @@ use std::process::ExitCode;
 #[derive(Debug, Clone, clap::Args)]
 pub struct SocketArg {
     /// Control socket of the daemon.
+    /// Default: the daemon's default path for this user (/run/hytask/control.sock for
+    /// root, $XDG_RUNTIME_DIR/hytask/control.sock otherwise).
     #[arg(
         long,
         env = "HYTASK_SOCKET",
-        default_value = "/run/hytask/control.sock"
+        default_value_os_t = crate::control::listen::default_socket_path()
     )]
     pub socket: PathBuf,
     /// Print the daemon's JSON reply as is.

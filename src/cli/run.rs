@@ -22,10 +22,12 @@ pub struct RunArgs {
     /// The G-code job.
     pub job: PathBuf,
     /// Control socket of a running daemon.
+    /// Default: the daemon's default path for this user (/run/hytask/control.sock for
+    /// root, $XDG_RUNTIME_DIR/hytask/control.sock otherwise).
     #[arg(
         long,
         env = "HYTASK_SOCKET",
-        default_value = "/run/hytask/control.sock"
+        default_value_os_t = crate::control::listen::default_socket_path()
     )]
     pub socket: PathBuf,
     /// Machine for the embedded daemon when none is reachable (default: built-in sim mill).

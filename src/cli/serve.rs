@@ -17,26 +17,34 @@ pub struct ServeArgs {
 
 /// Runs the daemon.
 pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
+    use crate::control::{listen, server::ServerOptions};
     init_logging();
     let config = crate::machine::load_config(args.config.as_deref())?;
-    let socket = crate::machine::socket_options(&config, args.socket);
+    let socket = listen::SocketOptions::from_config(&config.control, args.socket);
+    let options = ServerOptions::from_config(&config.control)?;
+    // Take the socket path before deploying anything: a second daemon must stop here, before
+    // it locks memory, starts realtime threads or opens the buses the first one drives.
+    let claim = listen::claim(&socket)?;
     let machine = crate::machine::deploy_from(args.config.as_deref())?;
-    let listener = crate::control::server::bind(&socket)?;
+    let listener = claim.bind()?;
     tracing::info!("control socket at {}", socket.path.display());
-    crate::daemon::run(machine, listener, std::future::pending())?;
+    crate::daemon::run_with(machine, listener, options, std::future::pending())?;
     tracing::info!("machine stopped; exiting");
     Ok(ExitCode::SUCCESS)
 }
 
 /// Logs to stderr without timestamps when journald captures it (it stamps lines itself),
-/// with them otherwise. `RUST_LOG` overrides the level.
+/// with them otherwise; in colour only on a terminal (a log file or the journal would keep
+/// the escape codes). `RUST_LOG` overrides the level.
 pub(super) fn init_logging() {
+    use std::io::IsTerminal;
     use tracing_subscriber::EnvFilter;
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     let under_journald = std::env::var_os("JOURNAL_STREAM").is_some();
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
         .with_target(false);
     let _ = if under_journald {
         builder.without_time().try_init()

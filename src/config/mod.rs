@@ -11,7 +11,8 @@
 //! [spindle]       max/min rpm, enable/direction/speed/at-speed channels
 //! [coolant]       flood/mist outputs
 //! [tool_table]    path
-//! [control]       socket_path, mode, group
+//! [control]       socket_path, mode, group, jobs_dir, max_job_bytes, idle_timeout_s,
+//!                 max_clients, max_buffered_bytes, operators, observers, unlisted
 //! [logging]       level
 //! [motion]        servo_thread, lookahead, g64_tolerance, rapid_override, max_feed_override
 //! [safety]        estop_input, overrun storm policy
@@ -51,7 +52,8 @@ pub use io::{AnalogPoint, DigitalPoint, IoBackend, IoConfig, IoKind, IoRef, Touc
 pub use machine::{Kinematics, KinematicsKind, MachineSection, ScaraConfig};
 pub use root::MachineConfig;
 pub use settings::{
-    ControlConfig, FileMode, LogLevel, LoggingConfig, MotionConfig, SafetyConfig, ToolTableConfig,
+    default_socket_path, ControlConfig, FileMode, LogLevel, LoggingConfig, MotionConfig,
+    Principals, SafetyConfig, ToolTableConfig, UnlistedRole,
 };
 pub use spindle::{CoolantConfig, SpindleConfig};
 pub use thread::{ThreadConfig, MAX_PERIOD_US, MIN_PERIOD_US};

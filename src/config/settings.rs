@@ -13,24 +13,107 @@ pub struct ToolTableConfig {
     pub path: PathBuf,
 }
 
-/// `[control]`: the control socket (JSON lines over a Unix socket).
+/// `[control]`: the control socket (JSON lines over a Unix socket), who may use it and what
+/// a request may cost the daemon.
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ControlConfig {
-    /// Path of the Unix socket.
+    /// Path of the Unix socket. Default: `/run/hytask/control.sock` for root (a system
+    /// daemon), `$XDG_RUNTIME_DIR/hytask/control.sock` for another user: never a directory
+    /// such as /tmp where another user could take the path first.
     #[serde(default = "default_socket_path")]
     pub socket_path: PathBuf,
     /// File mode of the socket, as an octal string (`"0660"`). Whoever can write the
-    /// socket can move the machine, so keep "other" bits off.
+    /// socket can reach the machine, so keep "other" bits off.
     #[serde(default = "default_mode")]
     pub mode: FileMode,
-    /// Group owning the socket (operators are members); the daemon's group if absent.
+    /// Group that owns the socket (operators are members); the daemon's group if absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub group: Option<String>,
+    /// Directory that `job.load` may read jobs from (absolute). A path outside it, after
+    /// symbolic links are resolved, is refused without being opened. Unset: any regular
+    /// file the daemon can read (a personal daemon); set it for a shared machine.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jobs_dir: Option<PathBuf>,
+    /// Largest job file `job.load` reads, bytes (default 256 MiB).
+    #[serde(default = "default_max_job_bytes")]
+    pub max_job_bytes: u64,
+    /// A connection that sends no request and receives no event for this long is closed,
+    /// seconds (0 = never). Frees the slots of clients that connect and go quiet.
+    #[serde(default = "default_idle_timeout_s")]
+    pub idle_timeout_s: u64,
+    /// Connections served at once. Beyond it a connection is still accepted, but answers
+    /// only `estop` and is then closed, so that an e-stop always gets through.
+    #[serde(default = "default_max_clients")]
+    pub max_clients: u32,
+    /// Bytes of unfinished request lines buffered across all clients. Each client may
+    /// buffer 64 KiB regardless; beyond that it draws on this shared budget and is
+    /// disconnected, with an error reply, when the budget is spent.
+    #[serde(default = "default_max_buffered_bytes")]
+    pub max_buffered_bytes: u64,
+    /// Users and groups that may move or change the machine. When `operators` or
+    /// `observers` is set, roles apply: root and the daemon's own user are always
+    /// operators, everyone else is what the lists (or `unlisted`) say. When neither is
+    /// set, everyone who can open the socket is an operator (its mode and group decide).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub operators: Option<Principals>,
+    /// Users and groups that may only watch: `status`, `subscribe`, `unsubscribe`,
+    /// `tasks`, and `estop` (stopping is never refused).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub observers: Option<Principals>,
+    /// Role of a user that is in neither list, when roles apply: `"observer"` (default) or
+    /// `"none"` (the connection is refused).
+    #[serde(default)]
+    pub unlisted: UnlistedRole,
 }
 
-fn default_socket_path() -> PathBuf {
-    PathBuf::from("/run/hytask/hytask.sock")
+/// A set of users and groups, by name.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Principals {
+    /// User names.
+    #[serde(default)]
+    pub users: Vec<String>,
+    /// Group names: primary or supplementary membership counts.
+    #[serde(default)]
+    pub groups: Vec<String>,
+}
+
+/// What a user in neither `operators` nor `observers` may do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UnlistedRole {
+    /// Watch only.
+    #[default]
+    Observer,
+    /// Nothing: the connection is refused.
+    None,
+}
+
+/// The default socket path for the current user: root runs the system daemon in
+/// /run/hytask; another user's daemon lives in its private runtime directory.
+pub fn default_socket_path() -> PathBuf {
+    let uid = nix::unistd::geteuid();
+    if uid.is_root() {
+        return PathBuf::from("/run/hytask/control.sock");
+    }
+    match std::env::var_os("XDG_RUNTIME_DIR") {
+        Some(d) if !d.is_empty() => PathBuf::from(d).join("hytask/control.sock"),
+        _ => PathBuf::from(format!("/run/user/{uid}/hytask/control.sock")),
+    }
+}
+
+fn default_max_job_bytes() -> u64 {
+    256 * 1024 * 1024
+}
+fn default_idle_timeout_s() -> u64 {
+    300
+}
+fn default_max_clients() -> u32 {
+    512
+}
+fn default_max_buffered_bytes() -> u64 {
+    64 * 1024 * 1024
 }
 
 fn default_mode() -> FileMode {
@@ -69,6 +152,14 @@ impl Default for ControlConfig {
             socket_path: default_socket_path(),
             mode: default_mode(),
             group: None,
+            jobs_dir: None,
+            max_job_bytes: default_max_job_bytes(),
+            idle_timeout_s: default_idle_timeout_s(),
+            max_clients: default_max_clients(),
+            max_buffered_bytes: default_max_buffered_bytes(),
+            operators: None,
+            observers: None,
+            unlisted: UnlistedRole::default(),
         }
     }
 }
@@ -211,6 +302,38 @@ impl ControlConfig {
         if let Some(g) = &self.group {
             issues.name("control.group", g);
         }
+        if let Some(d) = &self.jobs_dir {
+            if !d.is_absolute() {
+                issues.push(
+                    "control.jobs_dir",
+                    format!("must be an absolute path, got {}", d.display()),
+                );
+            }
+        }
+        issues.in_range("control.max_job_bytes", self.max_job_bytes, 1, u64::MAX);
+        issues.in_range("control.max_clients", self.max_clients, 1, 65_536);
+        issues.in_range(
+            "control.max_buffered_bytes",
+            self.max_buffered_bytes,
+            1024 * 1024,
+            u64::MAX,
+        );
+        for (list, p) in [
+            ("operators", &self.operators),
+            ("observers", &self.observers),
+        ] {
+            let Some(p) = p else { continue };
+            for (kind, names) in [("users", &p.users), ("groups", &p.groups)] {
+                for n in names {
+                    if n.is_empty() || n.contains(|c: char| c.is_whitespace() || c == ':') {
+                        issues.push(
+                            format!("control.{list}.{kind}"),
+                            format!("{n:?} is not a valid {} name", &kind[..kind.len() - 1]),
+                        );
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -237,6 +360,54 @@ impl SafetyConfig {
     pub(super) fn validate(&self, issues: &mut Issues) {
         if self.overrun_storm_count == 0 {
             issues.push("safety.overrun_storm_count", "must be >= 1, got 0");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn issues_of(toml_text: &str) -> Vec<String> {
+        let c: ControlConfig = toml::from_str(toml_text).unwrap();
+        let mut issues = Issues::default();
+        c.validate(&mut issues);
+        issues.into_vec().iter().map(ToString::to_string).collect()
+    }
+
+    #[test]
+    fn control_defaults_are_bounded_and_private() {
+        let c: ControlConfig = toml::from_str("").unwrap();
+        assert_eq!(c.max_job_bytes, 256 * 1024 * 1024);
+        assert_eq!(c.idle_timeout_s, 300);
+        assert_eq!(c.max_clients, 512);
+        assert_eq!(c.max_buffered_bytes, 64 * 1024 * 1024);
+        assert_eq!((c.jobs_dir, c.operators, c.observers), (None, None, None));
+        assert_eq!(c.unlisted, UnlistedRole::Observer);
+        assert!(!c.socket_path.starts_with("/tmp"));
+    }
+
+    #[test]
+    fn roles_and_limits_parse_and_are_checked() {
+        let c: ControlConfig = toml::from_str(
+            "operators = { users = [\"ann\"], groups = [\"cnc\"] }\nunlisted = \"none\"\n",
+        )
+        .unwrap();
+        assert_eq!(c.operators.unwrap().groups, vec!["cnc".to_string()]);
+        assert_eq!(c.unlisted, UnlistedRole::None);
+        let issues = issues_of(
+            "jobs_dir = \"jobs\"\nmax_clients = 0\nmax_buffered_bytes = 10\nobservers = { users = [\"a b\"] }\n",
+        );
+        for key in [
+            "control.jobs_dir",
+            "control.max_clients",
+            "control.max_buffered_bytes",
+            "control.observers.users",
+        ] {
+            assert!(
+                issues.iter().any(|i| i.starts_with(key)),
+                "{key}: {issues:?}"
+            );
         }
     }
 }

@@ -39,6 +39,8 @@ pub enum ErrorCode {
     Timeout,
     /// 5: not supported by this machine (e.g. sim inputs on real hardware).
     NotSupported,
+    /// 6: this client's role may not call the method (see `control::access`).
+    Forbidden,
 }
 
 impl ErrorCode {
@@ -54,6 +56,7 @@ impl ErrorCode {
             ErrorCode::Gcode => 3,
             ErrorCode::Timeout => 4,
             ErrorCode::NotSupported => 5,
+            ErrorCode::Forbidden => 6,
         }
     }
 }

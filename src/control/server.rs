@@ -3,110 +3,146 @@
 //!
 //! Robustness rules, each with a test in `tests/control_socket.rs`:
 //! - A request line is bounded ([`MAX_REQUEST_BYTES`]); an oversized or malformed line gets
-//!   an error reply and the connection stays usable.
+//!   an error reply and the connection stays usable. A final request without a newline is
+//!   answered at end of input (`printf '{"method":"estop"}' | socat - UNIX-CONNECT:…`).
+//! - Unfinished lines are bounded in total, across clients ([`ServerOptions::max_buffered_bytes`]):
+//!   a client may buffer [`FREE_LINE_BYTES`] on its own, more only from a shared budget, and
+//!   is disconnected with an error reply when the budget is spent.
 //! - Every client has a bounded output queue. Replies wait for space (the client only slows
 //!   itself); events are dropped for a client that does not read, and it is told how many
-//!   with a `lagged` event. A write that stalls past [`WRITE_TIMEOUT`] closes that client.
+//!   with a `lagged` event. A write that stalls past the write timeout closes that client
+//!   and frees its slot.
+//! - An e-stop always gets through: beyond [`ServerOptions::max_clients`] a connection is
+//!   still accepted, answers only `estop`, and is closed. Idle connections (no request, no
+//!   event for [`ServerOptions::idle_timeout`]) are closed.
 //!   Nothing a client does can block the daemon or another client.
 //! - Machine calls run on tokio's blocking pool, never on the reactor threads.
 //! - A client disconnecting mid-job does not stop the job: connections own no machine state.
-//! - The peer's credentials (SO_PEERCRED) are logged per connection.
+//! - The peer's credentials (SO_PEERCRED) decide its role ([`super::access`]).
 
+use super::access::{permits, AccessPolicy, Role};
+pub use super::listen::{bind, default_socket_path, BindError, Listener, SocketOptions};
 use super::methods;
 use super::protocol::{
     event_line, parse_request, reply_line, ControlError, ErrorCode, MAX_REQUEST_BYTES,
 };
 use crate::machine::api::MachineApi;
+use crate::machine::job_file::JobFilePolicy;
 use serde_json::{json, Value};
 use std::collections::HashSet;
 use std::future::Future;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
-use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
 use tokio::net::unix::OwnedReadHalf;
 use tokio::net::{UnixListener, UnixStream};
 use tokio::sync::{broadcast, mpsc};
 
 /// Lines queued for one client before events are dropped for it.
 pub const CLIENT_QUEUE: usize = 256;
-/// A client whose socket accepts nothing for this long is disconnected.
+/// A client whose socket accepts nothing for this long is disconnected (default).
 pub const WRITE_TIMEOUT: Duration = Duration::from_secs(5);
-/// Connections served at once; more are answered with an error and closed.
+/// Connections served at once by default (`[control] max_clients`).
 pub const MAX_CLIENTS: usize = 512;
+/// Bytes of an unfinished line a client may buffer without drawing on the shared budget:
+/// every ordinary request, `estop` included, fits.
+pub const FREE_LINE_BYTES: usize = 64 * 1024;
+/// Largest request read on an over-limit (e-stop only) connection.
+const OVERFLOW_REQUEST_BYTES: u64 = 4096;
+/// How long an over-limit connection may take to send its request.
+const OVERFLOW_READ_TIMEOUT: Duration = Duration::from_secs(10);
 
-/// Where and how to create the socket.
+/// How the server treats its clients; [`ServerOptions::from_config`] reads `[control]`.
 #[derive(Debug, Clone)]
-pub struct SocketOptions {
-    /// Socket path (default `/run/hytask/control.sock`).
-    pub path: PathBuf,
-    /// File mode, e.g. 0o660.
-    pub mode: u32,
-    /// Group that owns the socket, if any.
-    pub group: Option<String>,
+pub struct ServerOptions {
+    /// Connections served at once; more answer only `estop`.
+    pub max_clients: usize,
+    /// Close a connection with no request and no event for this long (`None`: never).
+    pub idle_timeout: Option<Duration>,
+    /// Close a client whose socket accepts nothing for this long.
+    pub write_timeout: Duration,
+    /// Bytes of unfinished request lines across all clients beyond [`FREE_LINE_BYTES`] each.
+    pub max_buffered_bytes: usize,
+    /// Roles.
+    pub access: AccessPolicy,
+    /// What `job.load` may read.
+    pub jobs: JobFilePolicy,
 }
 
-/// Why the socket could not be created.
-#[derive(Debug, thiserror::Error)]
-pub enum BindError {
-    /// Another daemon answers on the path.
-    #[error("{0}: another daemon is already listening there")]
-    InUse(PathBuf),
-    /// A filesystem or socket error.
-    #[error("{path}: {source}")]
-    Io {
-        /// Path involved.
-        path: PathBuf,
-        /// Cause.
-        source: std::io::Error,
-    },
-    /// The configured group does not exist.
-    #[error("control.group: no group named '{0}'")]
-    NoSuchGroup(String),
-}
-
-/// Creates the listening socket: makes the parent directory, replaces a stale socket file
-/// (one nobody answers on), applies mode and group.
-pub fn bind(opts: &SocketOptions) -> Result<std::os::unix::net::UnixListener, BindError> {
-    use std::os::unix::fs::PermissionsExt;
-    let io = |source| BindError::Io {
-        path: opts.path.clone(),
-        source,
-    };
-    if let Some(parent) = opts.path.parent() {
-        if !parent.as_os_str().is_empty() {
-            std::fs::create_dir_all(parent).map_err(io)?;
+impl Default for ServerOptions {
+    fn default() -> Self {
+        ServerOptions {
+            max_clients: MAX_CLIENTS,
+            idle_timeout: Some(Duration::from_secs(300)),
+            write_timeout: WRITE_TIMEOUT,
+            max_buffered_bytes: 64 * 1024 * 1024,
+            access: AccessPolicy::default(),
+            jobs: JobFilePolicy::default(),
         }
     }
-    if opts.path.exists() {
-        if std::os::unix::net::UnixStream::connect(&opts.path).is_ok() {
-            return Err(BindError::InUse(opts.path.clone()));
-        }
-        std::fs::remove_file(&opts.path).map_err(io)?;
-    }
-    let listener = std::os::unix::net::UnixListener::bind(&opts.path).map_err(io)?;
-    std::fs::set_permissions(&opts.path, std::fs::Permissions::from_mode(opts.mode)).map_err(io)?;
-    if let Some(group) = &opts.group {
-        let gid = nix::unistd::Group::from_name(group)
-            .ok()
-            .flatten()
-            .ok_or_else(|| BindError::NoSuchGroup(group.clone()))?
-            .gid;
-        nix::unistd::chown(&opts.path, None, Some(gid))
-            .map_err(|e| io(std::io::Error::from_raw_os_error(e as i32)))?;
-    }
-    listener.set_nonblocking(true).map_err(io)?;
-    Ok(listener)
 }
 
-/// Serves connections until `shutdown` completes. Open connections are dropped then.
+impl ServerOptions {
+    /// Options from `[control]`; fails on a user or group name unknown on this host.
+    pub fn from_config(
+        c: &crate::config::ControlConfig,
+    ) -> Result<Self, super::access::UnknownName> {
+        Ok(ServerOptions {
+            max_clients: c.max_clients as usize,
+            idle_timeout: (c.idle_timeout_s > 0).then(|| Duration::from_secs(c.idle_timeout_s)),
+            write_timeout: WRITE_TIMEOUT,
+            max_buffered_bytes: usize::try_from(c.max_buffered_bytes).unwrap_or(usize::MAX),
+            access: AccessPolicy::from_config(c)?,
+            jobs: JobFilePolicy {
+                jobs_dir: c.jobs_dir.clone(),
+                max_bytes: c.max_job_bytes,
+            },
+        })
+    }
+}
+
+/// State shared by all connections.
+struct Shared {
+    opts: ServerOptions,
+    machine: Arc<dyn MachineApi>,
+    clients: AtomicUsize,
+    overflow: AtomicUsize,
+    buffered: AtomicUsize,
+}
+
+/// Decrements a counter when dropped, so that an aborted connection task frees its slot.
+struct Slot<'a>(&'a AtomicUsize);
+
+impl Drop for Slot<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+/// Serves connections with default [`ServerOptions`] until `shutdown` completes.
 pub async fn serve(
     listener: UnixListener,
     machine: Arc<dyn MachineApi>,
     shutdown: impl Future<Output = ()>,
 ) {
-    let clients = Arc::new(AtomicUsize::new(0));
+    serve_with(listener, machine, ServerOptions::default(), shutdown).await
+}
+
+/// Serves connections until `shutdown` completes. Open connections are dropped then.
+pub async fn serve_with(
+    listener: UnixListener,
+    machine: Arc<dyn MachineApi>,
+    opts: ServerOptions,
+    shutdown: impl Future<Output = ()>,
+) {
+    let shared = Arc::new(Shared {
+        opts,
+        machine,
+        clients: AtomicUsize::new(0),
+        overflow: AtomicUsize::new(0),
+        buffered: AtomicUsize::new(0),
+    });
     tokio::pin!(shutdown);
     let mut tasks = tokio::task::JoinSet::new();
     loop {
@@ -114,15 +150,23 @@ pub async fn serve(
             _ = &mut shutdown => break,
             accepted = listener.accept() => match accepted {
                 Ok((stream, _)) => {
-                    let machine = machine.clone();
-                    let clients = clients.clone();
+                    let shared = shared.clone();
                     tasks.spawn(async move {
-                        if clients.fetch_add(1, Ordering::AcqRel) >= MAX_CLIENTS {
-                            reject_busy(stream).await;
+                        let max = shared.opts.max_clients;
+                        if shared.clients.fetch_add(1, Ordering::AcqRel) < max {
+                            let _slot = Slot(&shared.clients);
+                            serve_client(stream, &shared).await;
                         } else {
-                            serve_client(stream, machine).await;
+                            shared.clients.fetch_sub(1, Ordering::AcqRel);
+                            // Over-limit connections are bounded too; each lives at most
+                            // OVERFLOW_READ_TIMEOUT.
+                            if shared.overflow.fetch_add(1, Ordering::AcqRel) < max {
+                                let _slot = Slot(&shared.overflow);
+                                serve_estop_only(stream, &shared).await;
+                            } else {
+                                shared.overflow.fetch_sub(1, Ordering::AcqRel);
+                            }
                         }
-                        clients.fetch_sub(1, Ordering::AcqRel);
                     });
                 }
                 Err(e) => {
@@ -136,146 +180,357 @@ pub async fn serve(
     tasks.shutdown().await;
 }
 
-async fn reject_busy(mut stream: UnixStream) {
-    let line = reply_line(
+fn peer(stream: &UnixStream) -> Option<(u32, u32)> {
+    match stream.peer_cred() {
+        Ok(c) => Some((c.uid(), c.gid())),
+        Err(e) => {
+            tracing::info!("control client without peer credentials: {e}");
+            None
+        }
+    }
+}
+
+async fn role_of(shared: &Arc<Shared>, peer: Option<(u32, u32)>) -> Option<Role> {
+    let s = shared.clone();
+    tokio::task::spawn_blocking(move || s.opts.access.role_of_peer(peer))
+        .await
+        .unwrap_or(None)
+}
+
+fn refused_line(peer: Option<(u32, u32)>) -> String {
+    let who = match peer {
+        Some((uid, _)) => format!("uid {uid}"),
+        None => "a client without credentials".into(),
+    };
+    reply_line(
         &Value::Null,
         Err(ControlError::new(
-            ErrorCode::Failed,
-            format!("too many clients (limit {MAX_CLIENTS})"),
+            ErrorCode::Forbidden,
+            format!("{who} may not use this socket (control.operators, control.observers, control.unlisted)"),
         )),
-    );
-    let _ = tokio::time::timeout(WRITE_TIMEOUT, stream.write_all(line.as_bytes())).await;
+    )
+}
+
+/// An over-limit connection: reads one request; `estop` is served, anything else gets
+/// "too many clients"; then the connection is closed.
+async fn serve_estop_only(mut stream: UnixStream, shared: &Arc<Shared>) {
+    let peer = peer(&stream);
+    let max = shared.opts.max_clients;
+    let mut buf = Vec::new();
+    let read = async {
+        let mut limited = (&mut stream).take(OVERFLOW_REQUEST_BYTES);
+        let mut byte = [0u8; 1];
+        // Byte by byte up to the first newline: this path serves one short request.
+        while limited.read(&mut byte).await.ok()? == 1 {
+            if byte[0] == b'\n' {
+                break;
+            }
+            buf.push(byte[0]);
+        }
+        Some(())
+    };
+    let _ = tokio::time::timeout(OVERFLOW_READ_TIMEOUT, read).await;
+    let busy = || {
+        ControlError::new(
+            ErrorCode::Failed,
+            format!("too many clients (limit {max}, control.max_clients); this connection serves only 'estop'"),
+        )
+    };
+    let line = match parse_request(&buf) {
+        Ok(req) if req.method == "estop" => {
+            if role_of(shared, peer).await.is_none() {
+                refused_line(peer)
+            } else {
+                tracing::warn!("e-stop over an over-limit control connection");
+                let result = dispatch(shared, Role::Observer, req.method, req.params).await;
+                reply_line(&req.id, result)
+            }
+        }
+        Ok(req) => reply_line(&req.id, Err(busy())),
+        Err(_) => reply_line(&Value::Null, Err(busy())),
+    };
+    let _ =
+        tokio::time::timeout(shared.opts.write_timeout, stream.write_all(line.as_bytes())).await;
+}
+
+/// Runs one method on the blocking pool, under the job-file policy.
+async fn dispatch(
+    shared: &Arc<Shared>,
+    role: Role,
+    method: String,
+    params: Value,
+) -> Result<Value, ControlError> {
+    if !permits(role, &method) {
+        return Err(ControlError::new(
+            ErrorCode::Forbidden,
+            format!(
+                "'{method}' needs the operator role; this client is an {} (control.operators)",
+                role.as_str()
+            ),
+        ));
+    }
+    let s = shared.clone();
+    tokio::task::spawn_blocking(move || {
+        crate::machine::job_file::with_policy(&s.opts.jobs, || {
+            methods::dispatch(&*s.machine, &method, params)
+        })
+    })
+    .await
+    .unwrap_or_else(|e| {
+        Err(ControlError::new(
+            ErrorCode::Failed,
+            format!("internal error: {e}"),
+        ))
+    })
+}
+
+/// Milliseconds since the connection began, when it last sent or received something.
+struct Activity {
+    start: Instant,
+    last_ms: AtomicU64,
+}
+
+impl Activity {
+    fn touch(&self) {
+        self.last_ms
+            .store(self.start.elapsed().as_millis() as u64, Ordering::Relaxed);
+    }
+    fn last(&self) -> Instant {
+        self.start + Duration::from_millis(self.last_ms.load(Ordering::Relaxed))
+    }
+}
+
+/// Per-connection context.
+struct Conn<'a> {
+    shared: &'a Arc<Shared>,
+    role: Role,
+    out: mpsc::Sender<String>,
+    activity: Arc<Activity>,
+    events: Option<tokio::task::JoinHandle<()>>,
 }
 
 /// One connection: a reader loop that handles requests in order and a writer task that
 /// owns the socket's write half.
-async fn serve_client(stream: UnixStream, machine: Arc<dyn MachineApi>) {
-    match stream.peer_cred() {
-        Ok(c) => tracing::info!(
-            uid = c.uid(),
-            gid = c.gid(),
-            pid = c.pid(),
-            "control client connected"
-        ),
-        Err(e) => tracing::info!("control client connected (no peer credentials: {e})"),
+async fn serve_client(stream: UnixStream, shared: &Arc<Shared>) {
+    let peer = peer(&stream);
+    let Some(role) = role_of(shared, peer).await else {
+        tracing::warn!(?peer, "control client refused: no role");
+        let (_, mut w) = stream.into_split();
+        let _ = tokio::time::timeout(
+            shared.opts.write_timeout,
+            w.write_all(refused_line(peer).as_bytes()),
+        )
+        .await;
+        return;
+    };
+    if let Some((uid, gid)) = peer {
+        tracing::info!(uid, gid, role = role.as_str(), "control client connected");
     }
     let (read_half, mut write_half) = stream.into_split();
     let (out_tx, mut out_rx) = mpsc::channel::<String>(CLIENT_QUEUE);
+    let activity = Arc::new(Activity {
+        start: Instant::now(),
+        last_ms: AtomicU64::new(0),
+    });
+    let write_timeout = shared.opts.write_timeout;
+    let writer_activity = activity.clone();
     let writer = tokio::spawn(async move {
         while let Some(line) = out_rx.recv().await {
-            match tokio::time::timeout(WRITE_TIMEOUT, write_half.write_all(line.as_bytes())).await {
-                Ok(Ok(())) => {}
+            match tokio::time::timeout(write_timeout, write_half.write_all(line.as_bytes())).await {
+                Ok(Ok(())) => writer_activity.touch(),
                 Ok(Err(_)) => break,
                 Err(_) => {
-                    tracing::warn!("control client stalled for {WRITE_TIMEOUT:?}; disconnecting");
+                    tracing::warn!("control client stalled for {write_timeout:?}; disconnecting");
                     break;
                 }
             }
         }
     });
-    let mut events: Option<tokio::task::JoinHandle<()>> = None;
-    read_requests(read_half, &machine, &out_tx, &mut events).await;
-    if let Some(e) = events {
+    let mut conn = Conn {
+        shared,
+        role,
+        out: out_tx,
+        activity,
+        events: None,
+    };
+    read_requests(read_half, &mut conn).await;
+    if let Some(e) = conn.events.take() {
         e.abort();
     }
-    drop(out_tx);
+    drop(conn);
     let _ = writer.await;
     tracing::info!("control client disconnected");
 }
 
-/// Reads bounded lines and answers each. Returns on EOF, read error or writer gone.
-async fn read_requests(
-    read_half: OwnedReadHalf,
-    machine: &Arc<dyn MachineApi>,
-    out: &mpsc::Sender<String>,
-    events: &mut Option<tokio::task::JoinHandle<()>>,
-) {
-    let mut reader = BufReader::with_capacity(64 * 1024, read_half);
-    let mut line: Vec<u8> = Vec::new();
-    let mut oversized = false;
+/// An unfinished request line, with what it holds of the shared budget.
+struct LineBuf<'a> {
+    line: Vec<u8>,
+    oversized: bool,
+    reserved: usize,
+    budget: &'a AtomicUsize,
+    max: usize,
+}
+
+impl LineBuf<'_> {
+    /// Appends `bytes`; false when the shared budget cannot cover it.
+    fn extend(&mut self, bytes: &[u8]) -> bool {
+        if self.oversized {
+            return true;
+        }
+        if self.line.len() + bytes.len() > MAX_REQUEST_BYTES {
+            self.oversized = true;
+            self.reset();
+            return true;
+        }
+        let need = (self.line.len() + bytes.len()).saturating_sub(FREE_LINE_BYTES);
+        if need > self.reserved {
+            let more = need - self.reserved;
+            let got = self
+                .budget
+                .fetch_update(Ordering::AcqRel, Ordering::Acquire, |used| {
+                    (used + more <= self.max).then_some(used + more)
+                });
+            if got.is_err() {
+                return false;
+            }
+            self.reserved = need;
+        }
+        self.line.extend_from_slice(bytes);
+        true
+    }
+
+    /// Empties the line and returns its memory and its budget.
+    fn reset(&mut self) {
+        if self.line.capacity() > FREE_LINE_BYTES {
+            self.line = Vec::new();
+        } else {
+            self.line.clear();
+        }
+        self.budget.fetch_sub(self.reserved, Ordering::AcqRel);
+        self.reserved = 0;
+    }
+}
+
+impl Drop for LineBuf<'_> {
+    fn drop(&mut self) {
+        self.budget.fetch_sub(self.reserved, Ordering::AcqRel);
+    }
+}
+
+fn error_line(code: ErrorCode, message: String) -> String {
+    reply_line(&Value::Null, Err(ControlError::new(code, message)))
+}
+
+/// Reads bounded lines and answers each. Returns on EOF (after answering a final request
+/// without newline), read error, idle timeout, budget exhausted, or writer gone.
+async fn read_requests(read_half: OwnedReadHalf, conn: &mut Conn<'_>) {
+    let shared = conn.shared;
+    let mut reader = BufReader::with_capacity(FREE_LINE_BYTES, read_half);
+    let mut line = LineBuf {
+        line: Vec::new(),
+        oversized: false,
+        reserved: 0,
+        budget: &shared.buffered,
+        max: shared.opts.max_buffered_bytes,
+    };
+    let idle = shared.opts.idle_timeout;
     loop {
-        let (consumed, complete) = {
-            let buf = match reader.fill_buf().await {
-                Ok([]) => return,
-                Ok(b) => b,
-                Err(_) => return,
+        let idle_at = idle.map(|d| conn.activity.last() + d);
+        let (consumed, complete, eof) = {
+            let buf = tokio::select! {
+                r = reader.fill_buf() => match r {
+                    Ok(b) => b,
+                    Err(_) => return,
+                },
+                _ = conn.out.closed() => return,
+                _ = sleep_until(idle_at) => {
+                    if idle.is_some_and(|d| conn.activity.last().elapsed() >= d) {
+                        let d = idle.unwrap_or_default();
+                        let _ = conn.out.send(error_line(ErrorCode::Failed, format!(
+                            "idle for {} s (control.idle_timeout_s); closing", d.as_secs()
+                        ))).await;
+                        return;
+                    }
+                    continue;
+                }
             };
-            match buf.iter().position(|&b| b == b'\n') {
-                Some(i) => {
-                    if !oversized {
-                        line.extend_from_slice(&buf[..i]);
-                    }
-                    (i + 1, true)
+            conn.activity.touch();
+            if buf.is_empty() {
+                (0, !line.line.is_empty() || line.oversized, true)
+            } else {
+                let (take, complete) = match buf.iter().position(|&b| b == b'\n') {
+                    Some(i) => (i, true),
+                    None => (buf.len(), false),
+                };
+                if !line.extend(&buf[..take]) {
+                    let _ = conn
+                        .out
+                        .send(error_line(
+                            ErrorCode::InvalidRequest,
+                            format!(
+                                "too much unfinished request data buffered across clients (limit {} bytes, control.max_buffered_bytes); closing",
+                                shared.opts.max_buffered_bytes
+                            ),
+                        ))
+                        .await;
+                    return;
                 }
-                None => {
-                    if !oversized {
-                        line.extend_from_slice(buf);
-                    }
-                    (buf.len(), false)
-                }
+                (take + usize::from(complete), complete, false)
             }
         };
         reader.consume(consumed);
-        if line.len() > MAX_REQUEST_BYTES {
-            oversized = true;
-            line = Vec::new();
-        }
-        if !complete {
-            continue;
-        }
-        let reply = if oversized {
-            oversized = false;
-            Some(reply_line(
-                &Value::Null,
-                Err(ControlError::new(
+        if complete {
+            let reply = if line.oversized {
+                line.oversized = false;
+                Some(error_line(
                     ErrorCode::InvalidRequest,
                     format!("request larger than {MAX_REQUEST_BYTES} bytes"),
-                )),
-            ))
-        } else if line.iter().all(u8::is_ascii_whitespace) {
-            None
-        } else {
-            Some(handle_line(&line, machine, out, events).await)
-        };
-        line.clear();
-        if let Some(reply) = reply {
-            if out.send(reply).await.is_err() {
-                return;
+                ))
+            } else if line.line.iter().all(u8::is_ascii_whitespace) {
+                None
+            } else {
+                Some(handle_line(&line.line, conn).await)
+            };
+            line.reset();
+            if let Some(reply) = reply {
+                if conn.out.send(reply).await.is_err() {
+                    return;
+                }
             }
+        }
+        if eof {
+            return;
         }
     }
 }
 
-async fn handle_line(
-    line: &[u8],
-    machine: &Arc<dyn MachineApi>,
-    out: &mpsc::Sender<String>,
-    events: &mut Option<tokio::task::JoinHandle<()>>,
-) -> String {
+async fn sleep_until(at: Option<Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at.into()).await,
+        None => std::future::pending().await,
+    }
+}
+
+async fn handle_line(line: &[u8], conn: &mut Conn<'_>) -> String {
     let req = match parse_request(line) {
         Ok(r) => r,
         Err((id, e)) => return reply_line(&id, Err(e)),
     };
     let result = match req.method.as_str() {
-        "subscribe" => subscribe(machine, req.params, out, events),
+        "subscribe" => subscribe(
+            &conn.shared.machine,
+            req.params,
+            &conn.out,
+            &conn.activity,
+            &mut conn.events,
+        ),
         "unsubscribe" => {
-            if let Some(e) = events.take() {
+            if let Some(e) = conn.events.take() {
                 e.abort();
             }
             Ok(json!({"ok": true}))
         }
-        _ => {
-            let machine = machine.clone();
-            let method = req.method.clone();
-            tokio::task::spawn_blocking(move || methods::dispatch(&*machine, &method, req.params))
-                .await
-                .unwrap_or_else(|e| {
-                    Err(ControlError::new(
-                        ErrorCode::Failed,
-                        format!("internal error: {e}"),
-                    ))
-                })
-        }
+        _ => dispatch(conn.shared, conn.role, req.method, req.params).await,
     };
     reply_line(&req.id, result)
 }
@@ -287,6 +542,7 @@ fn subscribe(
     machine: &Arc<dyn MachineApi>,
     params: Value,
     out: &mpsc::Sender<String>,
+    activity: &Arc<Activity>,
     events: &mut Option<tokio::task::JoinHandle<()>>,
 ) -> Result<Value, ControlError> {
     let topics: HashSet<String> = match params.get("topics") {
@@ -314,6 +570,7 @@ fn subscribe(
     }
     let mut rx = machine.subscribe();
     let out = out.clone();
+    let activity = activity.clone();
     let mut list: Vec<String> = topics.iter().cloned().collect();
     list.sort();
     *events = Some(tokio::spawn(async move {
@@ -340,16 +597,11 @@ fn subscribe(
                 }
             }
             match out.try_send(event_line(&ev.topic, &ev.data)) {
-                Ok(()) => {}
+                Ok(()) => activity.touch(),
                 Err(mpsc::error::TrySendError::Full(_)) => dropped += 1,
                 Err(mpsc::error::TrySendError::Closed(_)) => return,
             }
         }
     }));
     Ok(json!({"topics": list}))
-}
-
-/// Default socket path.
-pub fn default_socket_path() -> &'static Path {
-    Path::new("/run/hytask/control.sock")
 }

@@ -8,7 +8,8 @@
 
 pub mod notify;
 
-use crate::control::server;
+use crate::control::listen::{self, Listener};
+use crate::control::server::{self, ServerOptions};
 use crate::machine::api::MachineApi;
 use notify::Notifier;
 use std::future::Future;
@@ -29,14 +30,30 @@ pub trait Deployed: MachineApi {
     fn shutdown(&self) -> anyhow::Result<()>;
 }
 
+/// After the machine has stopped, how long the daemon waits for requests still running on
+/// the blocking pool (a `job.load` reading a slow file, say) before it exits anyway.
+pub const SHUTDOWN_GRACE: Duration = Duration::from_secs(2);
+
 /// Serves the control socket for `machine` until `shutdown` completes or SIGTERM/SIGINT
 /// arrives, then stops the machine under control. Notifies systemd and feeds its watchdog
-/// when started by it.
+/// when started by it. The claim on the socket path is held until the machine has stopped,
+/// so that a successor cannot start while this daemon still drives the machine.
 pub fn run(
     machine: Arc<dyn Deployed>,
-    listener: std::os::unix::net::UnixListener,
+    listener: Listener,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
+    run_with(machine, listener, ServerOptions::default(), shutdown)
+}
+
+/// [`run`] with the server options of `[control]` ([`ServerOptions::from_config`]).
+pub fn run_with(
+    machine: Arc<dyn Deployed>,
+    listener: Listener,
+    options: ServerOptions,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let (listener, claim) = listener.into_parts();
     let notifier = Notifier::from_env();
     let stop_watchdog = Arc::new(AtomicBool::new(false));
     let watchdog = Notifier::watchdog_interval().map(|interval| {
@@ -60,7 +77,7 @@ pub fn run(
             if realtime { "" } else { " (not realtime)" }
         ));
         tracing::info!("machine '{name}' ready");
-        server::serve(listener, api, async move {
+        server::serve_with(listener, api, options, async move {
             let mut term =
                 match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
                     Ok(s) => s,
@@ -81,10 +98,13 @@ pub fn run(
         anyhow::Ok(())
     })?;
     let result = machine.shutdown();
+    // A request blocked in a read must not keep the process alive once the axes stopped.
+    rt.shutdown_timeout(SHUTDOWN_GRACE);
     stop_watchdog.store(true, Ordering::Release);
     if let Some(Ok(w)) = watchdog {
         let _ = w.join();
     }
+    drop(claim);
     result
 }
 
@@ -120,20 +140,24 @@ pub struct Embedded {
 impl Embedded {
     /// Starts the machine described by `config` (default: the built-in sim mill).
     pub fn start(config: Option<&Path>) -> anyhow::Result<Embedded> {
-        let machine = crate::machine::deploy_from(config)?;
+        let cfg = crate::machine::load_config(config)?;
+        let options = ServerOptions::from_config(&cfg.control)?;
         let dir = tempdir::Dir::new()?;
         let socket = dir.path().join("control.sock");
-        let listener = server::bind(&server::SocketOptions {
+        // The path is claimed before the machine is deployed, as `hytask serve` does.
+        let claim = listen::claim(&listen::SocketOptions {
             path: socket.clone(),
             mode: 0o600,
             group: None,
         })?;
+        let machine = crate::machine::deploy_from(config)?;
+        let listener = claim.bind()?;
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
         let m = machine.clone();
         let thread = std::thread::Builder::new()
             .name("embedded-daemon".into())
             .spawn(move || {
-                run(m, listener, async move {
+                run_with(m, listener, options, async move {
                     let _ = rx.await;
                 })
             })?;

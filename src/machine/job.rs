@@ -167,8 +167,7 @@ pub fn prepare(
 ) -> Result<PreparedJob, ApiError> {
     let (name, text) = match (&src.path, &src.text) {
         (Some(path), None) => {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| ApiError::InvalidParams(format!("cannot read job {path}: {e}")))?;
+            let text = super::job_file::read(path)?;
             (path.clone(), text)
         }
         (None, Some(text)) => (

@@ -4,6 +4,7 @@
 pub mod api;
 pub mod devices;
 pub mod job;
+pub mod job_file;
 pub mod mode;
 pub mod probing;
 pub mod runtime;
