@@ -596,4 +596,105 @@ mod tests {
         );
         assert!((j.plan.end_mm[0] - 20.0).abs() < 1e-9);
     }
+
+    /// A program with a long G64 run, messages and a dwell, prepared so that it keeps no
+    /// items (`keep` 0) or all of them.
+    fn replayed(keep: usize) -> PreparedJob {
+        let mut text = String::from("G21 G90 G64 P0.01\nG0 X10 Y10 Z-5\nF1500\n(MSG, go)\n");
+        for i in 0..3000 {
+            let x = 10.0 + (i % 400) as f64 * 0.2;
+            let y = 10.0 + (i / 400) as f64 * 0.5;
+            let z = -6.0 + (x * std::f64::consts::PI).sin();
+            text.push_str(&format!("G1 X{x:.3} Y{y:.3} Z{z:.4}\n"));
+            if i == 1500 {
+                text.push_str("G4 P0.5\n(MSG, half way)\n");
+            }
+        }
+        text.push_str("M2\n");
+        let cfg = sim();
+        let src = JobSource {
+            path: None,
+            text: Some(text),
+            name: Some("big.ngc".into()),
+        };
+        prepare_keeping(
+            &src,
+            &interp_options(&cfg),
+            &motion_config(&cfg),
+            START,
+            keep,
+        )
+        .expect("plans")
+    }
+
+    #[test]
+    fn a_job_planned_again_while_it_runs_queues_exactly_the_validated_items() {
+        let kept = replayed(usize::MAX);
+        assert!(kept.replay.is_none());
+        let big = replayed(0);
+        assert!(big.plan.items.is_empty(), "a replayed job keeps no items");
+        let replay = big.replay.as_ref().expect("replayed");
+        let mut fed = Vec::new();
+        let done = replay.run(&mut |batch| {
+            fed.extend_from_slice(batch);
+            true
+        });
+        assert_eq!(done, Ok(true));
+        assert_eq!(fed, kept.plan.items);
+        assert_eq!(big.item_count(), fed.len() as u64);
+        assert_eq!(big.plan.messages, kept.plan.messages);
+        assert_eq!(big.plan.messages.len(), 2);
+        assert_eq!(
+            (big.plan.duration_s, big.plan.segment_count, big.commands),
+            (kept.plan.duration_s, kept.plan.segment_count, kept.commands)
+        );
+        // A cancelled feed stops.
+        let mut batches = 0;
+        assert_eq!(
+            replay.run(&mut |_| {
+                batches += 1;
+                false
+            }),
+            Ok(false)
+        );
+        assert_eq!(batches, 1);
+    }
+
+    #[test]
+    fn a_replay_that_plans_differently_stops_before_queuing_that_batch() {
+        let mut big = replayed(0);
+        let replay = big.replay.as_mut().expect("replayed");
+        let last = replay.digests.len() - 1;
+        replay.digests[last] ^= 1;
+        let mut fed = 0;
+        let e = replay
+            .run(&mut |_| {
+                fed += 1;
+                true
+            })
+            .unwrap_err();
+        assert_eq!(fed, last, "only the matching batches were queued");
+        assert!(e.contains("big.ngc") && e.contains("differently"), "{e}");
+    }
+
+    #[test]
+    fn preparations_wait_for_the_one_in_progress() {
+        let guard = PREPARING.lock().unwrap_or_else(|p| p.into_inner());
+        let (tx, rx) = std::sync::mpsc::channel();
+        let t = std::thread::spawn(move || {
+            let r = prepare_text(None, "G0 X20\nM2\n").map(|j| j.plan.end_mm[0]);
+            let _ = tx.send(r.is_ok());
+        });
+        std::thread::sleep(std::time::Duration::from_millis(200));
+        assert!(
+            rx.try_recv().is_err(),
+            "prepared while another preparation ran"
+        );
+        drop(guard);
+        let ok = rx
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("prepared once the other one ended");
+        assert!(ok);
+        t.join().expect("joins");
+    }
 }

@@ -200,3 +200,117 @@ impl PlanStream {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gcode::{CanonCmd, SourceLoc};
+    use crate::motion::lookahead::CHUNK_MOVES;
+    use crate::motion::Segment;
+
+    /// A zig-zag of `n` short G1 moves in one G64 run (longer than a lookahead chunk).
+    fn zigzag(n: usize) -> Vec<Canon> {
+        let loc = |line| SourceLoc {
+            file: "z.ngc".into(),
+            line,
+            col: 1,
+        };
+        let mut c = vec![Canon {
+            loc: loc(1),
+            cmd: CanonCmd::SetFeedRate(3000.0),
+        }];
+        for i in 0..n {
+            let mut p = [0.0; NUM_AXES];
+            p[0] = 10.0 + (i % 500) as f64 * 0.2;
+            p[1] = 10.0 + (i / 500) as f64 * 0.3;
+            p[2] = -1.0 - 0.4 * ((i % 7) as f64);
+            c.push(Canon {
+                loc: loc(i as u32 + 2),
+                cmd: CanonCmd::StraightFeed(p),
+            });
+        }
+        c
+    }
+
+    fn plan_in_pieces(canon: &[Canon], piece: usize, cfg: &MotionConfig) -> (Vec<Item>, Plan) {
+        let start = [10.0, 10.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut items = Vec::new();
+        let mut sink = |c: &[Item]| items.extend_from_slice(c);
+        let mut s = PlanStream::new(cfg, start, FoldState::new(cfg)).unwrap();
+        for c in canon.chunks(piece) {
+            s.push(c, &mut sink).unwrap();
+        }
+        let f = s.finish(&mut sink).unwrap();
+        assert_eq!(f.items, items.len() as u64);
+        (items, f.plan)
+    }
+
+    fn segments(items: &[Item]) -> Vec<&Segment> {
+        items
+            .iter()
+            .filter_map(|i| match i {
+                Item::Segment(s) => Some(s),
+                Item::Aux(_) => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_run_longer_than_a_chunk_is_continuous_and_within_the_limits() {
+        let cfg = MotionConfig::default();
+        let n = 2 * CHUNK_MOVES + 1000;
+        let canon = zigzag(n);
+        let (items, plan) = plan_in_pieces(&canon, canon.len(), &cfg);
+        let segs = segments(&items);
+        assert!(segs.len() > 2 * CAP_CHUNK, "{}", segs.len());
+        for w in segs.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            for i in 0..NUM_AXES {
+                assert!(
+                    (a.end_mm[i] - b.start_mm[i]).abs() < 1e-9,
+                    "pose jumps at line {}",
+                    b.line
+                );
+                assert!(
+                    (a.v1_mm_s[i] - b.v0_mm_s[i]).abs() < 1e-6,
+                    "velocity jumps at line {}",
+                    b.line
+                );
+            }
+        }
+        let lim = Limits::new(&cfg);
+        for s in &segs {
+            assert!(s.override_cap >= 1.0 && s.end_override_cap >= 1.0);
+            for (i, [v, a, j]) in s.peaks().into_iter().enumerate() {
+                assert!(v <= lim.vel[i] * (1.0 + 1e-9), "v {v} line {}", s.line);
+                assert!(a <= lim.acc[i] * (1.0 + 1e-6), "a {a} line {}", s.line);
+                assert!(j <= lim.jerk[i] * (1.0 + 1e-6), "j {j} line {}", s.line);
+            }
+        }
+        // It never stops in the middle of the run (a chunk boundary is not a stop).
+        let stops = segs
+            .windows(2)
+            .filter(|w| w[0].v1_mm_s.iter().all(|v| *v == 0.0))
+            .count();
+        assert_eq!(stops, 0);
+        assert!((plan.end_mm[1] - (10.0 + ((n - 1) / 500) as f64 * 0.3)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn how_the_commands_are_cut_does_not_change_the_plan() {
+        let cfg = MotionConfig::default();
+        let canon = zigzag(CHUNK_MOVES + 3000);
+        let (whole, p1) = plan_in_pieces(&canon, canon.len(), &cfg);
+        let (pieces, p2) = plan_in_pieces(&canon, 777, &cfg);
+        assert_eq!(whole, pieces);
+        assert_eq!(p1, p2);
+        // And a short program is planned as a whole queue: same as `plan_from`.
+        let short = &canon[..2000];
+        let (items, _) = plan_in_pieces(short, 100, &cfg);
+        let start = [10.0, 10.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(
+            items,
+            crate::motion::plan_from(short, &cfg, start).unwrap().items
+        );
+    }
+}
