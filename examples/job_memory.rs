@@ -127,6 +127,7 @@ fn main() -> anyhow::Result<()> {
         kept as f64 / n as f64
     );
     println!("segments        {}", prepared.plan.segment_count);
+    println!("planned time    {:.0} s", prepared.plan.duration_s);
     println!("prepare         {secs:.1} s");
     if let Some(k) = vm_hwm_kib() {
         println!("VmHWM           {:.1} MB", k as f64 / 1e3);

@@ -157,10 +157,10 @@ fn stream_pass(
     let mut run = gcode::Chunked::open_str(name, text, opts, CANON_CHUNK).map_err(gcode)?;
     let mut planner = PlanStream::new(motion, start_mm, motion::from_canon::FoldState::new(motion))
         .map_err(refuse)?;
-    let mut stopped = false;
+    let stopped = std::cell::Cell::new(false);
     let mut sink = |items: &[Item]| {
-        if !stopped {
-            stopped = !batch(items);
+        if !stopped.get() {
+            stopped.set(!batch(items));
         }
     };
     let (mut chunk, mut commands) = (Vec::new(), 0);
@@ -171,6 +171,9 @@ fn stream_pass(
         }
         commands += chunk.len();
         planner.push(&chunk, &mut sink).map_err(refuse)?;
+        if stopped.get() {
+            return Ok(Streamed::Stopped);
+        }
         if !more {
             break;
         }
@@ -178,7 +181,7 @@ fn stream_pass(
     drop(chunk);
     drop(run);
     let finished = planner.finish(&mut sink).map_err(refuse)?;
-    Ok(if stopped {
+    Ok(if stopped.get() {
         Streamed::Stopped
     } else {
         Streamed::Planned(finished, commands)
@@ -648,7 +651,7 @@ mod tests {
             (big.plan.duration_s, big.plan.segment_count, big.commands),
             (kept.plan.duration_s, kept.plan.segment_count, kept.commands)
         );
-        // A cancelled feed stops.
+        // A cancelled feed stops at once.
         let mut batches = 0;
         assert_eq!(
             replay.run(&mut |_| {
@@ -696,5 +699,36 @@ mod tests {
             .expect("prepared once the other one ended");
         assert!(ok);
         t.join().expect("joins");
+    }
+
+    #[test]
+    fn a_cancelled_replay_stops_planning_at_once() {
+        // Long enough for several batches; a line near the end that only the interpreter
+        // refuses shows whether the replay went on after it was told to stop.
+        let mut text = String::from("G21 G90 G64 P0.01\nG0 X10 Y10 Z-5\nF1500\n");
+        for i in 0..40_000 {
+            let x = 10.0 + (i % 400) as f64 * 0.2;
+            let y = 10.0 + (i / 400) as f64 * 0.5;
+            let z = -6.0 + (x * std::f64::consts::PI).sin();
+            text.push_str(&format!("G1 X{x:.3} Y{y:.3} Z{z:.4}\n"));
+        }
+        let good = format!("{text}M2\n");
+        let cfg = sim();
+        let src = JobSource {
+            path: None,
+            text: Some(good),
+            name: Some("long.ngc".into()),
+        };
+        let (o, m) = (interp_options(&cfg), motion_config(&cfg));
+        let mut job = prepare_keeping(&src, &o, &m, START, 0).expect("plans");
+        let replay = job.replay.as_mut().expect("replayed");
+        assert!(replay.digests.len() >= 2, "{}", replay.digests.len());
+        replay.text = format!("{text}G1 X10 G0\nM2\n");
+        let mut batches = 0;
+        let out = replay.run(&mut |_| {
+            batches += 1;
+            false
+        });
+        assert_eq!((out, batches), (Ok(false), 1));
     }
 }
