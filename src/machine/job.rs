@@ -135,7 +135,7 @@ impl Replay {
 /// How a streaming pass ended.
 enum Streamed {
     /// Planned to the end: the summary and the number of commands.
-    Planned(Finished, usize),
+    Planned(Box<Finished>, usize),
     /// The program probes: it must be prepared whole.
     Probes,
     /// The batch consumer asked to stop.
@@ -184,7 +184,7 @@ fn stream_pass(
     Ok(if stopped.get() {
         Streamed::Stopped
     } else {
-        Streamed::Planned(finished, commands)
+        Streamed::Planned(Box::new(finished), commands)
     })
 }
 
@@ -416,7 +416,7 @@ pub fn prepare_keeping(
         true
     })?;
     let (finished, commands) = match streamed {
-        Streamed::Planned(f, c) => (f, c),
+        Streamed::Planned(f, c) => (*f, c),
         Streamed::Probes | Streamed::Stopped => {
             // A probing job: validated whole with simulated probes, run piece by piece.
             let program =
