@@ -21,9 +21,9 @@
 //! Why not store a compact plan instead (segments relative to the previous end, profile
 //! parameters only)? The segments carry per-segment override limits computed from what
 //! follows them, and a lossless encoding of their f64 fields stays above ~150 bytes per
-//! segment, ~350 bytes per line: more than the text (~30 bytes per line). Re-planning costs
-//! CPU on an ordinary thread (~4 µs a line, far faster than the machine runs it) and no
-//! memory.
+//! segment, ~350 bytes per line: more than ten times the text (~30 bytes per line).
+//! Re-planning costs CPU on an ordinary thread (a few µs a line, thousands of times faster
+//! than the machine runs it) and no memory. Figures: `benches/README.md`, "Job memory".
 //!
 //! Preparations are serialised ([`prepare`] waits for the one in progress): parallel loads
 //! cannot add up their peaks. A job that probes (G38.x) is prepared whole as before and runs
@@ -79,7 +79,7 @@ impl PreparedJob {
 }
 
 /// What a large job keeps to be planned again while it runs (see the module doc).
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct Replay {
     name: String,
     text: String,
@@ -90,6 +90,18 @@ pub struct Replay {
     pub items: u64,
     /// Digest of each batch of items the validating pass produced, in order.
     digests: Vec<u64>,
+}
+
+impl std::fmt::Debug for Replay {
+    /// Without the text (megabytes).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Replay")
+            .field("name", &self.name)
+            .field("text_bytes", &self.text.len())
+            .field("items", &self.items)
+            .field("batches", &self.digests.len())
+            .finish()
+    }
 }
 
 impl Replay {

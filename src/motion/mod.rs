@@ -5,6 +5,9 @@
 //! non-motion commands → [`AuxItem`]s) → [`lookahead`] (merging within G64 Q, junction
 //! blends within G64 P, backward/forward passes over a window, S-curve segments) → a
 //! [`Plan`] of `Copy` [`Item`]s → the [`Interpolator`] on the servo thread.
+//! [`stream::PlanStream`] runs that pipeline on a stream of commands in bounded memory (the
+//! whole-program [`plan_from`] is the same stream fed at once); a job of millions of lines
+//! is planned that way (see `machine::job`).
 //!
 //! Every segment is one S-curve velocity transition between two velocity *vectors* (see
 //! [`profile`]); corners are blends of that same shape ([`blend`]). That is what makes the
