@@ -17,6 +17,8 @@
 //! produces the same items, and each batch is checked against the first pass' digest
 //! *before* it is queued, so nothing that was not validated can move (a subroutine file
 //! changed on disk in between, say, ends the job at that batch with an error instead).
+//! The feeder plans on a thread of its own up to two batches ahead of the queue
+//! ([`Replay::run_ahead`]), so refilling the queue never waits for planning.
 //!
 //! Why not store a compact plan instead (segments relative to the previous end, profile
 //! parameters only)? The segments carry per-segment override limits computed from what
@@ -141,6 +143,40 @@ impl Replay {
             Ok(Streamed::Planned(..)) if n == self.digests.len() => Ok(true),
             Ok(_) => Err(changed()),
         }
+    }
+}
+
+impl Replay {
+    /// [`Replay::run`] with the planning on a thread of its own, up to two batches ahead of
+    /// `push`: the queue is refilled from a planned batch while the next one is planned, so
+    /// a job whose segments run faster than one batch is planned never starves the
+    /// interpolator (an underrun at speed is an abrupt stop).
+    pub fn run_ahead(&self, push: &mut dyn FnMut(&[Item]) -> bool) -> Result<bool, String> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<Item>>(2);
+        std::thread::scope(|scope| {
+            let planner = std::thread::Builder::new()
+                .name("job-replay".into())
+                .spawn_scoped(scope, move || {
+                    self.run(&mut |batch| tx.send(batch.to_vec()).is_ok())
+                })
+                .map_err(|e| format!("cannot start the job's planner: {e}"))?;
+            let mut pushed_all = true;
+            for batch in rx.iter() {
+                if !push(&batch) {
+                    pushed_all = false;
+                    break;
+                }
+            }
+            // A planner blocked on a full channel sees it closed and stops.
+            drop(rx);
+            let planned = planner
+                .join()
+                .unwrap_or_else(|_| Err(format!("{}: the job's planner panicked", self.name)));
+            match planned {
+                Ok(_) if !pushed_all => Ok(false),
+                other => other,
+            }
+        })
     }
 }
 
@@ -656,6 +692,13 @@ mod tests {
         });
         assert_eq!(done, Ok(true));
         assert_eq!(fed, kept.plan.items);
+        let mut ahead = Vec::new();
+        let done = replay.run_ahead(&mut |batch| {
+            ahead.extend_from_slice(batch);
+            true
+        });
+        assert_eq!(done, Ok(true));
+        assert_eq!(ahead, kept.plan.items);
         assert_eq!(big.item_count(), fed.len() as u64);
         assert_eq!(big.plan.messages, kept.plan.messages);
         assert_eq!(big.plan.messages.len(), 2);
@@ -690,6 +733,15 @@ mod tests {
             .unwrap_err();
         assert_eq!(fed, last, "only the matching batches were queued");
         assert!(e.contains("big.ngc") && e.contains("differently"), "{e}");
+        fed = 0;
+        let e = replay
+            .run_ahead(&mut |_| {
+                fed += 1;
+                true
+            })
+            .unwrap_err();
+        assert_eq!(fed, last, "planned ahead, queued only when it matched");
+        assert!(e.contains("differently"), "{e}");
     }
 
     #[test]
@@ -738,6 +790,12 @@ mod tests {
         replay.text = format!("{text}G1 X10 G0\nM2\n");
         let mut batches = 0;
         let out = replay.run(&mut |_| {
+            batches += 1;
+            false
+        });
+        assert_eq!((out, batches), (Ok(false), 1));
+        batches = 0;
+        let out = replay.run_ahead(&mut |_| {
             batches += 1;
             false
         });

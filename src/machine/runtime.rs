@@ -550,8 +550,8 @@ impl Machine {
                         }
                         // A large job is planned again as it runs (see `job`).
                         Some(replay) => {
-                            let run =
-                                replay.run(&mut |batch| feed(queue.clone(), batch, id, &cancel));
+                            let run = replay
+                                .run_ahead(&mut |batch| feed(queue.clone(), batch, id, &cancel));
                             if let Err(msg) = run {
                                 tracing::error!("job {id}: {msg}");
                                 if let Some(a) = lock(&book).active.as_mut().filter(|a| a.id == id)
