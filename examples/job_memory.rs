@@ -129,6 +129,27 @@ fn main() -> anyhow::Result<()> {
     println!("segments        {}", prepared.plan.segment_count);
     println!("planned time    {:.0} s", prepared.plan.duration_s);
     println!("prepare         {secs:.1} s");
+    // While it runs: the feeder plans the job again (see `machine::job`); what that costs
+    // on top of what the loaded job keeps.
+    if let Some(replay) = &prepared.replay {
+        let before = LIVE.load(Ordering::Relaxed);
+        PEAK.store(before, Ordering::Relaxed);
+        let mut items = 0u64;
+        let t = std::time::Instant::now();
+        let done = replay.run_ahead(&mut |batch| {
+            items += batch.len() as u64;
+            true
+        });
+        let secs = t.elapsed().as_secs_f64();
+        anyhow::ensure!(done == Ok(true), "replay: {done:?}");
+        anyhow::ensure!(items == prepared.item_count(), "replay gave {items} items");
+        let run_peak = PEAK.load(Ordering::Relaxed) - before;
+        println!(
+            "running: feeder  {:.1} MB peak on top ({:.0} B/line), {secs:.1} s to plan again",
+            mb(run_peak),
+            run_peak as f64 / n as f64
+        );
+    }
     if let Some(k) = vm_hwm_kib() {
         println!("VmHWM           {:.1} MB", k as f64 / 1e3);
     }

@@ -27,6 +27,10 @@
 //! Re-planning costs CPU on an ordinary thread (a few µs a line, thousands of times faster
 //! than the machine runs it) and no memory. Figures: `benches/README.md`, "Job memory".
 //!
+//! Errors are found chunk by chunk, in program order: a program with an interpreter error
+//! late and a planning error (a soft limit, say) thousands of lines earlier now reports the
+//! planning error; both were, and are, refused before anything moves.
+//!
 //! Preparations are serialised ([`prepare`] waits for the one in progress): parallel loads
 //! cannot add up their peaks. A job that probes (G38.x) is prepared whole as before and runs
 //! piece by piece ([`super::probing`]).
