@@ -33,7 +33,7 @@ pub mod session;
 pub mod tooltable;
 
 pub use canon::{Canon, CanonCmd, LengthUnits, Pose, ProbeKind, SourceLoc, NUM_AXES};
-pub use session::{PieceEnd, ProbeResult, Session};
+pub use session::{Chunked, PieceEnd, ProbeResult, Session};
 
 use std::path::{Path, PathBuf};
 

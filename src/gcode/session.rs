@@ -123,6 +123,44 @@ impl Session {
     }
 }
 
+/// A whole program interpreted a chunk of commands at a time, with probes simulated as in
+/// the one-shot run ([`super::load_str`]): the same commands in the same order, cut into
+/// pieces, so that a long program is checked and planned without ever holding all its
+/// commands (see `machine::job`).
+pub struct Chunked {
+    it: Interp<'static>,
+}
+
+impl Chunked {
+    /// Opens program text; `name` is used as the file name in locations and errors. Each
+    /// [`Chunked::next_chunk`] returns at least `chunk` commands (fewer at the end), a line's
+    /// commands never split.
+    pub fn open_str(
+        name: &str,
+        text: String,
+        opts: &InterpOptions,
+        chunk: usize,
+    ) -> Result<Chunked, GcodeError> {
+        let mut it = Interp::new(Cow::Owned(opts.clone()))?;
+        it.yield_after = chunk.max(1);
+        it.load(name, text)?;
+        Ok(Chunked { it })
+    }
+
+    /// Moves the next commands into `out` (cleared first); false once the program has ended
+    /// (`out` then holds the last ones, possibly none).
+    pub fn next_chunk(&mut self, out: &mut Vec<Canon>) -> Result<bool, GcodeError> {
+        out.clear();
+        if !self.it.ended() {
+            self.it.resume()?;
+        }
+        if let Sink::Canon(v) = &mut self.it.out {
+            std::mem::swap(v, out);
+        }
+        Ok(!self.it.ended())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -173,6 +211,27 @@ mod tests {
         assert_eq!(moves[0][2], 1.75, "G0 Z[#5063 + 5] uses the measured Z");
         assert_eq!(moves[1][0], 7.0, "#5070 is 1 after a trip");
         assert_eq!(moves[1][2], 1.75);
+    }
+
+    #[test]
+    fn a_chunked_run_gives_the_one_shot_commands_in_pieces() {
+        let prog = "G21 G90 F100\n#1 = 0\no1 while [#1 LT 50]\nG1 X[#1] Y[#1 * 2]\n\
+                    G38.2 Z-1\n#1 = [#1 + 1]\no1 endwhile\nM2\n";
+        let opts = InterpOptions::default();
+        let one_shot = crate::gcode::load_str("c.ngc", prog, &opts).unwrap();
+        let mut run = Chunked::open_str("c.ngc", prog.into(), &opts, 7).unwrap();
+        let (mut all, mut chunk, mut pieces) = (Vec::new(), Vec::new(), 0);
+        loop {
+            let more = run.next_chunk(&mut chunk).unwrap();
+            assert!(!more || chunk.len() >= 7, "{}", chunk.len());
+            all.append(&mut chunk);
+            pieces += 1;
+            if !more {
+                break;
+            }
+        }
+        assert!(pieces > 10, "{pieces}");
+        assert_eq!(all, one_shot.canon);
     }
 
     #[test]

@@ -2,13 +2,58 @@
 //! full (soft limits, kinematics, every axis limit), and only then hand it to the machine.
 //! A job with any error is refused as a whole before anything moves, and the error names
 //! file, line and column.
+//!
+//! # Memory: plan twice, keep the text
+//!
+//! A planned segment is ~400 bytes and a CAM surfacing job has ~2.3 segments per line, so a
+//! million-line job's queue alone is ~900 MB; the interpreter's commands and the planner's
+//! intermediates used to add as much again while it was prepared. A job is therefore
+//! interpreted and planned as a stream ([`gcode::Chunked`] → [`motion::stream::PlanStream`]),
+//! a chunk of commands at a time, in bounded memory. The first pass validates the whole job
+//! (every interpreter error, soft limit, kinematic and axis limit, as before) and keeps the
+//! summary, a digest of each batch of items, and the items themselves only while there are
+//! at most [`KEEP_ITEMS_MAX`]. A larger job keeps its text instead ([`Replay`]) and its
+//! feeder plans it again while it runs: the planner is deterministic, so the second pass
+//! produces the same items, and each batch is checked against the first pass' digest
+//! *before* it is queued, so nothing that was not validated can move (a subroutine file
+//! changed on disk in between, say, ends the job at that batch with an error instead).
+//! The feeder plans on a thread of its own up to two batches ahead of the queue
+//! ([`Replay::run_ahead`]), so refilling the queue never waits for planning.
+//!
+//! Why not store a compact plan instead (segments relative to the previous end, profile
+//! parameters only)? The segments carry per-segment override limits computed from what
+//! follows them, and a lossless encoding of their f64 fields stays above ~150 bytes per
+//! segment, ~350 bytes per line: more than ten times the text (~30 bytes per line).
+//! Re-planning costs CPU on an ordinary thread (a few µs a line, thousands of times faster
+//! than the machine runs it) and no memory. Figures: `benches/README.md`, "Job memory".
+//!
+//! Errors are found chunk by chunk, in program order: a program with an interpreter error
+//! late and a planning error (a soft limit, say) thousands of lines earlier now reports the
+//! planning error; both were, and are, refused before anything moves.
+//!
+//! Preparations are serialised ([`prepare`] waits for the one in progress): parallel loads
+//! cannot add up their peaks. A job that probes (G38.x) is prepared whole as before and runs
+//! piece by piece ([`super::probing`]).
 
 use super::probing::ProbingSource;
 use crate::config::MachineConfig;
 use crate::gcode::{self, Canon, CanonCmd, InterpOptions, NUM_AXES};
 use crate::machine::api::{ApiError, JobSource};
-use crate::motion::{self, AxisLimits, KinematicsConfig, MotionConfig, Plan};
+use crate::motion::stream::{Finished, PlanStream};
+use crate::motion::{self, AxisLimits, Item, KinematicsConfig, MotionConfig, Plan};
+use std::hash::Hasher;
 use std::path::Path;
+use std::sync::Mutex;
+
+/// Items a prepared job keeps in memory (~25 MB); a job with more keeps its text and is
+/// planned again while it runs (see the module doc).
+pub const KEEP_ITEMS_MAX: usize = 65_536;
+
+/// Commands interpreted at a time by the streaming passes.
+const CANON_CHUNK: usize = 4_096;
+
+/// One preparation at a time (see the module doc).
+static PREPARING: Mutex<()> = Mutex::new(());
 
 /// A job that interpreted and planned without error.
 #[derive(Debug, Clone)]
@@ -25,6 +70,209 @@ pub struct PreparedJob {
     pub plan: Plan,
     /// Set when the program probes (G38.x): what to interpret again, live, when it runs.
     pub probing: Option<ProbingSource>,
+    /// Set for a job too large to keep its items: `plan.items` is empty and the feeder plans
+    /// the job again from this.
+    pub replay: Option<Replay>,
+}
+
+impl PreparedJob {
+    /// Items the job puts in the segment queue (the first piece's for a probing job).
+    pub fn item_count(&self) -> u64 {
+        self.replay
+            .as_ref()
+            .map_or(self.plan.items.len() as u64, |r| r.items)
+    }
+}
+
+/// What a large job keeps to be planned again while it runs (see the module doc).
+#[derive(Clone)]
+pub struct Replay {
+    name: String,
+    text: String,
+    opts: InterpOptions,
+    motion: MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    /// Items the validating pass produced.
+    pub items: u64,
+    /// Digest of each batch of items the validating pass produced, in order.
+    digests: Vec<u64>,
+}
+
+impl std::fmt::Debug for Replay {
+    /// Without the text (megabytes).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Replay")
+            .field("name", &self.name)
+            .field("text_bytes", &self.text.len())
+            .field("items", &self.items)
+            .field("batches", &self.digests.len())
+            .finish()
+    }
+}
+
+impl Replay {
+    /// Plans the job again and hands each batch of items to `push` once it is checked against
+    /// the validated plan. `push` returns false to stop (job cancelled): then `Ok(false)`.
+    /// An error (a batch that differs from the validated one, or that no longer plans) comes
+    /// before that batch is handed over.
+    pub fn run(&self, push: &mut dyn FnMut(&[Item]) -> bool) -> Result<bool, String> {
+        let mut n = 0;
+        let mut differs = false;
+        let out = stream_pass(
+            &self.name,
+            self.text.clone(),
+            &self.opts,
+            &self.motion,
+            self.start_mm,
+            &mut |items| {
+                if self.digests.get(n) != Some(&digest(items)) {
+                    differs = true;
+                    return false;
+                }
+                n += 1;
+                push(items)
+            },
+        );
+        let changed = || {
+            format!(
+                "{}: the job planned differently while it ran than when it was loaded \
+                 (batch {n}; a subroutine or tool table file changed?): stopped",
+                self.name
+            )
+        };
+        match out {
+            Err(e) => Err(e.to_string()),
+            Ok(_) if differs => Err(changed()),
+            Ok(Streamed::Stopped) => Ok(false),
+            Ok(Streamed::Planned(..)) if n == self.digests.len() => Ok(true),
+            Ok(_) => Err(changed()),
+        }
+    }
+}
+
+impl Replay {
+    /// [`Replay::run`] with the planning on a thread of its own, up to two batches ahead of
+    /// `push`: the queue is refilled from a planned batch while the next one is planned, so
+    /// a job whose segments run faster than one batch is planned never starves the
+    /// interpolator (an underrun at speed is an abrupt stop).
+    pub fn run_ahead(&self, push: &mut dyn FnMut(&[Item]) -> bool) -> Result<bool, String> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<Item>>(2);
+        std::thread::scope(|scope| {
+            let planner = std::thread::Builder::new()
+                .name("job-replay".into())
+                .spawn_scoped(scope, move || {
+                    self.run(&mut |batch| tx.send(batch.to_vec()).is_ok())
+                })
+                .map_err(|e| format!("cannot start the job's planner: {e}"))?;
+            let mut pushed_all = true;
+            for batch in rx.iter() {
+                if !push(&batch) {
+                    pushed_all = false;
+                    break;
+                }
+            }
+            // A planner blocked on a full channel sees it closed and stops.
+            drop(rx);
+            let planned = planner
+                .join()
+                .unwrap_or_else(|_| Err(format!("{}: the job's planner panicked", self.name)));
+            match planned {
+                Ok(_) if !pushed_all => Ok(false),
+                other => other,
+            }
+        })
+    }
+}
+
+/// How a streaming pass ended.
+enum Streamed {
+    /// Planned to the end: the summary and the number of commands.
+    Planned(Box<Finished>, usize),
+    /// The program probes: it must be prepared whole.
+    Probes,
+    /// The batch consumer asked to stop.
+    Stopped,
+}
+
+/// Interprets and plans `text` a chunk at a time, handing each finalised batch of items to
+/// `batch` (which returns false to stop).
+fn stream_pass(
+    name: &str,
+    text: String,
+    opts: &InterpOptions,
+    motion: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    batch: &mut dyn FnMut(&[Item]) -> bool,
+) -> Result<Streamed, ApiError> {
+    let gcode = |e: gcode::GcodeError| ApiError::Gcode(e.to_string());
+    let refuse = |e: motion::PlanError| ApiError::Gcode(format!("{name}: {e}"));
+    let mut run = gcode::Chunked::open_str(name, text, opts, CANON_CHUNK).map_err(gcode)?;
+    let mut planner = PlanStream::new(motion, start_mm, motion::from_canon::FoldState::new(motion))
+        .map_err(refuse)?;
+    let stopped = std::cell::Cell::new(false);
+    let mut sink = |items: &[Item]| {
+        if !stopped.get() {
+            stopped.set(!batch(items));
+        }
+    };
+    let (mut chunk, mut commands) = (Vec::new(), 0);
+    loop {
+        let more = run.next_chunk(&mut chunk).map_err(gcode)?;
+        if first_probe_line(&chunk).is_some() {
+            return Ok(Streamed::Probes);
+        }
+        commands += chunk.len();
+        planner.push(&chunk, &mut sink).map_err(refuse)?;
+        if stopped.get() {
+            return Ok(Streamed::Stopped);
+        }
+        if !more {
+            break;
+        }
+    }
+    drop(chunk);
+    drop(run);
+    let finished = planner.finish(&mut sink).map_err(refuse)?;
+    Ok(if stopped.get() {
+        Streamed::Stopped
+    } else {
+        Streamed::Planned(Box::new(finished), commands)
+    })
+}
+
+/// A digest of a batch of items (the bits of every field).
+fn digest(items: &[Item]) -> u64 {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for it in items {
+        match it {
+            Item::Segment(s) => {
+                let arrays = [&s.start_mm, &s.end_mm, &s.v0_mm_s, &s.v1_mm_s];
+                for v in arrays.into_iter().flatten() {
+                    h.write_u64(v.to_bits());
+                }
+                for v in [
+                    s.duration_s,
+                    s.jerk_s,
+                    s.length_mm,
+                    s.move_rest_mm,
+                    s.override_cap,
+                    s.end_override_cap,
+                    s.scale_rate_max,
+                    s.end_scale_rate_max,
+                    s.scale_jerk_max,
+                    s.brake_scale_jerk_max,
+                    s.next_scale_jerk_max,
+                ] {
+                    h.write_u64(v.to_bits());
+                }
+                h.write_u32(s.line);
+                h.write_u8(s.kind as u8);
+            }
+            // Rare: the debug text names every field (f64 in its shortest exact form).
+            Item::Aux(a) => h.write(format!("{a:?}").as_bytes()),
+        }
+    }
+    h.finish()
 }
 
 /// Line of the first probe move, if the program probes.
@@ -158,13 +406,26 @@ fn starting_at(opts: &InterpOptions, start_mm: [f64; NUM_AXES]) -> InterpOptions
 }
 
 /// Interprets and plans a job from a file or inline text, starting at machine pose
-/// `start_mm`.
+/// `start_mm`. Waits while another job is being prepared.
 pub fn prepare(
     src: &JobSource,
     opts: &InterpOptions,
     motion: &MotionConfig,
     start_mm: [f64; NUM_AXES],
 ) -> Result<PreparedJob, ApiError> {
+    prepare_keeping(src, opts, motion, start_mm, KEEP_ITEMS_MAX)
+}
+
+/// [`prepare`], keeping the items of a plan of at most `keep_items` (tests use 0 to plan
+/// every job again when it runs).
+pub fn prepare_keeping(
+    src: &JobSource,
+    opts: &InterpOptions,
+    motion: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    keep_items: usize,
+) -> Result<PreparedJob, ApiError> {
+    let _one_at_a_time = PREPARING.lock().unwrap_or_else(|p| p.into_inner());
     let (name, text) = match (&src.path, &src.text) {
         (Some(path), None) => {
             let text = super::job_file::read(path)?;
@@ -185,20 +446,67 @@ pub fn prepare(
         // Subroutine files are also searched next to the program.
         opts.program_dir = Path::new(p).parent().map(Path::to_path_buf);
     }
-    let program =
-        gcode::load_str(&name, &text, &opts).map_err(|e| ApiError::Gcode(e.to_string()))?;
-    let plan = plan_job(&program.canon, motion, start_mm, &name)?;
-    let probing = probing_source(&program.canon, &name, &text, &opts);
     let display = Path::new(&name)
         .file_name()
         .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or(name);
+        .unwrap_or_else(|| name.clone());
+    let total_lines = text.lines().count() as u32;
+    let mut kept = Some(Vec::new());
+    let mut digests = Vec::new();
+    let streamed = stream_pass(&name, text.clone(), &opts, motion, start_mm, &mut |items| {
+        digests.push(digest(items));
+        if kept
+            .as_ref()
+            .is_some_and(|k| k.len() + items.len() > keep_items)
+        {
+            kept = None;
+        }
+        if let Some(k) = &mut kept {
+            k.extend_from_slice(items);
+        }
+        true
+    })?;
+    let (finished, commands) = match streamed {
+        Streamed::Planned(f, c) => (*f, c),
+        Streamed::Probes | Streamed::Stopped => {
+            // A probing job: validated whole with simulated probes, run piece by piece.
+            let program =
+                gcode::load_str(&name, &text, &opts).map_err(|e| ApiError::Gcode(e.to_string()))?;
+            let plan = plan_job(&program.canon, motion, start_mm, &name)?;
+            let probing = probing_source(&program.canon, &name, &text, &opts);
+            return Ok(PreparedJob {
+                name: display,
+                total_lines,
+                commands: program.canon.len(),
+                plan,
+                probing,
+                replay: None,
+            });
+        }
+    };
+    let mut plan = finished.plan;
+    let replay = match kept {
+        Some(items) => {
+            plan.items = items;
+            None
+        }
+        None => Some(Replay {
+            name,
+            text,
+            opts,
+            motion: motion.clone(),
+            start_mm,
+            items: finished.items,
+            digests,
+        }),
+    };
     Ok(PreparedJob {
         name: display,
-        total_lines: text.lines().count() as u32,
-        commands: program.canon.len(),
+        total_lines,
+        commands,
         plan,
-        probing,
+        probing: None,
+        replay,
     })
 }
 
@@ -223,6 +531,7 @@ pub fn prepare_mdi(
         commands: program.canon.len(),
         plan,
         probing,
+        replay: None,
     })
 }
 
@@ -340,5 +649,159 @@ mod tests {
             j.plan.duration_s
         );
         assert!((j.plan.end_mm[0] - 20.0).abs() < 1e-9);
+    }
+
+    /// A program with a long G64 run, messages and a dwell, prepared so that it keeps no
+    /// items (`keep` 0) or all of them.
+    fn replayed(keep: usize) -> PreparedJob {
+        let mut text = String::from("G21 G90 G64 P0.01\nG0 X10 Y10 Z-5\nF1500\n(MSG, go)\n");
+        for i in 0..3000 {
+            let x = 10.0 + (i % 400) as f64 * 0.2;
+            let y = 10.0 + (i / 400) as f64 * 0.5;
+            let z = -6.0 + (x * std::f64::consts::PI).sin();
+            text.push_str(&format!("G1 X{x:.3} Y{y:.3} Z{z:.4}\n"));
+            if i == 1500 {
+                text.push_str("G4 P0.5\n(MSG, half way)\n");
+            }
+        }
+        text.push_str("M2\n");
+        let cfg = sim();
+        let src = JobSource {
+            path: None,
+            text: Some(text),
+            name: Some("big.ngc".into()),
+        };
+        prepare_keeping(
+            &src,
+            &interp_options(&cfg),
+            &motion_config(&cfg),
+            START,
+            keep,
+        )
+        .expect("plans")
+    }
+
+    #[test]
+    fn a_job_planned_again_while_it_runs_queues_exactly_the_validated_items() {
+        let kept = replayed(usize::MAX);
+        assert!(kept.replay.is_none());
+        let big = replayed(0);
+        assert!(big.plan.items.is_empty(), "a replayed job keeps no items");
+        let replay = big.replay.as_ref().expect("replayed");
+        let mut fed = Vec::new();
+        let done = replay.run(&mut |batch| {
+            fed.extend_from_slice(batch);
+            true
+        });
+        assert_eq!(done, Ok(true));
+        assert_eq!(fed, kept.plan.items);
+        let mut ahead = Vec::new();
+        let done = replay.run_ahead(&mut |batch| {
+            ahead.extend_from_slice(batch);
+            true
+        });
+        assert_eq!(done, Ok(true));
+        assert_eq!(ahead, kept.plan.items);
+        assert_eq!(big.item_count(), fed.len() as u64);
+        assert_eq!(big.plan.messages, kept.plan.messages);
+        assert_eq!(big.plan.messages.len(), 2);
+        assert_eq!(
+            (big.plan.duration_s, big.plan.segment_count, big.commands),
+            (kept.plan.duration_s, kept.plan.segment_count, kept.commands)
+        );
+        // A cancelled feed stops at once.
+        let mut batches = 0;
+        assert_eq!(
+            replay.run(&mut |_| {
+                batches += 1;
+                false
+            }),
+            Ok(false)
+        );
+        assert_eq!(batches, 1);
+    }
+
+    #[test]
+    fn a_replay_that_plans_differently_stops_before_queuing_that_batch() {
+        let mut big = replayed(0);
+        let replay = big.replay.as_mut().expect("replayed");
+        let last = replay.digests.len() - 1;
+        replay.digests[last] ^= 1;
+        let mut fed = 0;
+        let e = replay
+            .run(&mut |_| {
+                fed += 1;
+                true
+            })
+            .unwrap_err();
+        assert_eq!(fed, last, "only the matching batches were queued");
+        assert!(e.contains("big.ngc") && e.contains("differently"), "{e}");
+        fed = 0;
+        let e = replay
+            .run_ahead(&mut |_| {
+                fed += 1;
+                true
+            })
+            .unwrap_err();
+        assert_eq!(fed, last, "planned ahead, queued only when it matched");
+        assert!(e.contains("differently"), "{e}");
+    }
+
+    #[test]
+    fn preparations_wait_for_the_one_in_progress() {
+        let guard = PREPARING.lock().unwrap_or_else(|p| p.into_inner());
+        let (tx, rx) = std::sync::mpsc::channel();
+        let t = std::thread::spawn(move || {
+            let r = prepare_text(None, "G0 X20\nM2\n").map(|j| j.plan.end_mm[0]);
+            let _ = tx.send(r.is_ok());
+        });
+        std::thread::sleep(std::time::Duration::from_millis(200));
+        assert!(
+            rx.try_recv().is_err(),
+            "prepared while another preparation ran"
+        );
+        drop(guard);
+        let ok = rx
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("prepared once the other one ended");
+        assert!(ok);
+        t.join().expect("joins");
+    }
+
+    #[test]
+    fn a_cancelled_replay_stops_planning_at_once() {
+        // Long enough for several batches; a line near the end that only the interpreter
+        // refuses shows whether the replay went on after it was told to stop.
+        let mut text = String::from("G21 G90 G64 P0.01\nG0 X10 Y10 Z-5\nF1500\n");
+        for i in 0..40_000 {
+            let x = 10.0 + (i % 400) as f64 * 0.2;
+            let y = 10.0 + (i / 400) as f64 * 0.5;
+            let z = -6.0 + (x * std::f64::consts::PI).sin();
+            text.push_str(&format!("G1 X{x:.3} Y{y:.3} Z{z:.4}\n"));
+        }
+        let good = format!("{text}M2\n");
+        let cfg = sim();
+        let src = JobSource {
+            path: None,
+            text: Some(good),
+            name: Some("long.ngc".into()),
+        };
+        let (o, m) = (interp_options(&cfg), motion_config(&cfg));
+        let mut job = prepare_keeping(&src, &o, &m, START, 0).expect("plans");
+        let replay = job.replay.as_mut().expect("replayed");
+        assert!(replay.digests.len() >= 2, "{}", replay.digests.len());
+        replay.text = format!("{text}G1 X10 G0\nM2\n");
+        let mut batches = 0;
+        let out = replay.run(&mut |_| {
+            batches += 1;
+            false
+        });
+        assert_eq!((out, batches), (Ok(false), 1));
+        batches = 0;
+        let out = replay.run_ahead(&mut |_| {
+            batches += 1;
+            false
+        });
+        assert_eq!((out, batches), (Ok(false), 1));
     }
 }

@@ -534,13 +534,31 @@ impl Machine {
                 let queue = self.queue.clone();
                 let items = job.clone();
                 let cancel = cancel.clone();
+                let (book, machine) = (self.book.clone(), self.machine.clone());
                 let feeder = std::thread::Builder::new()
                     .name(format!("feeder-{id}"))
-                    .spawn(move || {
-                        feed(queue, &items.plan.items, id, &cancel);
+                    .spawn(move || match &items.replay {
+                        None => {
+                            feed(queue, &items.plan.items, id, &cancel);
+                        }
+                        // A large job is planned again as it runs (see `job`).
+                        Some(replay) => {
+                            let run = replay
+                                .run_ahead(&mut |batch| feed(queue.clone(), batch, id, &cancel));
+                            if let Err(msg) = run {
+                                tracing::error!("job {id}: {msg}");
+                                if let Some(a) = lock(&book).active.as_mut().filter(|a| a.id == id)
+                                {
+                                    a.error = Some(msg);
+                                }
+                                if let Ok(h) = machine.send(MachineCmd::Abort) {
+                                    let _ = h.wait_accepted(ACCEPT_TIMEOUT);
+                                }
+                            }
+                        }
                     })
                     .map_err(|e| ApiError::Failed(format!("cannot start the feeder: {e}")))?;
-                (feeder, job.plan.items.len() as u64)
+                (feeder, job.item_count())
             }
             Some(src) => self.start_piece_runner(src, &job, id, &cancel, &messages)?,
         };
@@ -1033,6 +1051,7 @@ impl MachineApi for Machine {
             commands: canon.len(),
             plan,
             probing: None,
+            replay: None,
         });
         self.start_job(job, true)
     }

@@ -115,11 +115,23 @@ pub fn override_rates(cfg: &MotionConfig) -> (f64, f64) {
 /// scale-rate limit from the acceleration and jerk it leaves free, lowered so that the
 /// interpolator (whose `k̈` is bounded) can always meet the next segment's limit.
 pub fn propagate_override_caps(items: &mut [Item], cfg: &MotionConfig) {
+    propagate_override_caps_open(items, cfg, false);
+}
+
+/// [`propagate_override_caps`] for a stretch of a longer queue (`open_end`): what follows
+/// the stretch is not known yet, so it is assumed to tolerate the least any segment does
+/// (cap 1, scale rate `k1`, scale jerk `k2`, the reserve-based values that are always safe).
+/// The streaming planner finalises only the first part of such a stretch, far enough from its
+/// end that these assumptions rarely matter; where they do, they only make the interpolator
+/// more cautious.
+pub fn propagate_override_caps_open(items: &mut [Item], cfg: &MotionConfig, open_end: bool) {
     let (k1, k2) = override_rates(cfg);
     let kmax = cfg.max_feed_override;
     let margin = 2.5 * k1 * k1 / k2;
-    let mut line = f64::INFINITY; // cap allowed at the start of the next segment
-    let mut rate_line = f64::INFINITY; // scale rate allowed at the start of the next segment
+    // Cap allowed at the start of the next segment.
+    let mut line = if open_end { 1.0 } else { f64::INFINITY };
+    // Scale rate allowed at the start of the next segment.
+    let mut rate_line = if open_end { k1 } else { f64::INFINITY };
     for it in items.iter_mut().rev() {
         if let Item::Segment(s) = it {
             let raw = s.override_cap;
@@ -137,9 +149,10 @@ pub fn propagate_override_caps(items: &mut [Item], cfg: &MotionConfig) {
     // Braking guarantee: the smallest k̈ limit over the planned time one braking can span
     // (|k̇| ≤ √(2·k2·kmax) when braking at ≥ k2 over a scale range ≤ kmax, so a braking lasts
     // at most √(2·kmax/k2) s of real time, ≤ kmax times that of planned time).
-    let brake = min_ahead(items, kmax * (2.0 * kmax / k2).sqrt());
+    let beyond = if open_end { k2 } else { f64::INFINITY };
+    let brake = min_ahead(items, kmax * (2.0 * kmax / k2).sqrt(), beyond);
     // A servo period can end in a later segment: the smallest limit within two periods.
-    let step = min_ahead(items, 2.0 * kmax * cfg.servo_period_s);
+    let step = min_ahead(items, 2.0 * kmax * cfg.servo_period_s, beyond);
     let mut n = 0;
     for it in items.iter_mut() {
         if let Item::Segment(s) = it {
@@ -151,9 +164,10 @@ pub fn propagate_override_caps(items: &mut [Item], cfg: &MotionConfig) {
 }
 
 /// For each segment (in order), the smallest `scale_jerk_max` of the segments that start
-/// within `horizon_s` of planned time after it ends (infinity if none). Sliding-window
-/// minimum, backwards, amortised O(1) per segment.
-fn min_ahead(items: &[Item], horizon_s: f64) -> Vec<f64> {
+/// within `horizon_s` of planned time after it ends (infinity if none; at most `beyond` when
+/// the horizon reaches past the last one). Sliding-window minimum, backwards, amortised O(1)
+/// per segment.
+fn min_ahead(items: &[Item], horizon_s: f64, beyond: f64) -> Vec<f64> {
     let segs: Vec<(f64, f64)> = items
         .iter()
         .filter_map(|it| match it {
@@ -165,6 +179,7 @@ fn min_ahead(items: &[Item], horizon_s: f64) -> Vec<f64> {
     // (start σ, limit): front = latest added (earliest σ, largest limit), back = smallest.
     let mut window: std::collections::VecDeque<(f64, f64)> = std::collections::VecDeque::new();
     let mut sigma: f64 = segs.iter().map(|s| s.0).sum();
+    let total = sigma;
     for (i, &(dur, own)) in segs.iter().enumerate().rev() {
         let end = sigma;
         sigma -= dur;
@@ -172,6 +187,9 @@ fn min_ahead(items: &[Item], horizon_s: f64) -> Vec<f64> {
             window.pop_back();
         }
         out[i] = window.back().map_or(f64::INFINITY, |&(_, v)| v);
+        if end + horizon_s >= total {
+            out[i] = out[i].min(beyond);
+        }
         while window.front().is_some_and(|&(_, v)| v >= own) {
             window.pop_front();
         }

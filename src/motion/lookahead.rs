@@ -13,6 +13,7 @@ use super::merge::merge;
 use super::moves::{Junction, Move, MoveKind, Step};
 use super::profile::Tangential;
 use super::segment::{AuxItem, Item, Segment, SegmentKind};
+use super::PlanError;
 use crate::gcode::NUM_AXES;
 
 /// A move with its derived data.
@@ -23,42 +24,82 @@ struct Prepared {
     vcap_mm_s: f64,
     tang: Tangential,
     aux_after: Vec<AuxItem>,
+    /// Index of the last raw move merged into this one.
+    last: usize,
 }
 
-/// Plans a folded program into segment-queue items.
-pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
-    let mut out = Vec::with_capacity(steps.len() * 3);
-    let mut run: Vec<Move> = Vec::new();
-    let mut run_aux: Vec<Vec<AuxItem>> = Vec::new();
-    for step in steps {
+/// Moves of one run planned together before a chunk of them is committed (see
+/// [`Lookahead`]). Runs up to `CHUNK_MOVES + overlap` moves are planned whole.
+pub const CHUNK_MOVES: usize = 16_384;
+
+/// Moves planned beyond a chunk before it is committed: at least the lookahead window and the
+/// longest merge (256 moves), so a chunk's moves are planned and merged knowing what follows.
+fn overlap(window: usize) -> usize {
+    (2 * window).max(512)
+}
+
+/// Where a chunk of a long run continues from: the junction speed into its first move and the
+/// corner between that move and the last committed one.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    v_mm_s: f64,
+    corner: Option<Corner>,
+}
+
+/// Streaming lookahead: steps in, segment-queue items out, with memory bounded by the chunk
+/// size whatever the length of the program.
+///
+/// A run (the moves between two barriers) of up to `CHUNK_MOVES` plus the overlap is planned
+/// whole, exactly as it always was. A longer run is planned in chunks: the first
+/// `CHUNK_MOVES` moves are planned together with the overlap that follows them (the windowed
+/// backward pass ends in a stop at the end of the overlap, as it does at the end of any run),
+/// only those first moves are committed, and the next chunk starts from the committed
+/// junction speed and corner. Every committed move is verified to fit its speed changes and
+/// blends as before; a chunk whose first move cannot fit with the speed it inherits is
+/// refused with its line (never seen; the job is then refused before anything moves).
+pub struct Lookahead {
+    lim: Limits,
+    window: usize,
+    run: Vec<Move>,
+    run_aux: Vec<Vec<AuxItem>>,
+    entry: Option<Entry>,
+    last_pose: [f64; NUM_AXES],
+}
+
+impl Lookahead {
+    /// An empty lookahead with window `window` (moves).
+    pub fn new(lim: &Limits, window: usize) -> Self {
+        Lookahead {
+            lim: *lim,
+            window,
+            run: Vec::new(),
+            run_aux: Vec::new(),
+            entry: None,
+            last_pose: [0.0; NUM_AXES],
+        }
+    }
+
+    /// Takes the next step; appends to `out` whatever is committed.
+    pub fn push(&mut self, step: Step, out: &mut Vec<Item>) -> Result<(), PlanError> {
         match step {
             Step::Move(m) => {
-                run.push(m);
-                run_aux.push(Vec::new());
+                self.run.push(m);
+                self.run_aux.push(Vec::new());
+                if self.run.len() >= CHUNK_MOVES + overlap(self.window) {
+                    self.plan_chunk(out)?;
+                }
             }
-            Step::Aux(a) if !a.kind.is_barrier() => match run_aux.last_mut() {
+            Step::Aux(a) if !a.kind.is_barrier() => match self.run_aux.last_mut() {
                 Some(v) => v.push(a),
                 None => out.push(Item::Aux(a)),
             },
             Step::Aux(a) => {
-                plan_run(
-                    std::mem::take(&mut run),
-                    std::mem::take(&mut run_aux),
-                    lim,
-                    window,
-                    &mut out,
-                );
+                self.flush(out)?;
                 out.push(Item::Aux(a));
             }
             Step::Dwell { seconds, line } => {
-                plan_run(
-                    std::mem::take(&mut run),
-                    std::mem::take(&mut run_aux),
-                    lim,
-                    window,
-                    &mut out,
-                );
-                let pos = last_pose(&out);
+                self.flush(out)?;
+                let pos = self.last_pose;
                 out.push(Item::Segment(Segment {
                     start_mm: pos,
                     end_mm: pos,
@@ -70,8 +111,8 @@ pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
                     line,
                     length_mm: 0.0,
                     move_rest_mm: 0.0,
-                    override_cap: lim.max_override,
-                    end_override_cap: lim.max_override,
+                    override_cap: self.lim.max_override,
+                    end_override_cap: self.lim.max_override,
                     scale_rate_max: 0.0,
                     end_scale_rate_max: 0.0,
                     scale_jerk_max: 0.0,
@@ -80,19 +121,69 @@ pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
                 }));
             }
         }
+        Ok(())
     }
-    plan_run(run, run_aux, lim, window, &mut out);
+
+    /// Plans what is left of the current run, to a stop.
+    pub fn flush(&mut self, out: &mut Vec<Item>) -> Result<(), PlanError> {
+        let moves = std::mem::take(&mut self.run);
+        let aux = std::mem::take(&mut self.run_aux);
+        let entry = self.entry.take();
+        let from = out.len();
+        plan_run(moves, aux, &self.lim, self.window, out, entry, None)?;
+        self.note_pose(&out[from..]);
+        Ok(())
+    }
+
+    /// Commits the first `CHUNK_MOVES` moves of a long run (planned with the overlap after
+    /// them) and keeps the rest for the next chunk.
+    fn plan_chunk(&mut self, out: &mut Vec<Item>) -> Result<(), PlanError> {
+        let from = out.len();
+        let (entry, used) = plan_run(
+            self.run.clone(),
+            self.run_aux.clone(),
+            &self.lim,
+            self.window,
+            out,
+            self.entry,
+            Some(CHUNK_MOVES),
+        )?
+        .ok_or_else(|| PlanError::Invalid {
+            line: self.run[0].line,
+            what: "internal: a lookahead chunk committed nothing".into(),
+        })?;
+        self.run.drain(..used);
+        self.run_aux.drain(..used);
+        self.entry = Some(entry);
+        self.note_pose(&out[from..]);
+        Ok(())
+    }
+
+    fn note_pose(&mut self, items: &[Item]) {
+        if let Some(p) = last_pose(items) {
+            self.last_pose = p;
+        }
+    }
+}
+
+/// Plans a folded program into segment-queue items.
+pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
+    let mut out = Vec::new();
+    let mut la = Lookahead::new(lim, window);
+    // Without a chunked run nothing can fail; with one, a refused chunk ends the plan (the
+    // streaming planner reports the error, see `Lookahead`).
+    let ok = steps.into_iter().try_for_each(|s| la.push(s, &mut out));
+    if ok.is_ok() {
+        let _ = la.flush(&mut out);
+    }
     out
 }
 
-fn last_pose(out: &[Item]) -> [f64; NUM_AXES] {
-    out.iter()
-        .rev()
-        .find_map(|it| match it {
-            Item::Segment(s) => Some(s.end_mm),
-            Item::Aux(_) => None,
-        })
-        .unwrap_or([0.0; NUM_AXES])
+fn last_pose(out: &[Item]) -> Option<[f64; NUM_AXES]> {
+    out.iter().rev().find_map(|it| match it {
+        Item::Segment(s) => Some(s.end_mm),
+        Item::Aux(_) => None,
+    })
 }
 
 fn prepare(moves: Vec<Move>, aux: Vec<Vec<AuxItem>>, lim: &Limits) -> Vec<Prepared> {
@@ -116,23 +207,33 @@ fn prepare(moves: Vec<Move>, aux: Vec<Vec<AuxItem>>, lim: &Limits) -> Vec<Prepar
                 vcap_mm_s: vcap,
                 tang: lim.tangential(&u),
                 aux_after: aux.get_mut(j).and_then(Option::take).unwrap_or_default(),
+                last: j,
             }
         })
         .collect()
 }
 
+/// Plans a run (or, with `commit` = `Some(c)`, a chunk of one: only the merged moves made of
+/// the first `c` raw moves are emitted, and the entry of the rest is returned with the number
+/// of raw moves used). `entry` continues a chunked run.
 fn plan_run(
     moves: Vec<Move>,
     aux: Vec<Vec<AuxItem>>,
     lim: &Limits,
     window: usize,
     out: &mut Vec<Item>,
-) {
+    entry: Option<Entry>,
+    commit: Option<usize>,
+) -> Result<Option<(Entry, usize)>, PlanError> {
     if moves.is_empty() {
-        return;
+        return Ok(None);
     }
     let p = prepare(moves, aux, lim);
     let n = p.len();
+    let v_entry = entry.map_or(0.0, |e| e.v_mm_s);
+    let entry_corner = entry.and_then(|e| e.corner);
+    let continued = entry.is_some();
+
     // Junction k joins move k to move k + 1; the last junction is a stop.
     let corners: Vec<Option<Corner>> = (0..n)
         .map(|k| (k + 1 < n).then(|| Corner::new(&p[k].u, &p[k + 1].u, lim)))
@@ -158,8 +259,12 @@ fn plan_run(
         j.and_then(|j| corners[j])
             .map_or(0.0, |c| c.half_length_mm(v))
     };
+    let half_before = |k: usize, v: f64| match k.checked_sub(1) {
+        Some(j) => half(Some(j), v),
+        None => entry_corner.map_or(0.0, |c| c.half_length_mm(v)),
+    };
     let g = |k: usize, a: f64, b: f64| {
-        half(k.checked_sub(1), a) + half(Some(k), b) + p[k].tang.distance_mm(a, b)
+        half_before(k, a) + half(Some(k), b) + p[k].tang.distance_mm(a, b)
     };
     let bisect = |mut lo: f64, mut hi: f64, ok: &dyn Fn(f64) -> bool| {
         for _ in 0..60 {
@@ -195,7 +300,7 @@ fn plan_run(
     let passes = |jmax: &[f64]| {
         let mut vj = jmax.to_vec();
         let mut base = 0;
-        let mut v_start = 0.0;
+        let mut v_start = v_entry;
         while base < n {
             let end = (base + window).min(n);
             // Backward pass from a stop at the end of the window.
@@ -229,9 +334,19 @@ fn plan_run(
     for round in 0.. {
         let mut bad = false;
         for k in 0..n {
-            let a = if k > 0 { vj[k - 1] } else { 0.0 };
+            let a = if k > 0 { vj[k - 1] } else { v_entry };
             if g(k, a, vj[k]) > p[k].len_mm * (1.0 + 1e-12) + 1e-12 {
                 bad = true;
+                if k == 0 && continued && round > 40 {
+                    // Only a chunk's first move has a speed it cannot lower (the previous
+                    // chunk committed it); from rest every move fits.
+                    return Err(PlanError::Invalid {
+                        line: p[0].mv.line,
+                        what: "the lookahead cannot continue this long run at this move \
+                               (end the run here with G61 or a dwell)"
+                            .into(),
+                    });
+                }
                 let f = if round < 20 { 0.8 } else { 0.0 };
                 if k > 0 {
                     jmax[k - 1] = jmax[k - 1].min(f * vj[k - 1]);
@@ -244,10 +359,25 @@ fn plan_run(
         }
         vj = passes(&jmax);
     }
-    for k in 0..n {
-        let v_in = if k > 0 { vj[k - 1] } else { 0.0 };
-        emit_move(&p, &corners, k, v_in, vj[k], lim, out);
+    let emit = match commit {
+        Some(c) => p.iter().take_while(|m| m.last < c).count().min(n - 1),
+        None => n,
+    };
+    for k in 0..emit {
+        let v_in = if k > 0 { vj[k - 1] } else { v_entry };
+        let before = if k > 0 { corners[k - 1] } else { entry_corner };
+        emit_move(&p, &corners, before, k, v_in, vj[k], lim, out);
     }
+    Ok(match (commit, emit) {
+        (Some(_), e) if e > 0 => Some((
+            Entry {
+                v_mm_s: vj[e - 1],
+                corner: corners[e - 1],
+            },
+            p[e - 1].last + 1,
+        )),
+        _ => None,
+    })
 }
 
 fn kind_of(m: &Move) -> SegmentKind {
@@ -266,9 +396,11 @@ fn push(out: &mut Vec<Item>, lim: &Limits, mut s: Segment) {
 }
 
 /// Emits move `k` (S-curve up, cruise, S-curve down) and the blend at its end.
+#[allow(clippy::too_many_arguments)]
 fn emit_move(
     p: &[Prepared],
     corners: &[Option<Corner>],
+    before: Option<Corner>,
     k: usize,
     v_in: f64,
     v_out: f64,
@@ -276,11 +408,7 @@ fn emit_move(
     out: &mut Vec<Item>,
 ) {
     let m = &p[k];
-    let e = if k > 0 {
-        corners[k - 1].map_or(0.0, |c| c.half_length_mm(v_in))
-    } else {
-        0.0
-    };
+    let e = before.map_or(0.0, |c| c.half_length_mm(v_in));
     let x = corners[k].map_or(0.0, |c| c.half_length_mm(v_out));
     let mid = (m.len_mm - e - x).max(0.0);
     let kind = kind_of(&m.mv);

@@ -5,6 +5,9 @@
 //! non-motion commands → [`AuxItem`]s) → [`lookahead`] (merging within G64 Q, junction
 //! blends within G64 P, backward/forward passes over a window, S-curve segments) → a
 //! [`Plan`] of `Copy` [`Item`]s → the [`Interpolator`] on the servo thread.
+//! [`stream::PlanStream`] runs that pipeline on a stream of commands in bounded memory (the
+//! whole-program [`plan_from`] is the same stream fed at once); a job of millions of lines
+//! is planned that way (see `machine::job`).
 //!
 //! Every segment is one S-curve velocity transition between two velocity *vectors* (see
 //! [`profile`]); corners are blends of that same shape ([`blend`]). That is what makes the
@@ -72,6 +75,7 @@ pub mod merge;
 pub mod moves;
 pub mod profile;
 pub mod segment;
+pub mod stream;
 pub mod svg;
 pub mod trace;
 
@@ -83,7 +87,6 @@ pub use interpolator::{
 pub use segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
 
 use crate::gcode::{Canon, NUM_AXES};
-use kinematics::Kinematics;
 
 /// Axis letters in pose order.
 pub const AXIS_NAMES: [char; NUM_AXES] = ['X', 'Y', 'Z', 'A', 'B', 'C', 'U', 'V', 'W'];
@@ -135,57 +138,11 @@ pub fn plan_continue(
     start_mm: [f64; NUM_AXES],
     state: from_canon::FoldState,
 ) -> Result<Plan, PlanError> {
-    cfg.validate()?;
-    let folded = from_canon::fold_from(canon, cfg, start_mm, state)?;
-    let kin = kinematics::Machine::new(&cfg.kinematics);
-    for step in &folded.steps {
-        if let moves::Step::Move(m) = step {
-            limits::check_soft_limits(&m.end_mm, m.line, cfg)?;
-            kin.inverse(&m.end_mm)
-                .map_err(|source| PlanError::Kinematics {
-                    line: m.line,
-                    source,
-                })?;
-        }
-    }
-    let lim = limits::Limits::new(cfg);
-    let mut items = lookahead::plan_steps(folded.steps, &lim, cfg.lookahead_moves);
-    limits::propagate_override_caps(&mut items, cfg);
-    let mut duration_s = 0.0;
-    let mut distance_mm = 0.0;
-    let mut segment_count = 0;
-    let mut lines = std::collections::BTreeSet::new();
-    for it in &items {
-        match it {
-            Item::Segment(s) => {
-                duration_s += s.duration_s;
-                distance_mm += s.length_mm;
-                segment_count += 1;
-                lines.insert(s.line);
-                if let KinematicsConfig::Scara(sc) = &cfg.kinematics {
-                    // Reach, joint limits and joint speeds along the way (blends and arcs
-                    // leave the chords; joint speeds grow near full extension).
-                    kinematics::check_segment(&kin, s, &sc.joint_max_vel, cfg.servo_period_s)
-                        .map_err(|source| PlanError::Kinematics {
-                            line: s.line,
-                            source,
-                        })?;
-                }
-            }
-            Item::Aux(a) => {
-                lines.insert(a.line);
-            }
-        }
-    }
-    Ok(Plan {
-        items,
-        messages: folded.messages,
-        start_mm,
-        end_mm: folded.end_mm,
-        duration_s,
-        distance_mm,
-        line_count: lines.len(),
-        segment_count,
-        end_state: folded.state,
-    })
+    let mut items = Vec::new();
+    let mut sink = |chunk: &[Item]| items.extend_from_slice(chunk);
+    let mut stream = stream::PlanStream::new(cfg, start_mm, state)?;
+    stream.push(canon, &mut sink)?;
+    let mut plan = stream.finish(&mut sink)?.plan;
+    plan.items = items;
+    Ok(plan)
 }

@@ -243,6 +243,9 @@ pub(crate) struct Interp<'a> {
     pub(crate) live_probe: bool,
     /// The probe of the line just executed, waiting for its result (live probing only).
     pub(crate) pending_probe: Option<PendingProbe>,
+    /// Streaming hook ([`crate::gcode::session::Chunked`]): `resume` returns once this many
+    /// commands are collected, so a long program never holds all its commands at once.
+    pub(crate) yield_after: usize,
 }
 
 /// A probe move the interpreter has emitted and whose result it needs before going on.
@@ -301,6 +304,7 @@ impl<'a> Interp<'a> {
             steps: 0,
             live_probe: false,
             pending_probe: None,
+            yield_after: usize::MAX,
         })
     }
 
@@ -358,7 +362,7 @@ impl<'a> Interp<'a> {
         // Most programs produce about one command per line.
         let expect = (src.lines.len() + 32).min(self.opts.limits.max_canon);
         match &mut self.out {
-            Sink::Canon(v) => v.reserve(expect),
+            Sink::Canon(v) => v.reserve(expect.min(self.yield_after)),
             Sink::Trace { buf, .. } => buf.reserve(expect * 64),
         }
         self.files.push(src);
@@ -413,6 +417,9 @@ impl<'a> Interp<'a> {
             }
             self.step(f, l)?;
             if self.pending_probe.is_some() {
+                return Ok(());
+            }
+            if matches!(&self.out, Sink::Canon(v) if v.len() >= self.yield_after) {
                 return Ok(());
             }
         }
