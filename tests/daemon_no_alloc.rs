@@ -169,7 +169,20 @@ fn long_job_moving(c: &mut Client) {
 fn the_daemon_servo_thread_allocates_nothing_in_any_window() {
     let mut w = Windows::default();
     assert_eq!(counting_alloc::in_rt_steps(), 0);
-    let config = fast_sim();
+    // The fast mill, with a storm threshold no loaded host reaches by itself (400 overruns in
+    // a row: 0.4 s without the CPU), so only the injected storm trips the machine.
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(fast_sim()).unwrap();
+    assert!(
+        text.contains("overrun_storm_count = 50\n"),
+        "sim-fast.toml changed"
+    );
+    let config = dir.path().join("sim-fast-storm-400.toml");
+    std::fs::write(
+        &config,
+        text.replace("overrun_storm_count = 50\n", "overrun_storm_count = 400\n"),
+    )
+    .unwrap();
     {
         let d = InProcess::start(&config);
         let events = d.subscriber();
@@ -304,15 +317,19 @@ fn the_daemon_servo_thread_allocates_nothing_in_any_window() {
         }
         w.measure("trip: overrun storm", || {
             long_job_moving(&mut c);
-            // The fixture's storm threshold is 50 consecutive overruns.
             ok(
                 &mut c,
                 "sim.fault",
-                json!({"kind": "overrun", "cycles": 60}),
+                json!({"kind": "overrun", "cycles": 450}),
             );
-            wait_status(&mut c, "overrun storm", GUARD, |s| {
+            let s = wait_status(&mut c, "overrun storm", GUARD, |s| {
                 s["mode"] == json!("fault") && at_rest(s, 1e-3)
             });
+            assert!(
+                s["faults"].to_string().contains("overran"),
+                "{}",
+                s["faults"]
+            );
         });
         back_on(&mut c);
         assert!(
@@ -329,7 +346,6 @@ fn the_daemon_servo_thread_allocates_nothing_in_any_window() {
     }
     // The limit switches sit beyond the soft limits, which even a jog respects: a second
     // machine whose X switch is moved inside them (at 10 mm) is jogged onto it.
-    let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(&config).unwrap();
     assert!(
         text.contains("negative_limit = -3.0"),
