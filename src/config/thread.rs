@@ -33,7 +33,10 @@ pub struct ThreadConfig {
     #[serde(default, skip_serializing_if = "ThreadClock::is_realtime")]
     pub clock: ThreadClock,
     /// With `clock = "simulated"`: simulated seconds per wall-clock second (1: real time);
-    /// absent or 0: cycles back to back, as fast as the CPU allows.
+    /// absent or 0: cycles back to back, as fast as the CPU allows. What the machine does no
+    /// longer depends on the host's load, with one exception: a job longer than the segment
+    /// queue (4096 items) is topped up by its feeder thread in wall time, so at a high speed
+    /// on a loaded host the queue can run dry before the job's end.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sim_speed: Option<u32>,
 }
