@@ -1,6 +1,11 @@
 //! End to end: the real `hytask serve` binary on a private socket with the simulated mill.
 //! Jobs, progress and events; operator commands; the control socket under load.
 //! Safety paths are in `tests/daemon_safety.rs`.
+//!
+//! Tests of behaviour run the machine on a simulated clock ([`Daemon::start_sim`]) and act on
+//! observed states; the real-time smoke tests (a whole job with its progress events, SIGTERM,
+//! `hytask run`) keep the real-time servo thread. Every wait is a hang guard: see
+//! `tests/support/mod.rs`.
 #![allow(clippy::unwrap_used)]
 
 mod support;
@@ -8,6 +13,9 @@ mod support;
 use serde_json::{json, Value};
 use std::time::{Duration, Instant};
 use support::*;
+
+/// Hang guard of the waits below: a loaded host may run the machine slower than planned.
+const GUARD: Duration = Duration::from_secs(120);
 
 #[test]
 fn a_job_runs_to_the_end_with_progress_events_and_exact_final_position() {
@@ -18,7 +26,7 @@ fn a_job_runs_to_the_end_with_progress_events_and_exact_final_position() {
     let info = run_job(&mut c, "jobs/square.ngc");
     assert_eq!(info["name"], json!("square.ngc"));
     assert!(info["planned_time_s"].as_f64().unwrap() > 1.0);
-    let events = wait_event(&mut c, "job done", Duration::from_secs(60), |e| {
+    let events = wait_event(&mut c, "job done", GUARD, |e| {
         e.topic == "job" && e.data["state"] == json!("done")
     });
     // Progress grows and names lines of the program.
@@ -53,29 +61,42 @@ fn a_job_runs_to_the_end_with_progress_events_and_exact_final_position() {
 
 #[test]
 fn pause_resume_abort_and_overrides_act_on_a_running_job() {
-    let d = Daemon::start(&fast_sim());
+    let d = Daemon::start_sim();
     let mut c = d.client();
     ready(&mut c);
     run_job(&mut c, "jobs/long.ngc");
-    std::thread::sleep(Duration::from_millis(1500));
+    // Line 6 is "G1 X250 F1200": a 10 s feed move, then three more of Y and X.
+    wait_status(&mut c, "on line 6", GUARD, |s| {
+        s["job"]["line"].as_u64().unwrap() >= 6 && s["mode"] == json!("running")
+    });
     ok(&mut c, "job.pause", Value::Null);
-    let held = wait_status(&mut c, "holding at rest", Duration::from_secs(5), |s| {
+    let held = wait_status(&mut c, "holding at rest", GUARD, |s| {
         s["mode"] == json!("holding") && at_rest(s, 1e-6)
     });
-    let x = axis(&held, "X")["actual"].as_f64().unwrap();
+    let xy = |s: &Value| {
+        let at = |n| axis(s, n)["actual"].as_f64().unwrap();
+        (at("X"), at("Y"))
+    };
+    let (x, y) = xy(&held);
     std::thread::sleep(Duration::from_millis(300));
     let still = ok(&mut c, "status", Value::Null);
-    assert!((axis(&still, "X")["actual"].as_f64().unwrap() - x).abs() < 1e-6);
+    let (x1, y1) = xy(&still);
+    assert!(
+        (x1 - x).abs() < 1e-6 && (y1 - y).abs() < 1e-6,
+        "moved during the hold"
+    );
     ok(&mut c, "job.resume", Value::Null);
     let o = ok(&mut c, "override", json!({"feed": 1.5}));
     assert_eq!(o["feed"], json!(1.5));
-    wait_status(&mut c, "moving again", Duration::from_secs(5), |s| {
-        (axis(s, "X")["actual"].as_f64().unwrap() - x).abs() > 1.0
+    // Lines 6 to 9 move X or Y by 200 mm each: whichever the hold landed on moves on.
+    wait_status(&mut c, "moving again", GUARD, |s| {
+        let (x2, y2) = xy(s);
+        (x2 - x).abs() > 1.0 || (y2 - y).abs() > 1.0
     });
     let (code, _) = err(&mut c, "override", json!({"feed": 5.0}));
     assert_eq!(code, -32602);
     ok(&mut c, "job.abort", Value::Null);
-    let s = wait_status(&mut c, "idle after abort", Duration::from_secs(10), |s| {
+    let s = wait_status(&mut c, "idle after abort", GUARD, |s| {
         s["mode"] == json!("idle")
     });
     assert_eq!(s["job"]["state"], json!("aborted"));
@@ -91,18 +112,31 @@ fn pause_resume_abort_and_overrides_act_on_a_running_job() {
 
 #[test]
 fn job_step_runs_one_line_then_holds() {
-    let d = Daemon::start(&fast_sim());
+    let d = Daemon::start_sim();
     let mut c = d.client();
     ready(&mut c);
     run_job(&mut c, "jobs/long.ngc");
-    // Line 6 is "G1 X250 F1200": 200 mm at 20 mm/s. The deadlines below only guard against a
-    // hang: a loaded host can slow the simulated machine to a fraction of real time.
-    wait_status(&mut c, "on line 6", Duration::from_secs(120), |s| {
-        s["job"]["line"] == json!(6)
-    });
+    // Held at once (spindle start and the 2.5 s rapid of line 5 come first), then stepped
+    // line by line to the start of line 6: no step depends on when a request lands.
+    ok(&mut c, "job.pause", Value::Null);
+    let held_at_rest = |s: &Value| s["mode"] == json!("holding") && at_rest(s, 1e-6);
+    let mut held = wait_status(&mut c, "held", GUARD, held_at_rest);
+    for _ in 0..6 {
+        let line = held["job"]["line"].as_u64().unwrap();
+        assert!(line <= 6, "the hold came after line 6: {}", held["job"]);
+        if line == 6 {
+            break;
+        }
+        ok(&mut c, "job.step", Value::Null);
+        held = wait_status(&mut c, "held after a step", GUARD, |s| {
+            held_at_rest(s) && s["job"]["line"].as_u64().unwrap() > line
+        });
+    }
+    assert_eq!(held["job"]["line"], json!(6), "{}", held["job"]);
+    // Line 6 is "G1 X250 F1200", 200 mm at 20 mm/s.
     ok(&mut c, "job.step", Value::Null);
-    let held = wait_status(&mut c, "held on line 7", Duration::from_secs(120), |s| {
-        s["mode"] == json!("holding") && at_rest(s, 1e-6)
+    let held = wait_status(&mut c, "held on line 7", GUARD, |s| {
+        held_at_rest(s) && s["job"]["line"].as_u64().unwrap() > 6
     });
     assert_eq!(held["job"]["line"], json!(7), "{}", held["job"]);
     // Line 7 ("G1 Y250") had only just begun: X is at its end, Y barely moved.
@@ -112,47 +146,45 @@ fn job_step_runs_one_line_then_holds() {
     );
     assert!((x - 250.0).abs() < 1.0 && y < 55.0, "X {x} Y {y}");
     ok(&mut c, "job.step", Value::Null);
-    let held = wait_status(&mut c, "held on line 8", Duration::from_secs(120), |s| {
-        s["mode"] == json!("holding") && s["job"]["line"] == json!(8)
+    let held = wait_status(&mut c, "held on line 8", GUARD, |s| {
+        held_at_rest(s) && s["job"]["line"] == json!(8)
     });
     assert!(axis(&held, "Y")["actual"].as_f64().unwrap() > 245.0);
     ok(&mut c, "job.abort", Value::Null);
-    wait_status(&mut c, "idle", Duration::from_secs(60), |s| {
-        s["mode"] == json!("idle")
-    });
+    wait_status(&mut c, "idle", GUARD, |s| s["mode"] == json!("idle"));
     let (code, msg) = err(&mut c, "job.step", Value::Null);
     assert_eq!(code, 1, "{msg}");
 }
 
 #[test]
 fn jog_and_mdi_move_the_machine() {
-    let d = Daemon::start(&fast_sim());
+    let d = Daemon::start_sim();
     let mut c = d.client();
     ready(&mut c);
     ok(&mut c, "mdi", json!({"line": "G0 X100 Y120 Z-30"}));
-    let s = wait_status(&mut c, "mdi done", Duration::from_secs(20), |s| {
-        s["mode"] == json!("idle")
-    });
+    let s = wait_status(&mut c, "mdi done", GUARD, |s| s["mode"] == json!("idle"));
     assert!((axis(&s, "Y")["actual"].as_f64().unwrap() - 120.0).abs() < 0.002);
     ok(
         &mut c,
         "jog",
         json!({"axis": "X", "velocity": 20.0, "distance": 5.0}),
     );
-    let s = wait_status(&mut c, "jog done", Duration::from_secs(10), |s| {
+    let s = wait_status(&mut c, "jog done", GUARD, |s| {
         s["mode"] == json!("idle")
             && (axis(s, "X")["actual"].as_f64().unwrap() - 105.0).abs() < 0.002
     });
     assert_eq!(s["faults"], json!([]));
-    // A continuous jog stops on request, under control, without a fault.
-    ok(&mut c, "jog", json!({"axis": "Y", "velocity": -30.0}));
-    std::thread::sleep(Duration::from_millis(400));
-    ok(&mut c, "jog.stop", Value::Null);
-    let s = wait_status(&mut c, "jog stopped", Duration::from_secs(5), |s| {
-        s["mode"] == json!("idle")
+    // A continuous jog stops on request, under control, without a fault, short of the soft
+    // limit at Y0 (at 5 mm/s it would take 24 s of machine time to get there).
+    ok(&mut c, "jog", json!({"axis": "Y", "velocity": -5.0}));
+    wait_status(&mut c, "jogging", GUARD, |s| {
+        axis(s, "Y")["actual"].as_f64().unwrap() < 119.0
     });
+    ok(&mut c, "jog.stop", Value::Null);
+    let s = wait_status(&mut c, "jog stopped", GUARD, |s| s["mode"] == json!("idle"));
     let y = axis(&s, "Y")["actual"].as_f64().unwrap();
-    assert!(y < 119.0 && y > 90.0, "{y}");
+    assert!(y < 119.0 && y > 1.0, "{y}");
+    assert_eq!(s["faults"], json!([]));
     // MDI with a G-code error moves nothing and names the column.
     let (code, msg) = err(&mut c, "mdi", json!({"line": "G1 X10 G0"}));
     assert_eq!(code, 3, "{msg}");
@@ -161,7 +193,7 @@ fn jog_and_mdi_move_the_machine() {
 
 #[test]
 fn tasks_are_listed_and_operations_callable_by_name() {
-    let d = Daemon::start(&fast_sim());
+    let d = Daemon::start_sim();
     let mut c = d.client();
     let tasks = ok(&mut c, "tasks", Value::Null);
     let names: Vec<&str> = tasks
@@ -223,7 +255,7 @@ fn tasks_are_listed_and_operations_callable_by_name() {
 #[test]
 fn malformed_requests_get_errors_and_the_daemon_keeps_running() {
     use std::io::{BufRead, BufReader, Write};
-    let d = Daemon::start(&fast_sim());
+    let d = Daemon::start_sim();
     let s = std::os::unix::net::UnixStream::connect(&d.socket).unwrap();
     let mut r = BufReader::new(s.try_clone().unwrap());
     let mut w = s;
@@ -246,14 +278,14 @@ fn malformed_requests_get_errors_and_the_daemon_keeps_running() {
 
 #[test]
 fn fifty_clients_poll_status_while_a_job_runs_and_a_vanished_client_does_not_stop_it() {
-    let d = Daemon::start(&fast_sim());
+    let d = Daemon::start_sim();
     {
         let mut c = d.client();
         ready(&mut c);
         run_job(&mut c, "jobs/square.ngc");
         // c is dropped here: the job must go on without its client.
     }
-    let deadline = Instant::now() + Duration::from_secs(60);
+    let deadline = Instant::now() + GUARD;
     let pollers: Vec<_> = (0..50)
         .map(|_| {
             let socket = d.socket.clone();
@@ -284,7 +316,9 @@ fn sigterm_stops_the_machine_under_control_and_exits_zero() {
     let mut c = d.client();
     ready(&mut c);
     run_job(&mut c, "jobs/long.ngc");
-    std::thread::sleep(Duration::from_millis(800));
+    wait_status(&mut c, "job moving", GUARD, |s| {
+        s["job"]["line"].as_u64().unwrap() >= 5 && s["mode"] == json!("running")
+    });
     let (status, stderr) = d.terminate();
     assert!(status.success(), "exit {status:?}\n{stderr}");
     assert!(stderr.contains("SIGTERM"), "{stderr}");

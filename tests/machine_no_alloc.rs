@@ -2,8 +2,10 @@
 //! monitor) allocate nothing in steady state: the whole servo cycle runs on the stepped
 //! runtime on this thread, under a counting global allocator, through motion, a feed hold,
 //! a resume, aux commands and an e-stop; through an abort and a machine off with the spindle
-//! and coolant on (outputs to their safe state); and through a probe move, its trip, the stop
-//! and the next piece of the program.
+//! and coolant on (outputs to their safe state); through a probe move, its trip, the stop and
+//! the next piece of the program; and through a soft-limit trip (which the daemon cannot
+//! reach: its planner refuses such moves, so a plan made with wider limits is queued here).
+//! The same windows on the daemon's real servo thread are in `tests/daemon_no_alloc.rs`.
 #![allow(clippy::unwrap_used)]
 
 use hytask::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
@@ -304,5 +306,82 @@ fn an_abort_and_a_machine_off_with_spindle_and_coolant_on_allocate_nothing() {
         (window1, window2),
         (0, 0),
         "allocations in the servo cycles of an abort and a machine off"
+    );
+}
+
+#[test]
+fn a_soft_limit_trip_and_its_stop_allocate_nothing() {
+    let Homed {
+        mut rt,
+        machine,
+        queue,
+        mut motion_cfg,
+        sim_io: _,
+        fb: _,
+        start,
+    } = homed();
+    let mut snap: DataReader<hytask::machine::servo::MachineSnapshot> =
+        rt.reader(ports::SNAPSHOT).unwrap();
+    // X's soft limit is 300; the planner is told 400, the monitor still guards 300. The
+    // limit switch sits beyond 305: the soft limit trips first.
+    let max_x = motion_cfg.axes[0].max_mm;
+    motion_cfg.axes[0].max_mm = 400.0;
+    let mut end = start;
+    end[0] = max_x + 3.0;
+    let loc = SourceLoc {
+        file: Arc::from("t"),
+        line: 1,
+        col: 1,
+    };
+    let canon = [
+        Canon {
+            loc: loc.clone(),
+            cmd: CanonCmd::SetFeedRate(600.0),
+        },
+        Canon {
+            loc,
+            cmd: CanonCmd::StraightFeed(end),
+        },
+    ];
+    let plan = hytask::motion::plan_from(&canon, &motion_cfg, start).unwrap();
+    for &item in &plan.items {
+        queue.try_push(QueueItem { job: 1, item }).unwrap();
+    }
+    let run = machine
+        .send(MachineCmd::Run {
+            job: 1,
+            items: plan.items.len() as u64,
+            manual: false,
+        })
+        .unwrap();
+    let before = allocations();
+    let mut cycles = 0;
+    loop {
+        rt.run_cycles(1);
+        cycles += 1;
+        let s = snap.latest().unwrap();
+        if s.mode == hytask::machine::api::Mode::Fault {
+            break;
+        }
+        assert!(cycles < 20_000, "no soft-limit trip: {:?}", s.mode);
+    }
+    rt.run_cycles(500); // the stop after the trip
+    let during = allocations() - before;
+    let trip = snap.latest().unwrap().last_trip;
+    assert!(
+        matches!(
+            trip,
+            Some(hytask::machine::safety::Trip::SoftLimit { axis: 0, .. })
+        ),
+        "{trip:?}"
+    );
+    assert!(
+        matches!(run.status(), CommandStatus::Failed(_)),
+        "{:?}",
+        run.status()
+    );
+    assert_eq!(
+        during, 0,
+        "{during} allocations in {cycles} servo cycles and the stop"
     );
 }

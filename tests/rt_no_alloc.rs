@@ -203,3 +203,67 @@ fn full_periodic_step_of_a_task_group_does_not_allocate() {
     assert_eq!(n, 0);
     assert!(a.info().timing().exec.count > 2_000);
 }
+
+/// Allocates in its step while `on` is set.
+struct AllocatesWhenTold {
+    on: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl Task for AllocatesWhenTold {
+    type Command = NoCommands;
+    fn update(&mut self, _: &StepContext) -> Result<(), TaskError> {
+        if self.on.load(std::sync::atomic::Ordering::Acquire) {
+            drop(std::hint::black_box(vec![1u8; 16]));
+        }
+        Ok(())
+    }
+}
+
+/// The realtime-step count covers the real periodic thread (not only the test's own thread)
+/// and only what runs inside its cycles: it stays at zero while the test thread allocates
+/// freely, and sees an allocation made in a step on the periodic thread.
+#[test]
+fn allocations_inside_steps_are_counted_on_the_periodic_thread_and_only_there() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let on = std::sync::Arc::new(AtomicBool::new(false));
+    let mut app = Deployment::new();
+    let sched = Schedule {
+        priority: 10,
+        period_ns: 1_000_000,
+        cpu: None,
+    };
+    app.add_periodic("alloc", AllocatesWhenTold { on: on.clone() }, sched)
+        .unwrap();
+    app.configure().unwrap();
+    let rt = app.start().unwrap();
+    let thread = rt.threads()[0].clone();
+    let cycles = || thread.stats.summary().wakeup.count;
+    let wait_cycles = |n: u64| {
+        let until = cycles() + n;
+        let t0 = std::time::Instant::now();
+        while cycles() < until {
+            // Allocating here, outside any step, must not count.
+            drop(std::hint::black_box(vec![0u8; 64]));
+            std::thread::sleep(std::time::Duration::from_millis(1));
+            assert!(t0.elapsed().as_secs() < 60, "the periodic thread stalled");
+        }
+    };
+    wait_cycles(5);
+    let before = counting_alloc::in_rt_steps();
+    wait_cycles(100);
+    let quiet = counting_alloc::in_rt_steps() - before;
+    on.store(true, Ordering::Release);
+    let before = counting_alloc::in_rt_steps();
+    wait_cycles(20);
+    let loud = counting_alloc::in_rt_steps() - before;
+    on.store(false, Ordering::Release);
+    drop(rt.stop());
+    assert_eq!(quiet, 0, "counted allocations made outside steps");
+    assert!(
+        loud >= 20,
+        "missed allocations in steps on the periodic thread: {loud}"
+    );
+    assert!(counting_alloc::first_rt_backtrace()
+        .unwrap()
+        .contains("AllocatesWhenTold"));
+}

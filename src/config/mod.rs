@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! [machine]       name, kinematics (identity | scara + [machine.scara])
-//! [[thread]]      realtime threads: name, period_us, priority, cpu
+//! [[thread]]      realtime threads: name, period_us, priority, cpu, clock, sim_speed
 //! [[axis]]        X/Y/Z/A/B/C/U/V/W: drive, scale, soft limits, velocity/acceleration/jerk,
 //!                 following error limit, [axis.home]
 //! [[drive]]       name, backend = "sim" | "canopen", [drive.sim] / [drive.canopen]
@@ -56,7 +56,7 @@ pub use settings::{
     Principals, SafetyConfig, ToolTableConfig, UnlistedRole,
 };
 pub use spindle::{CoolantConfig, SpindleConfig};
-pub use thread::{ThreadConfig, MAX_PERIOD_US, MIN_PERIOD_US};
+pub use thread::{ThreadClock, ThreadConfig, MAX_PERIOD_US, MIN_PERIOD_US};
 
 use std::path::Path;
 

@@ -25,6 +25,46 @@ pub struct ThreadConfig {
     /// absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cpu: Option<u16>,
+    /// Which clock the thread runs on: `realtime` (default) or `simulated`, for tests of
+    /// behaviour through the real daemon: time then advances one period per cycle whatever
+    /// the wall clock does (cycles never skipped, no overrun accounting, no `SCHED_FIFO`), so
+    /// a loaded host cannot change what the machine does, only how fast. All threads of a
+    /// machine use the same clock.
+    #[serde(default, skip_serializing_if = "ThreadClock::is_realtime")]
+    pub clock: ThreadClock,
+    /// With `clock = "simulated"`: simulated seconds per wall-clock second (1: real time);
+    /// absent or 0: cycles back to back, as fast as the CPU allows. What the machine does no
+    /// longer depends on the host's load, with one exception: a job longer than the segment
+    /// queue (4096 items) is topped up by its feeder thread in wall time, so at a high speed
+    /// on a loaded host the queue can run dry before the job's end.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sim_speed: Option<u32>,
+}
+
+/// `[[thread]] clock`: what a thread's time is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ThreadClock {
+    /// `CLOCK_MONOTONIC`: absolute-deadline sleeps, `SCHED_FIFO`, overrun accounting.
+    #[default]
+    Realtime,
+    /// Simulated time, one period per cycle (tests).
+    Simulated,
+}
+
+impl ThreadClock {
+    /// True for the default real-time clock.
+    pub fn is_realtime(&self) -> bool {
+        *self == ThreadClock::Realtime
+    }
+
+    /// The config spelling.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            ThreadClock::Realtime => "realtime",
+            ThreadClock::Simulated => "simulated",
+        }
+    }
 }
 
 impl ThreadConfig {
@@ -54,6 +94,23 @@ pub(super) fn validate(threads: &[ThreadConfig], issues: &mut Issues) {
         issues.in_range(format!("{key}.priority"), t.priority, 1, 99);
         if let Some(cpu) = t.cpu {
             issues.in_range(format!("{key}.cpu"), cpu, 0, 1023);
+        }
+        if t.sim_speed.is_some() && t.clock.is_realtime() {
+            issues.push(
+                format!("{key}.sim_speed"),
+                "only applies with clock = \"simulated\"",
+            );
+        }
+        if let Some(first) = threads.first().filter(|f| f.clock != t.clock) {
+            issues.push(
+                format!("{key}.clock"),
+                format!(
+                    "\"{}\" differs from {}'s \"{}\": all threads of a machine share one clock",
+                    t.clock.as_str(),
+                    ThreadConfig::key(0, &first.name),
+                    first.clock.as_str()
+                ),
+            );
         }
         for (j, earlier) in threads[..i].iter().enumerate() {
             let other = ThreadConfig::key(j, &earlier.name);
@@ -87,5 +144,44 @@ pub(super) fn validate(threads: &[ThreadConfig], issues: &mut Issues) {
                 );
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{parse, BUILTIN_SIM_TOML};
+
+    /// The built-in mill with `extra` lines added to its first and second `[[thread]]`.
+    fn with_thread_keys(first: &str, second: &str) -> Result<Vec<ThreadConfig>, String> {
+        let mut parts = BUILTIN_SIM_TOML.splitn(3, "[[thread]]\n");
+        let text = format!(
+            "{}[[thread]]\n{first}{}[[thread]]\n{second}{}",
+            parts.next().unwrap_or_default(),
+            parts.next().unwrap_or_default(),
+            parts.next().unwrap_or_default()
+        );
+        parse(&text, "t")
+            .map(|c| c.threads)
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn the_clock_is_realtime_unless_every_thread_says_simulated() {
+        let t = with_thread_keys("", "").unwrap();
+        assert!(t.iter().all(|t| t.clock == ThreadClock::Realtime));
+        let sim = "clock = \"simulated\"\nsim_speed = 4\n";
+        let t = with_thread_keys(sim, "clock = \"simulated\"\n").unwrap();
+        assert_eq!(t[0].clock, ThreadClock::Simulated);
+        assert_eq!((t[0].sim_speed, t[1].sim_speed), (Some(4), None));
+        let e = with_thread_keys(sim, "").unwrap_err();
+        assert!(
+            e.contains("thread[1] (plc).clock") && e.contains("share one clock"),
+            "{e}"
+        );
+        let e = with_thread_keys("sim_speed = 2\n", "").unwrap_err();
+        assert!(e.contains("thread[0] (servo).sim_speed"), "{e}");
+        let e = with_thread_keys("clock = \"fast\"\n", "").unwrap_err();
+        assert!(e.contains("clock"), "{e}");
     }
 }

@@ -379,7 +379,15 @@ impl Machine {
         let readers = Readers {
             status: app.reader(ports::STATUS)?,
         };
-        let runtime = app.start()?;
+        let runtime = match config.servo_thread() {
+            Some(t) if t.clock == crate::config::ThreadClock::Simulated => {
+                app.start_simulated(match t.sim_speed {
+                    None | Some(0) => crate::rt::activity::SimPace::Unpaced,
+                    Some(x) => crate::rt::activity::SimPace::Speed(f64::from(x)),
+                })?
+            }
+            _ => app.start()?,
+        };
         let servo_info = runtime
             .threads()
             .first()

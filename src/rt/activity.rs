@@ -13,8 +13,19 @@
 //! A [`SteppedActivity`] runs the same group code on the caller's thread against a
 //! [`SimClock`](super::clock::SimClock): tests run N cycles deterministically.
 //!
+//! A periodic activity on a *simulated clock* ([`PeriodicActivity::spawn_simulated`]) runs
+//! the same group on its own ordinary thread, but its time advances exactly one period per
+//! cycle whatever the wall clock does: cycles run back to back (or paced at a multiple of
+//! real time), none is ever skipped and no overrun is counted. A daemon under test then shows
+//! the same cycle-by-cycle behaviour however loaded its host is (`[[thread]] clock =
+//! "simulated"`).
+//!
 //! Without the privilege for `SCHED_FIFO` the thread still runs with ordinary scheduling,
 //! logs one warning (see [`system::warn_not_realtime`]) and reports `realtime: false`.
+//!
+//! Every activity marks the thread it runs a cycle on while the cycle runs
+//! ([`in_rt_step`]): a counting allocator in a test binary uses the mark to count the
+//! allocations made inside realtime steps on any thread, the `SCHED_FIFO` one included.
 
 use super::clock::{monotonic_ns, Clock, SimClock};
 use super::event::EventSource;
@@ -22,8 +33,40 @@ use super::runner::Runnable;
 use super::stats::TimingStats;
 use super::system;
 use super::task::StepContext;
+use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
+
+thread_local! {
+    /// Set while this thread runs a cycle of a task group. `const`-initialised and without a
+    /// destructor, so reading it never allocates (a global allocator may read it).
+    static IN_RT_STEP: Cell<bool> = const { Cell::new(false) };
+}
+
+/// True while the calling thread runs a realtime cycle (the steps of a task group, the
+/// timing and overrun accounting after them), on any activity. For the zero-allocation
+/// tests: their counting global allocator reads it to count allocations made inside steps on
+/// every thread. Reading it never allocates and never panics (false during thread teardown).
+#[doc(hidden)]
+#[inline]
+pub fn in_rt_step() -> bool {
+    IN_RT_STEP.try_with(Cell::get).unwrap_or(false)
+}
+
+/// Runs `f` with the calling thread marked as inside a realtime cycle. Costs two
+/// thread-local stores per cycle; the mark is cleared even if `f` unwinds.
+#[inline]
+fn in_cycle<R>(f: impl FnOnce() -> R) -> R {
+    struct Clear;
+    impl Drop for Clear {
+        fn drop(&mut self) {
+            let _ = IN_RT_STEP.try_with(|c| c.set(false));
+        }
+    }
+    let _ = IN_RT_STEP.try_with(|c| c.set(true));
+    let _clear = Clear;
+    f()
+}
 
 /// Scheduling of one thread.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
@@ -246,7 +289,18 @@ pub struct PeriodicActivity {
 
 impl PeriodicActivity {
     /// Spawns the thread and starts cycling `group` (its tasks must already be started).
-    pub fn spawn(mut group: TaskGroup) -> Result<Self, ActivityError> {
+    pub fn spawn(group: TaskGroup) -> Result<Self, ActivityError> {
+        Self::spawn_with(group, None)
+    }
+
+    /// Spawns the thread on a simulated clock: an ordinary (not `SCHED_FIFO`) thread whose
+    /// tasks see time advance one period per cycle, paced by `pace`; no overrun accounting.
+    /// For tests of behaviour, not timing: see the module documentation.
+    pub fn spawn_simulated(group: TaskGroup, pace: SimPace) -> Result<Self, ActivityError> {
+        Self::spawn_with(group, Some(pace))
+    }
+
+    fn spawn_with(mut group: TaskGroup, sim: Option<SimPace>) -> Result<Self, ActivityError> {
         let spec = group.info.spec.clone();
         if spec.period_ns == 0 {
             return Err(ActivityError::ZeroPeriod(spec.name));
@@ -259,8 +313,19 @@ impl PeriodicActivity {
             .name(thread_name)
             .stack_size(RT_STACK_BYTES)
             .spawn(move || {
-                thread_setup(&group.info);
-                run_loop(&mut group, &stop2);
+                match sim {
+                    None => {
+                        thread_setup(&group.info);
+                        run_loop(&mut group, &stop2);
+                    }
+                    Some(pace) => {
+                        tracing::info!(
+                            thread = %group.info.spec.name,
+                            "simulated clock ({pace:?}): not realtime, no overrun accounting"
+                        );
+                        run_sim_loop(&mut group, &stop2, pace);
+                    }
+                }
                 group.stop_tasks();
                 group.info.running.store(false, Ordering::Release);
                 group
@@ -345,30 +410,81 @@ fn run_loop(group: &mut TaskGroup, stop: &AtomicBool) {
     let mut deadline = monotonic_ns() + period;
     while !stop.load(Ordering::Acquire) {
         sleep_until_ns(deadline);
-        let woke = monotonic_ns();
-        group
-            .info
-            .stats
-            .wakeup
-            .record(woke.saturating_sub(deadline));
-        let next = deadline + period;
-        // Non-periodic work may use up to three quarters of the period.
-        group.run_tasks(
-            deadline,
-            deadline + period * 3 / 4,
-            &monotonic_ns,
-            Some(deadline),
-        );
-        let end = monotonic_ns();
-        group.info.stats.exec.record(end.saturating_sub(woke));
-        let overran = end > next;
-        group.account_overrun(overran);
-        deadline = next;
-        if overran {
-            // Skip the periods already missed rather than running them back to back.
-            let missed = (end - deadline) / period + 1;
-            deadline += missed * period;
+        deadline = in_cycle(|| real_time_cycle(group, deadline));
+    }
+}
+
+/// One cycle of the real-time loop scheduled at `deadline`; returns the next deadline.
+#[inline]
+fn real_time_cycle(group: &mut TaskGroup, deadline: u64) -> u64 {
+    let period = group.info.spec.period_ns;
+    let woke = monotonic_ns();
+    group
+        .info
+        .stats
+        .wakeup
+        .record(woke.saturating_sub(deadline));
+    let next = deadline + period;
+    // Non-periodic work may use up to three quarters of the period.
+    group.run_tasks(
+        deadline,
+        deadline + period * 3 / 4,
+        &monotonic_ns,
+        Some(deadline),
+    );
+    let end = monotonic_ns();
+    group.info.stats.exec.record(end.saturating_sub(woke));
+    let overran = end > next;
+    group.account_overrun(overran);
+    if overran {
+        // Skip the periods already missed rather than running them back to back.
+        let missed = (end - next) / period + 1;
+        next + missed * period
+    } else {
+        next
+    }
+}
+
+/// How a periodic activity on a simulated clock keeps pace with the wall clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SimPace {
+    /// Cycles back to back, as fast as the CPU allows.
+    Unpaced,
+    /// At most `speed` simulated seconds per wall-clock second (1.0: real time); a cycle
+    /// that is late runs at once, and later ones catch up, none skipped.
+    Speed(f64),
+}
+
+/// The loop of a periodic activity on a simulated clock: time advances one period per cycle
+/// whatever the wall clock says, so the tasks see exactly the cycles a stepped runtime would
+/// run; nothing is skipped and no overrun is counted (there is no deadline to miss).
+fn run_sim_loop(group: &mut TaskGroup, stop: &AtomicBool, pace: SimPace) {
+    let period = group.info.spec.period_ns;
+    let wall_start = monotonic_ns();
+    let mut deadline = wall_start;
+    let mut n: u64 = 0;
+    while !stop.load(Ordering::Acquire) {
+        if let SimPace::Speed(speed) = pace {
+            let due = wall_start + ((n as f64 * period as f64) / speed) as u64;
+            if monotonic_ns() < due {
+                sleep_until_ns(due);
+            }
         }
+        in_cycle(|| {
+            let woke = monotonic_ns();
+            group.info.stats.wakeup.record(0);
+            // Simulated time stands still during the cycle: every non-periodic task with
+            // work runs, as on the stepped activity.
+            // No start latency per task: the deadline is not on `CLOCK_MONOTONIC`.
+            group.run_tasks(deadline, u64::MAX, &|| deadline, None);
+            group
+                .info
+                .stats
+                .exec
+                .record(monotonic_ns().saturating_sub(woke));
+        });
+        deadline += period;
+        n += 1;
     }
 }
 
@@ -398,6 +514,10 @@ impl SteppedActivity {
     /// Runs one cycle: moves the clock to the cycle's deadline, steps the tasks, and counts an
     /// overrun if the tasks moved the simulated clock past the next deadline.
     pub fn step(&mut self) {
+        in_cycle(|| self.step_cycle());
+    }
+
+    fn step_cycle(&mut self) {
         let deadline = self.next_deadline_ns;
         self.clock.set_ns(deadline);
         self.group.info.stats.wakeup.record(0);

@@ -18,7 +18,8 @@
 //! separate names.
 
 use super::activity::{
-    Overrun, OverrunPolicy, PeriodicActivity, SteppedActivity, TaskGroup, ThreadInfo, ThreadSpec,
+    Overrun, OverrunPolicy, PeriodicActivity, SimPace, SteppedActivity, TaskGroup, ThreadInfo,
+    ThreadSpec,
 };
 use super::buffer::{unsized_buffer, BufferReader, BufferWriter, FullPolicy};
 use super::clock::SimClock;
@@ -1021,7 +1022,19 @@ impl Deployment {
 
     /// Starts every task (start hooks in start order, on this thread) and one periodic
     /// thread per (priority, period).
-    pub fn start(mut self) -> Result<Runtime, DeployError> {
+    pub fn start(self) -> Result<Runtime, DeployError> {
+        self.start_with(None)
+    }
+
+    /// Starts every task like [`start`](Self::start), but each thread runs on a simulated
+    /// clock ([`PeriodicActivity::spawn_simulated`]): one period per cycle whatever the wall
+    /// clock does, no skipped cycles, no overrun accounting, no `SCHED_FIFO`. For tests of
+    /// behaviour through the real daemon.
+    pub fn start_simulated(self, pace: SimPace) -> Result<Runtime, DeployError> {
+        self.start_with(Some(pace))
+    }
+
+    fn start_with(mut self, sim: Option<SimPace>) -> Result<Runtime, DeployError> {
         if let Err(e) = self.start_groups() {
             for g in &mut self.groups {
                 g.stop_tasks();
@@ -1030,7 +1043,10 @@ impl Deployment {
         }
         let mut activities = Vec::new();
         for g in self.groups.drain(..) {
-            activities.push(PeriodicActivity::spawn(g)?);
+            activities.push(match sim {
+                None => PeriodicActivity::spawn(g)?,
+                Some(pace) => PeriodicActivity::spawn_simulated(g, pace)?,
+            });
         }
         Ok(Runtime {
             core: RuntimeCore::from(self),

@@ -1,5 +1,22 @@
 //! Shared helpers of the end-to-end tests: start the real `hytask serve` binary on a
-//! private socket, talk to it, wait for conditions with deadlines.
+//! private socket, talk to it, wait for conditions with hang guards.
+//!
+//! # Simulated clock or real time
+//! Tests about behaviour (what the machine does: jobs, holds, steps, trips, probing) start the
+//! daemon with [`Daemon::start_sim`]: the fast-homing mill of `tests/fixtures/sim-fast.toml`
+//! with `[[thread]] clock = "simulated"`. Its servo thread is an ordinary thread whose time
+//! advances exactly one period per cycle, paced at [`SIM_SPEED`] × real time: a loaded host
+//! can slow the machine down but never skips a cycle or trips an overrun, so the machine does
+//! the same thing cycle by cycle however loaded the host is. The tests act on states they
+//! observe (a job line reached, a hold at rest), never after a wall-clock sleep, and every
+//! wait is only a hang guard (60 s and more). Cycle-exact assertions (the e-stop quick stop,
+//! the probe trip) live on the stepped runtime, in-process (`src/machine/servo/tests.rs`,
+//! `tests/machine_no_alloc.rs`).
+//!
+//! A few real-time smoke tests keep [`Daemon::start`] on the real-time fixture (the servo
+//! thread on `SCHED_FIFO` when permitted, overrun accounting on): SIGTERM, `hytask run`, the
+//! overrun storm (`tests/daemon_overrun.rs`), and the zero-allocation windows
+//! (`tests/daemon_no_alloc.rs`).
 #![allow(clippy::unwrap_used, dead_code)]
 
 use hytask::control::client::{Client, ClientError, Event};
@@ -27,10 +44,56 @@ pub struct Daemon {
     _dir: tempfile::TempDir,
 }
 
+/// Simulated seconds per wall-clock second of the behaviour tests' machine: fast enough to
+/// shorten the tests, slow enough that a state a test waits for (a 10 s feed move of the long
+/// job) lasts seconds of wall time, so a test's request lands in it even on a loaded host.
+pub const SIM_SPEED: u32 = 4;
+
+/// Writes the fast-homing mill on a simulated clock (`sim_speed` = `speed`, 0: unpaced) into
+/// `dir`; with `plate_top`, a touch plate under Z drives the `probe` input inside the servo
+/// cycle (as in config/sim.toml), so probing does not depend on a watcher's timing.
+pub fn sim_clock_config(dir: &Path, speed: u32, plate_top: Option<f64>) -> PathBuf {
+    let base = std::fs::read_to_string(fast_sim()).unwrap();
+    let thread = "[[thread]]\n";
+    assert_eq!(base.matches(thread).count(), 2, "sim-fast.toml changed");
+    let mut text = base.replace(
+        thread,
+        &format!("{thread}clock = \"simulated\"\nsim_speed = {speed}\n"),
+    );
+    if let Some(top) = plate_top {
+        let panel = "name = \"panel\"\n";
+        assert!(text.contains(panel), "sim-fast.toml changed");
+        text = text.replace(
+            panel,
+            &format!("{panel}touch_plate = {{ input = \"probe\", axis = \"Z\", top = {top:?} }}\n"),
+        );
+    }
+    let path = dir.join("sim-clock.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
 impl Daemon {
-    /// Starts the daemon on `config` and waits for its socket.
+    /// Starts the daemon on `config` (real time) and waits for its socket.
     pub fn start(config: &Path) -> Daemon {
+        Self::start_in(tempfile::tempdir().unwrap(), config)
+    }
+
+    /// Starts the daemon on the fast-homing mill on a simulated clock at [`SIM_SPEED`] (see
+    /// the module documentation).
+    pub fn start_sim() -> Daemon {
+        Self::start_sim_with(SIM_SPEED, None)
+    }
+
+    /// [`start_sim`](Self::start_sim) at `speed` (0: unpaced), with an optional touch plate
+    /// under Z at `plate_top`.
+    pub fn start_sim_with(speed: u32, plate_top: Option<f64>) -> Daemon {
         let dir = tempfile::tempdir().unwrap();
+        let config = sim_clock_config(dir.path(), speed, plate_top);
+        Self::start_in(dir, &config)
+    }
+
+    fn start_in(dir: tempfile::TempDir, config: &Path) -> Daemon {
         let socket = dir.path().join("control.sock");
         let child = Command::new(env!("CARGO_BIN_EXE_hytask"))
             .args(["serve", "--config"])
@@ -42,15 +105,28 @@ impl Daemon {
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        let d = Daemon {
+        let mut d = Daemon {
             child: Some(child),
             socket,
             _dir: dir,
         };
         let t0 = Instant::now();
         while Client::connect(&d.socket).is_err() {
+            if let Some(status) = d.child.as_mut().unwrap().try_wait().unwrap() {
+                let mut err = String::new();
+                use std::io::Read;
+                let _ = d
+                    .child
+                    .as_mut()
+                    .unwrap()
+                    .stderr
+                    .take()
+                    .unwrap()
+                    .read_to_string(&mut err);
+                panic!("daemon exited ({status}) before opening its socket:\n{err}");
+            }
             assert!(
-                t0.elapsed() < Duration::from_secs(20),
+                t0.elapsed() < Duration::from_secs(60),
                 "daemon did not open its socket"
             );
             std::thread::sleep(Duration::from_millis(20));
@@ -178,7 +254,7 @@ pub fn ready(c: &mut Client) {
         ok(c, "machine.on", Value::Null);
     }
     ok(c, "home", Value::Null);
-    wait_status(c, "homed and idle", Duration::from_secs(30), |s| {
+    wait_status(c, "homed and idle", Duration::from_secs(120), |s| {
         s["mode"] == json!("idle")
             && s["axes"]
                 .as_array()
