@@ -1342,7 +1342,13 @@ impl crate::daemon::Deployed for Machine {
     fn shutdown(&self) -> anyhow::Result<()> {
         // A controlled stop of whatever moves, then drives off, then threads down.
         let snap = self.snapshot().machine;
-        if !matches!(snap.mode, Mode::Estop | Mode::Off) {
+        if snap.mode == Mode::Fault {
+            // A fault has already stopped the axes under control and disabled the drives; the
+            // machine does not take `Off` in that mode, so waiting for it would outlast
+            // systemd's stop timeout. The e-stop puts the outputs in their safe state at once.
+            let _ = self.command(MachineCmd::Estop);
+            std::thread::sleep(Duration::from_millis(200));
+        } else if !matches!(snap.mode, Mode::Estop | Mode::Off) {
             if let Err(e) = self.command_done(MachineCmd::Off, Duration::from_secs(30)) {
                 tracing::warn!("controlled stop at shutdown: {e}; tripping the e-stop");
                 let _ = self.command(MachineCmd::Estop);
