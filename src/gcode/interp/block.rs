@@ -183,6 +183,11 @@ impl Interp<'_> {
         // 24. stop
         if let Some((m, col)) = b.m[4] {
             self.loc.col = col;
+            if m == 99 {
+                if let Some(msg) = self.m99_misplaced() {
+                    return Err(self.err(col, msg));
+                }
+            }
             self.stop(m)?;
         }
         Ok(())
@@ -190,7 +195,7 @@ impl Interp<'_> {
 
     /// LinuxCNC's block checks that do not depend on execution (check_g_codes,
     /// check_m_codes, check_other_codes).
-    fn check_block(&self, b: &Block) -> Result<(), GcodeError> {
+    pub(super) fn check_block(&self, b: &Block) -> Result<(), GcodeError> {
         // An unsupported feature says its name before any word check can blame its words.
         for grp in [1, 7, 8, 15] {
             if let Some((g, col)) = b.g[grp] {
