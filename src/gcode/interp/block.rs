@@ -275,12 +275,16 @@ impl Interp<'_> {
             }
         };
         let cycle = matches!(g1, Some(730 | 810..=890));
+        // G5/G5.1 are not modal: only an explicit one uses I, J (and G5 P, Q).
+        let spline = matches!(g1, Some(50 | 51));
+        let g5 = g1 == Some(50);
         let g10 = g0 == Some(100);
         let user_m = b.m[10].is_some();
         if !b"ijkredhpql".iter().any(|&c| b.has(c)) {
             return Ok(());
         }
         let p_ok = arc
+            || g5
             || g0 == Some(40)
             || g10
             || b.gcode(13) == Some(640)
@@ -289,6 +293,7 @@ impl Interp<'_> {
             || matches!(b.mcode(5), Some(62..=66))
             || user_m;
         let q_ok = g10
+            || g5
             || b.gcode(13) == Some(640)
             || matches!(motion, 730 | 830) && (cycle || axis)
             || matches!(b.mcode(5), Some(66..=68))
@@ -299,12 +304,12 @@ impl Interp<'_> {
         let checks: [(u8, bool, &str); 10] = [
             (
                 b'i',
-                arc || g10 || motion == 870,
+                arc || spline || g10 || motion == 870,
                 "I word with no G2, G3, G5, G5.1, G10, G33.1, G76, or G87 to use it",
             ),
             (
                 b'j',
-                arc || g10 || motion == 870,
+                arc || spline || g10 || motion == 870,
                 "J word with no G2, G3, G5, G5.1, G10, G76 or G87 to use it",
             ),
             (

@@ -13,6 +13,7 @@ mod frame;
 mod mcodes;
 mod motion;
 mod ocode;
+mod splines;
 mod state;
 mod unsupported;
 
