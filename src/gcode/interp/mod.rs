@@ -329,6 +329,7 @@ impl<'a> Interp<'a> {
             CanonCmd::StraightTraverse(_)
                 | CanonCmd::StraightFeed(_)
                 | CanonCmd::ArcFeed { .. }
+                | CanonCmd::NurbsFeed { .. }
                 | CanonCmd::StraightProbe { .. }
         ) {
             self.s.tlo_at_motion = self.s.tool_offset;
