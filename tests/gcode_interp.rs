@@ -321,11 +321,6 @@ fn cutter_compensation_is_refused_clearly() {
 #[test]
 fn unsupported_g_codes_say_their_name() {
     for (line, name) in [
-        (
-            "G5.1 X1 Y1 I1 J1",
-            "G5.1 (quadratic B-spline) is not supported",
-        ),
-        ("G5 X1 Y1 I1 J1 P1 Q1", "G5 (cubic spline) is not supported"),
         ("G5.2 X1 Y1 P1 L3", "G5.2 (NURBS block) is not supported"),
         ("G33.1 Z-1 K0.1", "G33.1 (rigid tapping) is not supported"),
         (
@@ -552,4 +547,47 @@ fn bytes_that_are_not_utf8_are_located() {
     assert!(e.message.contains("not UTF-8"), "{e}");
     std::fs::write(&f, b"G21 (caf\xe9)\nG0 X1\nM2\n").unwrap();
     assert!(load_file(&f, &InterpOptions::default()).is_ok());
+}
+
+#[test]
+fn fanuc_m98_repeats_share_parameters_and_l0_calls_nothing() {
+    // L3: three runs of O10, each one step further (#1 is shared with the caller);
+    // L0: no run at all, and the next line runs once. (`G1 F100` alone is a zero-length
+    // feed, as in rs274.)
+    let p = run("#1=0\nG1 F100\nM98 P10 L3\nM98 P11 L0\nG1 Y#1\nM2\nO10\n#1=[#1+1]\nG1 X#1\nM99\nO11\nG0 Z9\nM99\n");
+    assert_eq!(
+        feeds(&p),
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [2.0, 0.0, 0.0],
+            [3.0, 0.0, 0.0],
+            [3.0, 3.0, 0.0]
+        ]
+    );
+    assert!(!body(&p)
+        .iter()
+        .any(|c| matches!(c, CanonCmd::StraightTraverse(_))));
+    // Where the subprogram's lines say they came from: line 9 (G1 X#1), three times.
+    let lines: Vec<u32> = p
+        .canon
+        .iter()
+        .filter(|c| matches!(c.cmd, CanonCmd::StraightFeed(_)))
+        .map(|c| c.loc.line)
+        .collect();
+    assert_eq!(lines, vec![2, 9, 9, 9, 5]);
+}
+
+#[test]
+fn fanuc_m98_errors_name_the_line() {
+    let e = err("G21\nM98 P77\nM2\n");
+    assert_eq!((e.line, e.col), (2, 1));
+    assert!(e.message.contains("O77"), "{}", e.message);
+    let e = err("M98 P10\nM2\nO10\nG0 X1 M99\n");
+    assert_eq!(e.line, 4);
+    assert!(
+        e.message.contains("M99 must begin its line"),
+        "{}",
+        e.message
+    );
 }

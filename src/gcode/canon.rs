@@ -220,6 +220,22 @@ pub enum CanonCmd {
         /// Full end pose (program frame).
         end: Pose,
     },
+    /// `NURBS_FEED(n, ...)`: a feed move along a planar NURBS curve in the XY plane (G5
+    /// cubic and G5.1 quadratic splines as Bézier curves). `points` are the `n` control
+    /// points in the program frame, the current position first, each with its weight;
+    /// the knot vector is uniform and clamped, of order `order` (degree + 1). The other
+    /// axes do not move. The planner flattens the curve into lines within the path
+    /// tolerance.
+    NurbsFeed {
+        /// Control points `[x, y, weight]`, starting at the current position.
+        points: Vec<[f64; 3]>,
+        /// Order of the curve (4: cubic, 3: quadratic).
+        order: u8,
+        /// Full end pose (program frame).
+        end: Pose,
+        /// G93: the F word (the move takes 1/F minutes), as rs274 sets no feed rate for it.
+        inverse_time: Option<f64>,
+    },
     /// `DWELL(seconds)`.
     Dwell(f64),
     /// `SET_SPINDLE_SPEED(spindle, rpm)`.

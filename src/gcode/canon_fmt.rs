@@ -194,6 +194,10 @@ pub fn push_call(out: &mut Vec<u8>, cmd: &CanonCmd) -> bool {
             push_list(out, six(p));
             out.push(b')');
         }
+        CanonCmd::NurbsFeed { points, .. } => {
+            // rs274's standalone canon prints only the number of control points.
+            let _ = write!(out, "NURBS_FEED({}, ...)", points.len());
+        }
         CanonCmd::ArcFeed {
             first_end,
             second_end,

@@ -33,7 +33,8 @@ pub fn g_group(g: u16) -> Option<usize> {
 /// M modal group of `m`, or None if LinuxCNC has no such M code.
 pub fn m_group(m: u16) -> Option<usize> {
     Some(match m {
-        0 | 1 | 2 | 30 | 60 => 4,
+        // M99 outside a Fanuc-style subprogram ends the program, as M2 (rs274).
+        0 | 1 | 2 | 30 | 60 | 99 => 4,
         62..=68 => 5,
         6 | 61 => 6,
         3..=5 => 7,

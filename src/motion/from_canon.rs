@@ -316,6 +316,59 @@ pub fn fold_from(
                     st.pos_mm = m;
                 }
             }
+            CanonCmd::NurbsFeed {
+                points,
+                order,
+                end,
+                inverse_time,
+            } => {
+                check_finite(end, line)?;
+                let curve =
+                    super::nurbs::Nurbs::new(points, usize::from(*order)).ok_or_else(|| {
+                        PlanError::Invalid {
+                            line,
+                            what: "spline with invalid control points".into(),
+                        }
+                    })?;
+                let tol_mm = cfg.arc_chord_tolerance_mm.min(st.blend_tolerance_mm(cfg));
+                let machine: Vec<[f64; NUM_AXES]> = curve
+                    .chord_points(tol_mm / st.scale())
+                    .iter()
+                    .map(|p| {
+                        let mut e = *end;
+                        e[0] = p[0];
+                        e[1] = p[1];
+                        st.to_machine(&e)
+                    })
+                    .collect();
+                let mut total_mm = 0.0;
+                let mut prev = st.pos_mm;
+                for m in &machine {
+                    total_mm += Move {
+                        start_mm: prev,
+                        end_mm: *m,
+                        ..blank()
+                    }
+                    .feed_length_mm();
+                    prev = *m;
+                }
+                st.arc_id += 1;
+                let feed = match inverse_time {
+                    // G93: the whole curve takes 1/F minutes.
+                    Some(f) if f.is_finite() && *f > 0.0 => total_mm * f / 60.0,
+                    Some(_) => {
+                        return Err(PlanError::Invalid {
+                            line,
+                            what: "inverse time spline with zero or invalid F".into(),
+                        })
+                    }
+                    None => st.feed_mm_s(total_mm, false, line)?,
+                };
+                for m in machine {
+                    push_line(&mut out, &st, cfg, m, false, st.arc_id, feed, line)?;
+                    st.pos_mm = m;
+                }
+            }
             CanonCmd::Dwell(s) => {
                 if !(s.is_finite() && *s >= 0.0) {
                     return Err(PlanError::Invalid {

@@ -73,6 +73,7 @@ pub mod limits;
 pub mod lookahead;
 pub mod merge;
 pub mod moves;
+pub mod nurbs;
 pub mod profile;
 pub mod segment;
 pub mod stream;

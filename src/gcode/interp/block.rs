@@ -183,6 +183,11 @@ impl Interp<'_> {
         // 24. stop
         if let Some((m, col)) = b.m[4] {
             self.loc.col = col;
+            if m == 99 {
+                if let Some(msg) = self.m99_misplaced() {
+                    return Err(self.err(col, msg));
+                }
+            }
             self.stop(m)?;
         }
         Ok(())
@@ -190,7 +195,7 @@ impl Interp<'_> {
 
     /// LinuxCNC's block checks that do not depend on execution (check_g_codes,
     /// check_m_codes, check_other_codes).
-    fn check_block(&self, b: &Block) -> Result<(), GcodeError> {
+    pub(super) fn check_block(&self, b: &Block) -> Result<(), GcodeError> {
         // An unsupported feature says its name before any word check can blame its words.
         for grp in [1, 7, 8, 15] {
             if let Some((g, col)) = b.g[grp] {
@@ -270,12 +275,16 @@ impl Interp<'_> {
             }
         };
         let cycle = matches!(g1, Some(730 | 810..=890));
+        // G5/G5.1 are not modal: only an explicit one uses I, J (and G5 P, Q).
+        let spline = matches!(g1, Some(50 | 51));
+        let g5 = g1 == Some(50);
         let g10 = g0 == Some(100);
         let user_m = b.m[10].is_some();
         if !b"ijkredhpql".iter().any(|&c| b.has(c)) {
             return Ok(());
         }
         let p_ok = arc
+            || g5
             || g0 == Some(40)
             || g10
             || b.gcode(13) == Some(640)
@@ -284,6 +293,7 @@ impl Interp<'_> {
             || matches!(b.mcode(5), Some(62..=66))
             || user_m;
         let q_ok = g10
+            || g5
             || b.gcode(13) == Some(640)
             || matches!(motion, 730 | 830) && (cycle || axis)
             || matches!(b.mcode(5), Some(66..=68))
@@ -294,12 +304,12 @@ impl Interp<'_> {
         let checks: [(u8, bool, &str); 10] = [
             (
                 b'i',
-                arc || g10 || motion == 870,
+                arc || spline || g10 || motion == 870,
                 "I word with no G2, G3, G5, G5.1, G10, G33.1, G76, or G87 to use it",
             ),
             (
                 b'j',
-                arc || g10 || motion == 870,
+                arc || spline || g10 || motion == 870,
                 "J word with no G2, G3, G5, G5.1, G10, G76 or G87 to use it",
             ),
             (

@@ -8,10 +8,12 @@
 mod arcs;
 mod block;
 mod cycles;
+mod fanuc;
 mod frame;
 mod mcodes;
 mod motion;
 mod ocode;
+mod splines;
 mod state;
 mod unsupported;
 
@@ -210,6 +212,9 @@ pub(crate) struct Frame {
     saved: [f64; 30],
     /// Label of the subroutine (for endsub/return checks).
     label: Box<str>,
+    /// Set for a Fanuc-style `M98` call: shares `#1`–`#30` with its caller and returns
+    /// with `M99`, after its repeats.
+    fanuc: Option<fanuc::Repeat>,
 }
 
 /// The interpreter.
@@ -324,6 +329,7 @@ impl<'a> Interp<'a> {
             CanonCmd::StraightTraverse(_)
                 | CanonCmd::StraightFeed(_)
                 | CanonCmd::ArcFeed { .. }
+                | CanonCmd::NurbsFeed { .. }
                 | CanonCmd::StraightProbe { .. }
         ) {
             self.s.tlo_at_motion = self.s.tool_offset;
@@ -485,6 +491,9 @@ impl<'a> Interp<'a> {
 
     fn exec_line(&mut self, line: &Line) -> Result<(), GcodeError> {
         if line.words.is_empty() && line.assigns.is_empty() && line.comments.is_empty() {
+            return Ok(());
+        }
+        if self.fanuc_line(line)? {
             return Ok(());
         }
         let mut b = Block::default();

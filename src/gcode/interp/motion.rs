@@ -66,6 +66,7 @@ impl Interp<'_> {
         match m {
             0 | 10 => self.straight(m, b),
             20 | 30 => self.arc(m, b),
+            50 | 51 => self.spline(m, b),
             382..=385 => self.probe(m, b),
             800 => {
                 self.s.motion = 800;

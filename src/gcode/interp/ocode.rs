@@ -161,6 +161,12 @@ impl Interp<'_> {
                 let Some(top) = self.frames.last() else {
                     return Err(missing(self, "endsub/return outside of a subroutine call"));
                 };
+                if top.fanuc.is_some() {
+                    return Err(self.err(
+                        o.col,
+                        "Fanuc 'O....' subroutine definition must end with 'M99'",
+                    ));
+                }
                 // A return leaves the subroutine being executed whatever its label (CAM
                 // and hand-written code write `oN return` inside `oN if`), as in rs274.
                 if o.kind == OKind::EndSub && top.label != label {
@@ -177,25 +183,7 @@ impl Interp<'_> {
                     }
                     None => self.s.value_returned = 0.0,
                 }
-                // M73 in this subroutine: its saved modal state comes back on return.
-                let level = self.frames.len();
-                if self.s.auto_restore.get(level).copied().unwrap_or(false) {
-                    if let Some(Some(saved)) = self.s.saved.get(level).cloned() {
-                        self.restore_modal(&saved, true)?;
-                    }
-                }
-                let Some(frame) = self.frames.pop() else {
-                    return Ok(());
-                };
-                self.s.auto_restore.pop();
-                self.p.numbered[1..31].copy_from_slice(&frame.saved);
-                self.p.locals.pop();
-                self.s.saved.pop();
-                let level = self.frames.len();
-                self.loop_iters.retain(|k, _| k.2 <= level);
-                self.repeats.retain(|k, _| k.2 <= level);
-                self.pc = frame.ret;
-                Ok(())
+                self.leave_frame()
             }
             OKind::Call => {
                 let mut args = Vec::with_capacity(o.args.len());
@@ -230,8 +218,21 @@ impl Interp<'_> {
                                 }
                             }
                         }
+                        let numbered = self.files.iter().any(|src| {
+                            src.by_label.get(&label).is_some_and(|ls| {
+                                ls.iter().any(|x| {
+                                    src.olines.get(x).map(|o| o.kind) == Some(OKind::ProgramNumber)
+                                })
+                            })
+                        });
                         match found {
                             Some(t) => t,
+                            None if numbered => {
+                                return Err(self.err(
+                                    o.col,
+                                    "Fanuc 'O....' subroutine must be called with 'M98'",
+                                ))
+                            }
                             None => self.load_sub_file(&label)?.ok_or_else(|| {
                                 self.err(o.col, format!("Unable to find subroutine o<{label}>: not defined and no file {label}.ngc on the subroutine path"))
                             })?,
@@ -248,6 +249,7 @@ impl Interp<'_> {
                     ret: self.pc,
                     saved,
                     label: label.clone(),
+                    fanuc: None,
                 });
                 self.p.locals.push(HashMap::new());
                 self.s.saved.push(None);
@@ -393,5 +395,31 @@ impl Interp<'_> {
                 Ok(())
             }
         }
+    }
+
+    /// Returns from the innermost call: M73's auto-restore, the caller's `#1`–`#30` (not
+    /// for `M98` calls, which share them), its locals and its loop state.
+    pub(super) fn leave_frame(&mut self) -> Result<(), GcodeError> {
+        // M73 in this subroutine: its saved modal state comes back on return.
+        let level = self.frames.len();
+        if self.s.auto_restore.get(level).copied().unwrap_or(false) {
+            if let Some(Some(saved)) = self.s.saved.get(level).cloned() {
+                self.restore_modal(&saved, true)?;
+            }
+        }
+        let Some(frame) = self.frames.pop() else {
+            return Ok(());
+        };
+        self.s.auto_restore.pop();
+        if frame.fanuc.is_none() {
+            self.p.numbered[1..31].copy_from_slice(&frame.saved);
+        }
+        self.p.locals.pop();
+        self.s.saved.pop();
+        let level = self.frames.len();
+        self.loop_iters.retain(|k, _| k.2 <= level);
+        self.repeats.retain(|k, _| k.2 <= level);
+        self.pc = frame.ret;
+        Ok(())
     }
 }

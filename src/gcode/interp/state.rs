@@ -42,6 +42,9 @@ pub(crate) struct Settings {
     pub tlo_at_motion: Pose,
     /// A tool change happened: re-read the position before the next block.
     pub synch_pending: bool,
+    /// P and Q of the last G5 (program units): a G5 without I and J starts in the
+    /// direction the previous one ended (I, J = -P, -Q).
+    pub last_g5_pq: [f64; 2],
     /// G98 (true, back to the old Z) / G99 (R plane). Starts in G99, as LinuxCNC's
     /// interpreter does (`#<_retract_r_plane>` is 1 in rs274 before any G98/G99).
     pub retract_old_z: bool,
@@ -118,6 +121,7 @@ impl Settings {
             tool_offset: [0.0; 9],
             tlo_at_motion: [0.0; 9],
             synch_pending: false,
+            last_g5_pq: [0.0; 2],
             retract_old_z: false,
             control: MotionControl::Continuous { tolerance: 0.0 },
             naive_tol: 0.0,

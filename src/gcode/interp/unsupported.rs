@@ -5,8 +5,6 @@
 /// The message for an unsupported G code (tenths), or None if hytask implements it.
 pub(crate) fn g_code(g: u16) -> Option<&'static str> {
     Some(match g {
-        50 => "G5 (cubic spline) is not supported by hytask",
-        51 => "G5.1 (quadratic B-spline) is not supported by hytask",
         52 => "G5.2 (NURBS block) is not supported by hytask",
         70 => "G7 (lathe diameter mode) is not supported by hytask",
         330 => "G33 (spindle-synchronised motion) is not supported by hytask",
@@ -30,10 +28,12 @@ mod tests {
 
     #[test]
     fn unsupported_codes_name_themselves() {
-        assert!(g_code(51).is_some_and(|m| m.starts_with("G5.1 (quadratic B-spline)")));
+        assert!(g_code(52).is_some_and(|m| m.starts_with("G5.2 (NURBS block)")));
         assert!(g_code(331).is_some_and(|m| m.starts_with("G33.1 ")));
         assert!(g_code(420).is_some_and(|m| m.contains("cutter radius compensation")));
-        for implemented in [0, 10, 20, 30, 382, 400, 430, 431, 490, 800, 810, 890] {
+        for implemented in [
+            0, 10, 20, 30, 50, 51, 382, 400, 430, 431, 490, 800, 810, 890,
+        ] {
             assert_eq!(g_code(implemented), None, "G{}", implemented / 10);
         }
     }
