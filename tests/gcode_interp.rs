@@ -321,7 +321,6 @@ fn cutter_compensation_is_refused_clearly() {
 #[test]
 fn unsupported_g_codes_say_their_name() {
     for (line, name) in [
-        ("G5.2 X1 Y1 P1 L3", "G5.2 (NURBS block) is not supported"),
         ("G33.1 Z-1 K0.1", "G33.1 (rigid tapping) is not supported"),
         (
             "G33 Z-1 K0.1",

@@ -79,3 +79,34 @@ fn a_g5_1_and_a_g93_spline_take_their_time() {
         "took {took} s, cruise time alone {expect_s} s"
     );
 }
+
+#[test]
+fn a_weighted_g5_2_block_traces_an_exact_quarter_circle() {
+    let cfg = MotionConfig::default();
+    // Quadratic NURBS from (10, 0) through the corner (10, 10) weighted cos 45° to
+    // (0, 10): a quarter of the circle of radius 10 around the origin.
+    let canon = program(
+        "G21 G90 G17 G64 P0.01 F1200\nG0 X10 Y0\nG5.2 X10 Y10 P0.70710678118 L3\nX0 Y10 P1\nG5.3\nM2\n",
+    );
+    let p = plan(&canon, &cfg).unwrap();
+    let tr = run(&p, &cfg);
+    assert_within_limits(&tr, &cfg);
+    assert_eq!(last(&tr), pose(0.0, 10.0, 0.0));
+    let worst = tr
+        .poses_mm
+        .iter()
+        // Past the blend that joins the rapid lead-in at (10, 0).
+        .filter(|q| q[1] > 0.2)
+        .map(|q| (q[0].hypot(q[1]) - 10.0).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        worst <= cfg.arc_chord_tolerance_mm + 0.01 + 1e-6,
+        "radial error {worst}"
+    );
+    // The rapid lead-in, then the quarter circle (not the corner): 10 + 5π.
+    assert!(
+        (p.distance_mm - 10.0 - 5.0 * std::f64::consts::PI).abs() < 0.01,
+        "{}",
+        p.distance_mm
+    );
+}

@@ -285,6 +285,7 @@ impl Interp<'_> {
         }
         let p_ok = arc
             || g5
+            || matches!(motion, 52 | 53)
             || g0 == Some(40)
             || g10
             || b.gcode(13) == Some(640)
@@ -299,8 +300,11 @@ impl Interp<'_> {
             || matches!(b.mcode(5), Some(66..=68))
             || b.mcode(6) == Some(61)
             || user_m;
-        let l_ok =
-            g10 || cycle || (matches!(motion, 730 | 810..=890) && axis) || b.mcode(5) == Some(66);
+        let l_ok = matches!(motion, 52 | 53)
+            || g10
+            || cycle
+            || (matches!(motion, 730 | 810..=890) && axis)
+            || b.mcode(5) == Some(66);
         let checks: [(u8, bool, &str); 10] = [
             (
                 b'i',

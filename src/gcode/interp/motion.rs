@@ -63,10 +63,16 @@ impl Interp<'_> {
             }
         };
         self.loc.col = col;
+        if !matches!(m, 52 | 53) {
+            // Another motion ends a G5.2 block without G5.3: rs274 drops its points.
+            self.s.nurbs = None;
+        }
         match m {
             0 | 10 => self.straight(m, b),
             20 | 30 => self.arc(m, b),
             50 | 51 => self.spline(m, b),
+            52 => self.nurbs_point(b),
+            53 => self.nurbs_end(b),
             382..=385 => self.probe(m, b),
             800 => {
                 self.s.motion = 800;

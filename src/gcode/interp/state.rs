@@ -45,6 +45,8 @@ pub(crate) struct Settings {
     /// P and Q of the last G5 (program units): a G5 without I and J starts in the
     /// direction the previous one ended (I, J = -P, -Q).
     pub last_g5_pq: [f64; 2],
+    /// The NURBS block being collected between G5.2 and G5.3.
+    pub nurbs: Option<super::splines::NurbsBlock>,
     /// G98 (true, back to the old Z) / G99 (R plane). Starts in G99, as LinuxCNC's
     /// interpreter does (`#<_retract_r_plane>` is 1 in rs274 before any G98/G99).
     pub retract_old_z: bool,
@@ -122,6 +124,7 @@ impl Settings {
             tlo_at_motion: [0.0; 9],
             synch_pending: false,
             last_g5_pq: [0.0; 2],
+            nurbs: None,
             retract_old_z: false,
             control: MotionControl::Continuous { tolerance: 0.0 },
             naive_tol: 0.0,

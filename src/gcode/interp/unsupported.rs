@@ -5,7 +5,6 @@
 /// The message for an unsupported G code (tenths), or None if hytask implements it.
 pub(crate) fn g_code(g: u16) -> Option<&'static str> {
     Some(match g {
-        52 => "G5.2 (NURBS block) is not supported by hytask",
         70 => "G7 (lathe diameter mode) is not supported by hytask",
         330 => "G33 (spindle-synchronised motion) is not supported by hytask",
         331 => "G33.1 (rigid tapping) is not supported by hytask",
@@ -28,7 +27,6 @@ mod tests {
 
     #[test]
     fn unsupported_codes_name_themselves() {
-        assert!(g_code(52).is_some_and(|m| m.starts_with("G5.2 (NURBS block)")));
         assert!(g_code(331).is_some_and(|m| m.starts_with("G33.1 ")));
         assert!(g_code(420).is_some_and(|m| m.contains("cutter radius compensation")));
         for implemented in [
