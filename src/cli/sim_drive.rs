@@ -171,3 +171,35 @@ pub fn run(a: SimDriveArgs) -> anyhow::Result<ExitCode> {
     }
     Ok(ExitCode::SUCCESS)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cmd {
+        #[command(flatten)]
+        a: SimDriveArgs,
+    }
+
+    fn ids(args: &[&str]) -> anyhow::Result<Vec<u8>> {
+        let c = Cmd::try_parse_from(["sim-drive"].iter().chain(args))?;
+        Ok(node_ids(&c.a)?.iter().map(|n| n.get()).collect())
+    }
+
+    #[test]
+    fn node_lists_are_checked() {
+        assert_eq!(ids(&["--iface", "vcan0", "--node", "3"]).unwrap(), vec![3]);
+        assert_eq!(
+            ids(&["--iface", "vcan0", "--nodes", "1,2,3"]).unwrap(),
+            vec![1, 2, 3]
+        );
+        let e = ids(&["--iface", "vcan0", "--nodes", "1,2,1"]).unwrap_err();
+        assert!(e.to_string().contains("node 1 is given twice"), "{e}");
+        let e = ids(&["--iface", "vcan0", "--node", "128"]).unwrap_err();
+        assert!(format!("{e:#}").contains("128"), "{e:#}");
+        assert!(ids(&["--iface", "vcan0"]).is_err(), "a node is required");
+        assert!(ids(&["--iface", "vcan0", "--node", "1", "--nodes", "2"]).is_err());
+    }
+}
