@@ -4,6 +4,8 @@
 //! returns. Tests change vcan0 (down, a qdisc), so the harness runs them one at a time.
 #![allow(clippy::unwrap_used)]
 
+mod counting_alloc;
+
 use hytask_hal::socketcan::{IdFilter, SocketCanBus, SocketCanError};
 use hytask_hal::{CanBus, CanFrame, CanId, Error as _, ErrorKind};
 use std::process::Command;
@@ -183,7 +185,11 @@ fn interface_down_is_a_link_failure_naming_the_interface() {
     a.try_send(&f).unwrap();
     assert_eq!(recv(&mut b), f);
     sh(&["ip", "link", "set", "down", &i]);
-    let e = a.try_send(&f).unwrap_err();
+    let mut res = None;
+    // The error path allocates nothing either: the servo thread builds these errors.
+    let n = counting_alloc::during(|| res = Some(a.try_send(&f)));
+    assert_eq!(n, 0, "a failed send allocated {n} times");
+    let e = res.unwrap().unwrap_err();
     assert_eq!(e.kind(), ErrorKind::Disconnected, "{e}");
     assert!(e.kind().is_link_failure());
     assert_eq!(
@@ -204,4 +210,31 @@ fn opening_a_missing_interface_names_it() {
     let e = SocketCanBus::open("vcan97").unwrap_err();
     assert!(matches!(e, SocketCanError::NoSuchInterface { .. }), "{e:?}");
     assert!(e.to_string().contains("vcan97"), "{e}");
+}
+
+#[test]
+fn sending_and_receiving_do_not_allocate() {
+    let Some(i) = vcan() else { return };
+    let mut a = SocketCanBus::open(&i).unwrap();
+    let mut b = SocketCanBus::open(&i).unwrap();
+    let f = CanFrame::new(sid(0x181), &[1, 2, 3, 4, 5, 6, 7, 8]).unwrap();
+    a.try_send(&f).unwrap();
+    assert_eq!(recv(&mut b), f);
+    let mut buf = [f; 16];
+    let mut got = 0;
+    let mut empty = None;
+    let t0 = Instant::now();
+    // What the servo thread does every cycle: queue frames, drain the socket, find it empty.
+    let n = counting_alloc::during(|| {
+        for _ in 0..100 {
+            a.try_send(&f).unwrap();
+        }
+        while got < 100 && t0.elapsed() < Duration::from_secs(60) {
+            got += b.recv_into(&mut buf).unwrap();
+        }
+        empty = Some(b.try_recv().unwrap());
+    });
+    assert_eq!(got, 100);
+    assert_eq!(empty, Some(None));
+    assert_eq!(n, 0, "send/receive allocated {n} times");
 }

@@ -173,7 +173,8 @@ impl SocketCanBus {
     }
 
     /// Delivers only frames that pass one of `filters` (error frames are always
-    /// delivered). An empty slice receives no frames at all.
+    /// delivered). An empty slice receives no frames at all. Allocates (the kernel's filter
+    /// list): call it at start-up, not in the servo step.
     pub fn set_filters(&mut self, filters: &[IdFilter]) -> Result<(), SocketCanError> {
         let k: Vec<CanFilter> = filters.iter().map(|f| f.to_kernel()).collect();
         self.sock
