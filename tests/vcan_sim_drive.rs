@@ -5,6 +5,10 @@
 //! `tests/vcan/run`, which sets `HYTASK_VCAN`; elsewhere it says why and returns.
 #![allow(clippy::unwrap_used)]
 
+mod vcan;
+
+const NAME: &str = "vcan_sim_drive";
+
 use hytask_hal::canopen::heartbeat::HeartbeatConsumer;
 use hytask_hal::canopen::nmt::{NmtCommand, NmtState};
 use hytask_hal::canopen::sdo::{SdoClient, SdoStep};
@@ -16,20 +20,6 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 const GUARD: Duration = Duration::from_secs(120);
-
-fn vcan() -> Option<String> {
-    match std::env::var("HYTASK_VCAN") {
-        Ok(i) if !i.is_empty() => Some(i),
-        _ => {
-            eprintln!(
-                "vcan_sim_drive: HYTASK_VCAN is unset, so this test does not run here: it needs \
-                 a real vcan0 and runs under tests/vcan/run (which boots a VM when the host \
-                 kernel has no CAN)"
-            );
-            None
-        }
-    }
-}
 
 /// The sim-drive process; killed if the test panics before stopping it.
 struct Drive(Child);
@@ -47,7 +37,9 @@ fn nodes() -> [NodeId; 3] {
 
 #[test]
 fn one_process_serves_three_nodes_and_stops_on_sigterm() {
-    let Some(iface) = vcan() else { return };
+    let Some(iface) = vcan::iface(NAME) else {
+        return;
+    };
     let mut bus = SocketCanBus::open(&iface).unwrap();
     let mut drive = Drive(
         Command::new(env!("CARGO_BIN_EXE_hytask"))

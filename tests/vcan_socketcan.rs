@@ -5,26 +5,14 @@
 #![allow(clippy::unwrap_used)]
 
 mod counting_alloc;
+mod vcan;
+
+const NAME: &str = "vcan_socketcan";
 
 use hytask_hal::socketcan::{IdFilter, SocketCanBus, SocketCanError};
 use hytask_hal::{CanBus, CanFrame, CanId, Error as _, ErrorKind};
 use std::process::Command;
 use std::time::{Duration, Instant};
-
-/// The interface to test on, or `None` (with the reason printed) outside the harness.
-fn vcan() -> Option<String> {
-    match std::env::var("HYTASK_VCAN") {
-        Ok(i) if !i.is_empty() => Some(i),
-        _ => {
-            eprintln!(
-                "vcan_socketcan: HYTASK_VCAN is unset, so this test does not run here: it needs \
-                 a real vcan0 and runs under tests/vcan/run (which boots a VM when the host \
-                 kernel has no CAN)"
-            );
-            None
-        }
-    }
-}
 
 fn sid(raw: u16) -> CanId {
     CanId::standard(raw).unwrap()
@@ -70,7 +58,7 @@ fn drain(bus: &mut SocketCanBus) -> Vec<CanFrame> {
 
 #[test]
 fn frames_go_round_trip_between_two_sockets() {
-    let Some(i) = vcan() else { return };
+    let Some(i) = vcan::iface(NAME) else { return };
     let mut a = SocketCanBus::open(&i).unwrap();
     let mut b = SocketCanBus::open(&i).unwrap();
     assert_eq!(a.iface(), i);
@@ -100,7 +88,7 @@ fn frames_go_round_trip_between_two_sockets() {
 
 #[test]
 fn filters_deliver_only_the_wanted_ids() {
-    let Some(i) = vcan() else { return };
+    let Some(i) = vcan::iface(NAME) else { return };
     let mut a = SocketCanBus::open(&i).unwrap();
     let mut b = SocketCanBus::open(&i).unwrap();
     b.set_filters(&[
@@ -151,7 +139,7 @@ impl Drop for Restore {
 
 #[test]
 fn a_full_transmit_queue_is_would_block_naming_the_interface() {
-    let Some(i) = vcan() else { return };
+    let Some(i) = vcan::iface(NAME) else { return };
     let _restore = Restore(i.clone());
     let mut a = SocketCanBus::open(&i).unwrap();
     // vcan delivers synchronously and has no queue; a token bucket of 8 kbit/s with room
@@ -177,7 +165,7 @@ fn a_full_transmit_queue_is_would_block_naming_the_interface() {
 
 #[test]
 fn interface_down_is_a_link_failure_naming_the_interface() {
-    let Some(i) = vcan() else { return };
+    let Some(i) = vcan::iface(NAME) else { return };
     let _restore = Restore(i.clone());
     let mut a = SocketCanBus::open(&i).unwrap();
     let mut b = SocketCanBus::open(&i).unwrap();
@@ -206,7 +194,7 @@ fn interface_down_is_a_link_failure_naming_the_interface() {
 
 #[test]
 fn opening_a_missing_interface_names_it() {
-    let Some(_) = vcan() else { return };
+    let Some(_) = vcan::iface(NAME) else { return };
     let e = SocketCanBus::open("vcan97").unwrap_err();
     assert!(matches!(e, SocketCanError::NoSuchInterface { .. }), "{e:?}");
     assert!(e.to_string().contains("vcan97"), "{e}");
@@ -214,7 +202,7 @@ fn opening_a_missing_interface_names_it() {
 
 #[test]
 fn sending_and_receiving_do_not_allocate() {
-    let Some(i) = vcan() else { return };
+    let Some(i) = vcan::iface(NAME) else { return };
     let mut a = SocketCanBus::open(&i).unwrap();
     let mut b = SocketCanBus::open(&i).unwrap();
     let f = CanFrame::new(sid(0x181), &[1, 2, 3, 4, 5, 6, 7, 8]).unwrap();
