@@ -4,6 +4,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod canopen_tool;
 mod check;
 mod client;
 mod gcode;
@@ -12,6 +13,7 @@ mod plan;
 mod plot;
 mod run;
 mod serve;
+mod sim_drive;
 
 /// hytask: realtime hybrid task-based controller for machine tools and robots.
 #[derive(Debug, Parser)]
@@ -42,6 +44,10 @@ pub enum Command {
     Plan(plan::PlanArgs),
     /// Plot the planned toolpath of a G-code file to SVG.
     Plot(plot::PlotArgs),
+    /// Loopback CiA 402 drives (CANopen slaves) on a SocketCAN interface, for tests.
+    SimDrive(sim_drive::SimDriveArgs),
+    /// CANopen master tool on a SocketCAN interface: sdo-read, sdo-write, nmt, scan, heartbeat.
+    Canopen(canopen_tool::CanopenArgs),
 }
 
 /// Entry point of the binary.
@@ -56,6 +62,8 @@ pub fn main() -> ExitCode {
         Command::Gcode(a) => gcode::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Plot(a) => plot::run(a),
+        Command::SimDrive(a) => sim_drive::run(a),
+        Command::Canopen(a) => canopen_tool::run(a),
     };
     match result {
         Ok(code) => code,

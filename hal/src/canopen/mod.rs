@@ -29,8 +29,8 @@
 //! configuration time or on a non-realtime path, never in the servo step.
 //!
 //! Not yet here (issue 9): SDO block transfer (the server answers a block request with abort
-//! 0x05040001, the client never starts one), a SocketCAN [`CanBus`](crate::CanBus), the
-//! daemon wiring and `hytask sim-drive`.
+//! 0x05040001, the client never starts one) and the daemon wiring. The SocketCAN
+//! [`CanBus`](crate::CanBus) is [`crate::socketcan`].
 
 use crate::can::{CanFrame, CanId};
 use core::fmt;

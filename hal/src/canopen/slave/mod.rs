@@ -1,4 +1,4 @@
-//! A CiA 402 slave core: the loopback drive that `hytask sim-drive` will put on vcan0, and
+//! A CiA 402 slave core: the loopback drive that `hytask sim-drive` puts on vcan0, and
 //! the counterpart the master is tested against on the in-memory bus.
 //!
 //! Sans-IO like the rest: [`DriveSlave::on_frame`] takes a received frame, [`DriveSlave::tick`]
