@@ -65,6 +65,7 @@ impl MachineApi for Double {
             inputs: Default::default(),
             outputs: Default::default(),
             probe: Default::default(),
+            optional_stop: false,
         }
     }
     fn estop(&self) -> Result<(), ApiError> {

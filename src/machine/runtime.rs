@@ -976,6 +976,7 @@ impl MachineApi for Machine {
                     .map(|&(c, i)| (c.to_string(), snap.probe.probed_mm[i]))
                     .collect(),
             },
+            optional_stop: snap.optional_stop,
         }
     }
 
@@ -1127,6 +1128,11 @@ impl MachineApi for Machine {
 
     fn job_step(&self) -> Result<(), ApiError> {
         self.command(MachineCmd::Step).map(|_| ())
+    }
+
+    fn set_optional_stop(&self, on: bool) -> Result<bool, ApiError> {
+        self.command(MachineCmd::OptionalStop { on })?;
+        Ok(self.snapshot().machine.optional_stop)
     }
 
     fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError> {
