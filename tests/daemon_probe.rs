@@ -116,26 +116,37 @@ fn mdi_probing_touches_off_and_a_tripped_probe_refuses_to_start() {
     // before it moves (LinuxCNC's rule).
     assert_eq!(s["inputs"]["probe"], json!(1.0), "{}", s["inputs"]);
     let z0 = axis(&s, "Z")["actual"].as_f64().unwrap();
-    // The machine fails the job in the cycle that accepts it: whether the call still sees
-    // the acceptance or already the failure depends on when it polls (reported), so both
-    // replies are taken; the job's end is what is asserted.
-    match c.call("mdi", json!({"line": "G38.2 Z-20 F300"})) {
-        Ok(_) => {}
-        Err(hytask::control::client::ClientError::Remote { code: 2, message }) => {
-            assert!(message.contains("program error"), "{message}");
-        }
-        Err(e) => panic!("mdi: {e}"),
+    // Refused as an error before anything moves, whatever the timing (LinuxCNC: "Probe is
+    // already tripped when starting G38.2 or G38.3 move"); the loaded or last job is left
+    // as it was.
+    let before = s["job"].clone();
+    for line in ["G38.2 Z-20 F300", "G38.3 Z-20 F300"] {
+        let (code, message) = err(&mut c, "mdi", json!({ "line": line }));
+        assert_eq!(code, 1, "{message}");
+        assert!(
+            message.contains("probe is already tripped when starting G38.2 or G38.3 move"),
+            "{message}"
+        );
     }
-    let s = wait_status(&mut c, "refused probe", Duration::from_secs(120), |s| {
-        s["mode"] == json!("idle") && s["job"]["state"] == json!("failed")
+    let s = ok(&mut c, "status", Value::Null);
+    assert_eq!(s["mode"], json!("idle"));
+    assert_eq!(s["job"], before);
+    // G38.4 (away from the plate) is what starts from a tripped probe.
+    ok(&mut c, "mdi", json!({"line": "G38.4 Z-5 F300"}));
+    let s = wait_status(&mut c, "probe away", Duration::from_secs(120), |s| {
+        s["mode"] == json!("idle") && s["probe"]["count"] == json!(2)
     });
+    assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
+    assert_eq!(s["inputs"]["probe"], json!(0.0));
+    assert!(axis(&s, "Z")["actual"].as_f64().unwrap() > z0);
+    // And from an untripped probe, G38.4 is refused the same way.
+    let (code, message) = err(&mut c, "mdi", json!({"line": "G38.4 Z-1 F300"}));
+    assert_eq!(code, 1, "{message}");
     assert!(
-        s["job"]["reason"]
-            .as_str()
-            .unwrap()
-            .contains("already tripped"),
-        "{}",
-        s["job"]
+        message.contains("probe is not tripped when starting G38.4 or G38.5 move"),
+        "{message}"
     );
-    assert!((axis(&s, "Z")["actual"].as_f64().unwrap() - z0).abs() < 1e-3);
+    let z1 = axis(&s, "Z")["actual"].as_f64().unwrap();
+    let s = ok(&mut c, "status", Value::Null);
+    assert!((axis(&s, "Z")["actual"].as_f64().unwrap() - z1).abs() < 1e-3);
 }

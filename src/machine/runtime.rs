@@ -509,6 +509,13 @@ impl Machine {
         pose
     }
 
+    /// The probe input as the last servo cycle saw it (`None`: the machine has none).
+    fn probe_active(&self) -> Option<bool> {
+        let name = self.config.motion.probe_input.as_deref()?;
+        let i = self.io_map.di.iter().position(|c| c.point.name == name)?;
+        Some(self.snapshot().inputs.di(i))
+    }
+
     /// Refuses a run or jog the machine cannot take now (e-stop, off, fault, not homed,
     /// busy), with the machine task's own reason: checked before anything about the job, so
     /// that the operator hears about the e-stop, not about a job planned elsewhere.
@@ -524,6 +531,7 @@ impl Machine {
     /// Starts a prepared job (or jog/MDI) as job `id`: feeder first, then the `run` command.
     fn start_job(&self, job: Arc<PreparedJob>, manual: bool) -> Result<(), ApiError> {
         self.check_can_run(manual)?;
+        probing::check_probe_start(&job, self.probe_active())?;
         let pose = self.actual_pose();
         for &(c, i) in self.axes().iter() {
             if (job.plan.start_mm[i] - pose[i]).abs() > 0.01 {
