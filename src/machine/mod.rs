@@ -3,6 +3,7 @@
 
 pub mod api;
 pub mod devices;
+mod feeder;
 pub mod job;
 pub mod job_file;
 pub mod mode;

@@ -88,6 +88,8 @@ pub struct PieceRunner {
     pub cancel: Arc<AtomicBool>,
     /// Probe results already seen before this job started.
     pub seen_probe_seq: u32,
+    /// The servo thread, whose cycles pace the feeder's waits for room in the queue.
+    pub servo: Arc<crate::rt::activity::ThreadInfo>,
     /// The job's `(MSG, …)` texts: each piece's are appended, and the message ids of its
     /// queue items shifted to match (each piece's plan numbers its own from 0).
     pub messages: Arc<Mutex<Vec<String>>>,
@@ -209,7 +211,7 @@ impl PieceRunner {
 
     /// Pushes every item, waiting while the queue is full; false if cancelled.
     fn feed(&self, items: &[Item]) -> bool {
-        super::runtime::feed(self.queue.clone(), items, self.job, &self.cancel)
+        super::feeder::feed(&self.queue, items, self.job, &self.cancel, &self.servo)
     }
 }
 

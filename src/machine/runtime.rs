@@ -12,6 +12,7 @@
 
 use super::api::*;
 use super::devices;
+use super::feeder::feed;
 use super::job::{self, PreparedJob};
 use super::mode::{ModeMachine, Request};
 use super::probing;
@@ -551,16 +552,17 @@ impl Machine {
                 let items = job.clone();
                 let cancel = cancel.clone();
                 let (book, machine) = (self.book.clone(), self.machine.clone());
+                let servo = self.servo.clone();
                 let feeder = std::thread::Builder::new()
                     .name(format!("feeder-{id}"))
                     .spawn(move || match &items.replay {
                         None => {
-                            feed(queue, &items.plan.items, id, &cancel);
+                            feed(&queue, &items.plan.items, id, &cancel, &servo);
                         }
                         // A large job is planned again as it runs (see `job`).
                         Some(replay) => {
                             let run = replay
-                                .run_ahead(&mut |batch| feed(queue.clone(), batch, id, &cancel));
+                                .run_ahead(&mut |batch| feed(&queue, batch, id, &cancel, &servo));
                             if let Err(msg) = run {
                                 tracing::error!("job {id}: {msg}");
                                 if let Some(a) = lock(&book).active.as_mut().filter(|a| a.id == id)
@@ -666,6 +668,7 @@ impl Machine {
             name: job.name.clone(),
             cancel: cancel.clone(),
             seen_probe_seq: self.snapshot().machine.probe.seq,
+            servo: self.servo.clone(),
             messages: messages.clone(),
         };
         let book = self.book.clone();
@@ -701,33 +704,6 @@ impl Machine {
             data,
         });
     }
-}
-
-/// Pushes a job's items into the segment queue, waiting while it is full, until done or
-/// cancelled (then false). Runs on its own ordinary thread: the realtime side never waits
-/// for it.
-pub(crate) fn feed(
-    queue: BufferWriter<QueueItem>,
-    items: &[motion::Item],
-    job: u32,
-    cancel: &AtomicBool,
-) -> bool {
-    for &item in items {
-        let mut q = QueueItem { job, item };
-        loop {
-            if cancel.load(Ordering::Acquire) {
-                return false;
-            }
-            match queue.try_push(q) {
-                Ok(()) => break,
-                Err(back) => {
-                    q = back;
-                    std::thread::sleep(Duration::from_millis(2));
-                }
-            }
-        }
-    }
-    true
 }
 
 /// Forwards realtime events to subscribers, keeps the job book, publishes progress.
