@@ -26,23 +26,13 @@ fn dwells(n: usize) -> String {
 fn run_dwells(d: &Daemon, n: usize) -> (Value, f64, u64) {
     let mut c = d.client();
     ready(&mut c);
-    let info = ok(
-        &mut c,
-        "job.load",
-        json!({"text": dwells(n), "name": "dwells.ngc"}),
-    );
-    assert_eq!(info["lines"], json!(n + 4));
-    let planned = info["planned_time_s"].as_f64().unwrap();
     let before = ok(&mut c, "status", Value::Null)["servo_cycle"]
         .as_u64()
         .unwrap();
-    ok(&mut c, "job.run", Value::Null);
-    let s = wait_status(&mut c, "the job's end", Duration::from_secs(600), |s| {
-        matches!(
-            s["job"]["state"].as_str(),
-            Some("done" | "failed" | "aborted")
-        )
-    });
+    let info = run_text(&mut c, &dwells(n), "dwells.ngc");
+    assert_eq!(info["lines"], json!(n + 4));
+    let planned = info["planned_time_s"].as_f64().unwrap();
+    let s = wait_job_end(&mut c, "the job's end", Duration::from_secs(600));
     assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
     let x = axis(&s, "X")["actual"].as_f64().unwrap();
     let y = axis(&s, "Y")["actual"].as_f64().unwrap();

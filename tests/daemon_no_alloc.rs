@@ -39,7 +39,8 @@ impl InProcess {
         let dir = tempfile::tempdir().unwrap();
         let socket = dir.path().join("control.sock");
         let cfg = hytask::machine::load_config(Some(config)).unwrap();
-        let opts = hytask::machine::socket_options(&cfg, Some(socket.clone()));
+        let opts =
+            hytask::control::server::SocketOptions::from_config(&cfg.control, Some(socket.clone()));
         let machine = hytask::machine::deploy_from(Some(config)).unwrap();
         let listener = hytask::control::server::bind(&opts).unwrap();
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();

@@ -13,17 +13,11 @@ use support::*;
 /// Top of the simulated plate.
 const PLATE: f64 = -10.0;
 
+/// Hang guard of the waits for a job's end.
+const GUARD: Duration = Duration::from_secs(180);
+
 fn machine_with_plate() -> Daemon {
     Daemon::start_sim_with(SIM_SPEED, Some(PLATE))
-}
-
-fn wait_job_end(c: &mut hytask::control::client::Client, what: &str) -> Value {
-    wait_status(c, what, Duration::from_secs(180), |s| {
-        matches!(
-            s["job"]["state"].as_str(),
-            Some("done" | "failed" | "aborted")
-        )
-    })
 }
 
 #[test]
@@ -33,7 +27,7 @@ fn a_job_that_probes_measures_the_plate_and_goes_on_with_the_result() {
     ready(&mut c);
     let info = run_job(&mut c, "jobs/probe.ngc");
     assert_eq!(info["name"], json!("probe.ngc"));
-    let s = wait_job_end(&mut c, "probing job");
+    let s = wait_job_end(&mut c, "probing job", GUARD);
     assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
     assert_eq!(s["mode"], json!("idle"));
     // Two probes; the last (G38.3 along X) made no contact and ended at X170.
@@ -60,7 +54,7 @@ fn g38_2_without_contact_fails_the_job_naming_the_line_and_the_machine_stays_on(
         json!({"text": text, "name": "miss.ngc"}),
     );
     ok(&mut c, "job.run", Value::Null);
-    let s = wait_job_end(&mut c, "failed probe");
+    let s = wait_job_end(&mut c, "failed probe", GUARD);
     assert_eq!(s["job"]["state"], json!("failed"));
     let reason = s["job"]["reason"].as_str().unwrap();
     assert!(
@@ -75,7 +69,7 @@ fn g38_2_without_contact_fails_the_job_naming_the_line_and_the_machine_stays_on(
     );
     // The machine takes the next job at once.
     ok(&mut c, "mdi", json!({"line": "G0 Z-1"}));
-    let s = wait_job_end(&mut c, "mdi after a failed probe");
+    let s = wait_job_end(&mut c, "mdi after a failed probe", GUARD);
     assert_eq!(s["mode"], json!("idle"));
     assert!((axis(&s, "Z")["actual"].as_f64().unwrap() + 1.0).abs() < 0.01);
 }
@@ -91,7 +85,7 @@ fn an_error_that_depends_on_the_measurement_fails_the_job_at_the_probe() {
     let text = "G21 G90 F600\nG38.3 Z-20\nG1 Z[1 / [#5070 - 1]]\nM2\n";
     ok(&mut c, "job.load", json!({"text": text, "name": "div.ngc"}));
     ok(&mut c, "job.run", Value::Null);
-    let s = wait_job_end(&mut c, "error after probe");
+    let s = wait_job_end(&mut c, "error after probe", GUARD);
     assert_eq!(s["job"]["state"], json!("failed"), "{}", s["job"]);
     let reason = s["job"]["reason"].as_str().unwrap();
     assert!(reason.starts_with("div.ngc:3:"), "{reason}");

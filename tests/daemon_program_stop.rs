@@ -8,6 +8,7 @@
 
 mod support;
 
+use hytask::control::client::Client;
 use serde_json::{json, Value};
 use std::time::Duration;
 use support::*;
@@ -19,7 +20,7 @@ fn x(s: &Value) -> f64 {
 }
 
 /// Waits until the job stands still in a program stop on `line`.
-fn stopped_at(c: &mut hytask::control::client::Client, line: u64) -> Value {
+fn stopped_at(c: &mut Client, line: u64) -> Value {
     let s = wait_status(c, &format!("program stop on line {line}"), GUARD, |s| {
         s["job"]["state"] == json!("holding") && at_rest(s, 1e-6)
     });
@@ -28,24 +29,23 @@ fn stopped_at(c: &mut hytask::control::client::Client, line: u64) -> Value {
     s
 }
 
-fn job_done(c: &mut hytask::control::client::Client) -> Value {
-    wait_status(c, "job done", GUARD, |s| {
-        s["job"]["state"] != json!("running") && s["job"]["state"] != json!("holding")
-    })
+fn job_done(c: &mut Client) -> Value {
+    wait_job_end(c, "the job's end", GUARD)
+}
+
+/// A homed machine on the simulated clock, running `text`.
+fn running(text: &str, name: &str) -> (Daemon, Client) {
+    let d = Daemon::start_sim();
+    let mut c = d.client();
+    ready(&mut c);
+    run_text(&mut c, text, name);
+    (d, c)
 }
 
 #[test]
 fn m0_and_m60_hold_the_job_and_job_resume_goes_on_with_the_next_line() {
-    let d = Daemon::start_sim();
-    let mut c = d.client();
-    ready(&mut c);
     let text = "G21 G90\nG0 X100 Y100 Z-5\nM0\nG0 X110\nM60\nG0 X120\nM2\n";
-    ok(
-        &mut c,
-        "job.load",
-        json!({"text": text, "name": "stops.ngc"}),
-    );
-    ok(&mut c, "job.run", Value::Null);
+    let (_d, mut c) = running(text, "stops.ngc");
 
     let s = stopped_at(&mut c, 3);
     assert!((x(&s) - 100.0).abs() < 0.002, "{}", x(&s));
@@ -65,17 +65,9 @@ fn m0_and_m60_hold_the_job_and_job_resume_goes_on_with_the_next_line() {
 
 #[test]
 fn job_step_at_an_m0_runs_the_next_line_and_abort_ends_the_stop() {
-    let d = Daemon::start_sim();
-    let mut c = d.client();
-    ready(&mut c);
     // Lines 4 and 5 meet at a blended corner, so the hold at line 5 stops on the way.
     let text = "G21 G90\nG0 X100 Y100 Z-5\nM0\nG1 X110 Y105 F1200\nG1 X120 Y100\nM2\n";
-    ok(
-        &mut c,
-        "job.load",
-        json!({"text": text, "name": "step.ngc"}),
-    );
-    ok(&mut c, "job.run", Value::Null);
+    let (_d, mut c) = running(text, "step.ngc");
     stopped_at(&mut c, 3);
     ok(&mut c, "job.step", Value::Null);
     let s = wait_status(&mut c, "held after the step", GUARD, |s| {
@@ -114,8 +106,7 @@ fn m1_stops_only_while_optional_stop_is_on() {
     });
     let on = ok(&mut c, "job.optional_stop", json!({"on": true}));
     assert_eq!(on, json!({"optional_stop": true}));
-    ok(&mut c, "job.load", json!({"text": text, "name": "m1.ngc"}));
-    ok(&mut c, "job.run", Value::Null);
+    run_text(&mut c, text, "m1.ngc");
     let s = stopped_at(&mut c, 3);
     assert_eq!(s["optional_stop"], json!(true));
     ok(&mut c, "job.resume", Value::Null);
