@@ -40,6 +40,8 @@ fn run_dwells(d: &Daemon, n: usize) -> (Value, f64, u64) {
         (x - 30.0).abs() < 1e-3 && (y - 90.0).abs() < 1e-3,
         "X {x} Y {y}"
     );
+    // The last line (M2), however long ago the last progress sample was taken.
+    assert_eq!(s["job"]["line"], json!(n + 4), "{}", s["job"]);
     let cycles = s["servo_cycle"].as_u64().unwrap() - before;
     (s, planned, cycles)
 }

@@ -49,6 +49,18 @@ fn m0_and_m60_hold_the_job_and_job_resume_goes_on_with_the_next_line() {
 
     let s = stopped_at(&mut c, 3);
     assert!((x(&s) - 100.0).abs() < 0.002, "{}", x(&s));
+    // Standing at the stop is no progress: the job's planned time done stays where it is.
+    let cycle = s["servo_cycle"].as_u64().unwrap();
+    let later = wait_status(&mut c, "a second at the stop", GUARD, |t| {
+        t["servo_cycle"].as_u64().unwrap() > cycle + 1000
+    });
+    assert_eq!(
+        later["job"]["progress"], s["job"]["progress"],
+        "{}",
+        later["job"]
+    );
+    let progress = s["job"]["progress"].as_f64().unwrap();
+    assert!(progress > 0.1 && progress < 0.9, "{}", s["job"]);
     // A feed hold on top of the stop changes nothing; one resume leaves both.
     ok(&mut c, "job.pause", Value::Null);
     ok(&mut c, "job.resume", Value::Null);
@@ -61,6 +73,8 @@ fn m0_and_m60_hold_the_job_and_job_resume_goes_on_with_the_next_line() {
     assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
     assert_eq!(s["mode"], json!("idle"));
     assert!((x(&s) - 120.0).abs() < 0.002, "{}", x(&s));
+    // A finished job shows its last line (M2), not the last progress sample's.
+    assert_eq!(s["job"]["line"], json!(7), "{}", s["job"]);
 }
 
 #[test]

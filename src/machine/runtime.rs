@@ -800,7 +800,10 @@ fn handle_job_event(m: &Machine, e: JobEvent) {
             ("holding", None, false)
         }
         JobEvent::Resumed => ("running", None, false),
-        JobEvent::Finished => ("done", None, true),
+        JobEvent::Finished { line } => {
+            book.status.line = line;
+            ("done", None, true)
+        }
         JobEvent::Aborted { line } => match book.active.as_ref().and_then(|a| a.error.clone()) {
             Some(error) => ("failed", Some(error), true),
             None => ("aborted", Some(format!("aborted at line {line}")), true),

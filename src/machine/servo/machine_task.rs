@@ -473,7 +473,7 @@ impl MachineTask {
     fn emit_job(&mut self, e: JobEvent) {
         if matches!(
             e,
-            JobEvent::Finished
+            JobEvent::Finished { .. }
                 | JobEvent::Aborted { .. }
                 | JobEvent::Failed { .. }
                 | JobEvent::Error { .. }
@@ -908,7 +908,8 @@ impl MachineTask {
             self.current = Motion::None;
             self.motion.track_actual = true;
             self.mode.fact(Fact::MotionDone);
-            self.emit_job(JobEvent::Finished);
+            let line = self.setpoints.line;
+            self.emit_job(JobEvent::Finished { line });
         }
     }
 }
@@ -1214,7 +1215,7 @@ impl Task for MachineTask {
                 _ => Progress::Failed("homing stopped by a fault or e-stop"),
             },
             MachineCmd::Run { job, .. } => match self.ended {
-                Some((j, JobEvent::Finished)) if j == job => Progress::Done,
+                Some((j, JobEvent::Finished { .. })) if j == job => Progress::Done,
                 Some((j, JobEvent::Aborted { .. })) if j == job => Progress::Failed("aborted"),
                 Some((j, JobEvent::Failed { .. })) if j == job => {
                     Progress::Failed("stopped by a fault or e-stop")

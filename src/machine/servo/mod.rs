@@ -363,7 +363,10 @@ pub enum JobEvent {
     /// Resumed.
     Resumed,
     /// Reached the end.
-    Finished,
+    Finished {
+        /// The last line executed (status shows it, not the last progress sample's).
+        line: u32,
+    },
     /// Aborted by the operator; stopped under control.
     Aborted {
         /// Line at the abort.
