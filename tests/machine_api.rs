@@ -200,3 +200,36 @@ fn job_resume_continues_after_an_m0_and_m1_stops_with_optional_stop_on() {
     wait(&m, "the end", |s| s.job.state == "done");
     shutdown(&m);
 }
+
+/// `call` reaches task operations by name, but not the job machinery's own `machine.run` and
+/// `machine.continue`: a hand-made run of a job nothing feeds would hold the machine in
+/// `running` until an abort.
+#[test]
+fn call_refuses_the_job_machinerys_own_operations() {
+    let (m, _dir) = sim_machine();
+    ready(&m);
+    for (op, args) in [
+        (
+            "run",
+            serde_json::json!({"job": 99, "items": 5, "manual": false}),
+        ),
+        ("continue", serde_json::json!({"job": 99, "items": 5})),
+    ] {
+        match m.call("machine", op, &args) {
+            Err(ApiError::Rejected(why)) => assert!(why.contains("use job.run"), "{why}"),
+            other => panic!("machine.{op}: {other:?}"),
+        }
+    }
+    let s = m.status();
+    assert_eq!(s.mode, Mode::Idle);
+    // Other operations stay callable.
+    assert!(m
+        .call(
+            "machine",
+            "set_optional_stop",
+            &serde_json::json!({"on": true})
+        )
+        .is_ok());
+    assert!(m.status().optional_stop);
+    shutdown(&m);
+}

@@ -791,6 +791,18 @@ fn apply_progress(status: &mut JobStatus, a: &ActiveJob, sp: &Setpoints) {
     status.distance_to_go_mm = status.distance_mm * (1.0 - status.progress);
 }
 
+/// Operations `call` refuses, with what to use instead. `machine.run` and
+/// `machine.continue` name a job by id and count the queue items its feeder pushed: called
+/// by hand they start a "job" nothing feeds, which holds the machine in `running` with a
+/// stale job status until an abort.
+fn internal_operation(task: &str, operation: &str) -> Option<&'static str> {
+    match (task, operation) {
+        ("machine", "run") => Some("job.run, mdi or jog"),
+        ("machine", "continue") => Some("job.run (a probing job continues by itself)"),
+        _ => None,
+    }
+}
+
 fn handle_job_event(m: &Machine, e: JobEvent) {
     let mut book = lock(&m.book);
     let (state, reason, end) = match e {
@@ -1198,6 +1210,12 @@ impl MachineApi for Machine {
     }
 
     fn call(&self, task: &str, operation: &str, args: &Value) -> Result<Value, ApiError> {
+        if let Some(instead) = internal_operation(task, operation) {
+            return Err(ApiError::Rejected(format!(
+                "{task}.{operation} is the job machinery's own operation (it refers to queue \
+                 items only a running job has): use {instead}"
+            )));
+        }
         let handle = {
             let rt = lock(&self.runtime);
             let rt = rt
