@@ -106,6 +106,7 @@ pub struct Machine {
     sim_io: Vec<Option<SimIoHandle>>,
     io_map: devices::IoMap,
     overrun_injection: Arc<AtomicU32>,
+    estop_request: Arc<AtomicU32>,
     sim_axes: Vec<(char, SimAxisHandle)>,
     next_job: AtomicU32,
     servo: Arc<crate::rt::activity::ThreadInfo>,
@@ -195,6 +196,8 @@ pub struct Built {
     pub sim_axes: Vec<(char, SimAxisHandle)>,
     /// Overrun injection counter (simulated machines).
     pub overrun_injection: Arc<AtomicU32>,
+    /// E-stop requests to the machine task (see [`MachineTask::with_estop_request`]).
+    pub estop_request: Arc<AtomicU32>,
 }
 
 /// Builds the backends and adds the machine's tasks to a new deployment, in start order
@@ -306,7 +309,12 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         io_task = io_task.with_overrun_injection(overrun_injection.clone());
     }
     app.add_periodic("io", io_task, schedule)?;
-    let machine = app.add_periodic("machine", MachineTask::new(setup), schedule)?;
+    let estop_request = Arc::new(AtomicU32::new(0));
+    let machine = app.add_periodic(
+        "machine",
+        MachineTask::new(setup).with_estop_request(estop_request.clone()),
+        schedule,
+    )?;
     app.add_periodic(
         "interpolator",
         InterpolatorTask::new(motion_cfg.clone(), axes.clone(), queue_r),
@@ -347,6 +355,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
             .map(|(n, h)| (axis_letter(n as usize), h))
             .collect(),
         overrun_injection,
+        estop_request,
     })
 }
 
@@ -369,6 +378,7 @@ impl Machine {
             io_map,
             sim_axes,
             overrun_injection,
+            estop_request,
         } = build(&config)?;
         let report = app.configure()?;
         for w in &report.warnings {
@@ -409,6 +419,7 @@ impl Machine {
             sim_io,
             io_map,
             overrun_injection,
+            estop_request,
             sim_axes,
             next_job: AtomicU32::new(1),
             servo: servo_info,
@@ -979,8 +990,22 @@ impl MachineApi for Machine {
         }
     }
 
+    /// Not a queued command: the machine task reads the request counter every cycle, so an
+    /// e-stop is taken in the next cycle even when its command slots are all busy.
     fn estop(&self) -> Result<(), ApiError> {
-        self.command(MachineCmd::Estop).map(|_| ())
+        self.estop_request.fetch_add(1, Ordering::AcqRel);
+        let t0 = Instant::now();
+        loop {
+            self.wait_for_cycle_end();
+            if self.snapshot().machine.mode == Mode::Estop {
+                return Ok(());
+            }
+            if !self.servo.running() || t0.elapsed() > ACCEPT_TIMEOUT {
+                return Err(ApiError::Timeout(
+                    "the machine task did not enter e-stop".into(),
+                ));
+            }
+        }
     }
 
     fn estop_reset(&self) -> Result<(), ApiError> {

@@ -397,6 +397,10 @@ pub struct MachineTask {
     step_from: Option<u32>,
     /// A step from a program stop: the stop's line, which does not count as the step's line.
     step_skip: u32,
+    /// E-stop requests from the non-realtime side, counted: read every cycle, outside the
+    /// command queue, so that an e-stop is taken even when every command slot is busy.
+    estop_request: Option<std::sync::Arc<std::sync::atomic::AtomicU32>>,
+    estop_seen: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -449,8 +453,21 @@ impl MachineTask {
             ended: None,
             step_from: None,
             step_skip: 0,
+            estop_request: None,
+            estop_seen: 0,
             setup,
         }
+    }
+
+    /// Takes e-stop requests from `counter` (each increment is one request), read every
+    /// cycle: the command queue serves a few commands at a time and may be busy.
+    pub fn with_estop_request(
+        mut self,
+        counter: std::sync::Arc<std::sync::atomic::AtomicU32>,
+    ) -> Self {
+        self.estop_seen = counter.load(std::sync::atomic::Ordering::Acquire);
+        self.estop_request = Some(counter);
+        self
     }
 
     fn all_homed(&self) -> bool {
@@ -1001,6 +1018,15 @@ impl Task for MachineTask {
             });
         }
         self.mode.set_estop_input(pressed);
+        let requests = self.estop_request.as_ref().map_or(self.estop_seen, |r| {
+            r.load(std::sync::atomic::Ordering::Acquire)
+        });
+        if requests != self.estop_seen {
+            self.estop_seen = requests;
+            if self.mode.mode() != Mode::Estop {
+                self.enter_estop(Trip::Estop);
+            }
+        }
         self.motion.probe_input = self.setup.probe_input.is_some_and(|i| self.inputs.di(i));
         if self.mode.mode() == Mode::Estop {
             // The quick stop is requested until the drives are off.
@@ -1225,11 +1251,18 @@ impl Task for MachineTask {
                 }
                 _ => Progress::Running,
             },
+            // Done once nothing moves: held on the path, or standing at a barrier (M0, M66,
+            // spindle at speed), where the interpolator waits and never reports `Holding`.
+            // A pause that stayed active there kept one of the task's few command slots;
+            // enough of them and the task took no command at all, e-stop included.
             MachineCmd::Pause => {
                 if mode != Mode::Holding
                     || matches!(
                         self.setpoints.state,
-                        InterpState::Holding | InterpState::Done | InterpState::Idle
+                        InterpState::Holding
+                            | InterpState::Waiting
+                            | InterpState::Done
+                            | InterpState::Idle
                     )
                 {
                     Progress::Done

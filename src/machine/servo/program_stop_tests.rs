@@ -123,3 +123,29 @@ fn every_command_points_at_its_own_operation() {
         );
     }
 }
+
+/// The machine task serves a few commands at a time (`MAX_ACTIVE_COMMANDS`); aborts sent
+/// during a deceleration all stay active until it ends. An e-stop request does not queue
+/// behind them: it is taken in the next cycle.
+#[test]
+fn an_estop_request_is_taken_while_every_command_slot_is_busy() {
+    use std::sync::atomic::Ordering;
+    let mut r = Rig::new();
+    r.ready();
+    let x0 = r.feedback(0).actual;
+    r.start_move(1, [x0 - 250.0, 100.0, -5.0], 6000.0);
+    r.rt.run_cycles(1500);
+    assert!(r.feedback(0).velocity.abs() > 50.0, "at speed");
+    // The job's own `run` holds one slot; the aborts take the others.
+    let aborts: Vec<_> = (1..crate::rt::runner::MAX_ACTIVE_COMMANDS)
+        .map(|_| r.built_machine.send(MachineCmd::Abort).expect("queue"))
+        .collect();
+    let queued = r.built_machine.send(MachineCmd::Estop).expect("queue");
+    r.rt.run_cycles(20);
+    assert!(aborts.iter().all(|h| h.status() == CommandStatus::Accepted));
+    assert_eq!(queued.status(), CommandStatus::Pending, "slots are busy");
+    assert_ne!(r.mode(), Mode::Estop);
+    r.estop_request.fetch_add(1, Ordering::AcqRel);
+    r.rt.run_cycles(1);
+    assert_eq!(r.mode(), Mode::Estop);
+}
