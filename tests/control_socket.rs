@@ -65,6 +65,7 @@ impl MachineApi for Double {
             inputs: Default::default(),
             outputs: Default::default(),
             probe: Default::default(),
+            optional_stop: false,
         }
     }
     fn estop(&self) -> Result<(), ApiError> {
@@ -261,6 +262,14 @@ fn malformed_and_unknown_requests_get_errors_and_the_connection_survives() {
         .unwrap();
     let v = read_json(&mut r);
     assert!(v["error"]["message"].as_str().unwrap().contains("feed"));
+    // An absurd value is quoted short, not as 309 digits.
+    w.write_all(b"{\"id\":13,\"method\":\"override\",\"params\":{\"rapid\":1e308}}\n")
+        .unwrap();
+    let v = read_json(&mut r);
+    assert_eq!(
+        v["error"]["message"],
+        json!("rapid must be within 0..=1, got 1e308")
+    );
     // Blank lines are ignored; the next request still works.
     w.write_all(b"\n\n{\"id\":12,\"method\":\"status\"}\n")
         .unwrap();

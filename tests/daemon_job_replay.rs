@@ -31,12 +31,7 @@ fn a_job_larger_than_the_kept_queue_is_planned_again_and_runs_to_its_end() {
     );
     assert_eq!(info["lines"], json!(lines));
     ok(&mut c, "job.run", Value::Null);
-    let s = wait_status(&mut c, "the job's end", Duration::from_secs(600), |s| {
-        matches!(
-            s["job"]["state"].as_str(),
-            Some("done" | "failed" | "aborted")
-        )
-    });
+    let s = wait_job_end(&mut c, "the job's end", Duration::from_secs(600));
     assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
     let x = axis(&s, "X")["actual"].as_f64().unwrap();
     let y = axis(&s, "Y")["actual"].as_f64().unwrap();

@@ -20,9 +20,10 @@ fn shutdown_puts_the_spindle_coolant_and_every_output_in_the_safe_state() {
     let machine = Machine::deploy(cfg.clone()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let socket = dir.path().join("control.sock");
-    let listener =
-        hytask::control::server::bind(&hytask::machine::socket_options(&cfg, Some(socket.clone())))
-            .unwrap();
+    let listener = hytask::control::server::bind(
+        &hytask::control::server::SocketOptions::from_config(&cfg.control, Some(socket.clone())),
+    )
+    .unwrap();
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let (done_tx, done_rx) = std::sync::mpsc::channel();
     let deployed: Arc<dyn hytask::daemon::Deployed> = machine.clone();

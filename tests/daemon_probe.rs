@@ -13,17 +13,11 @@ use support::*;
 /// Top of the simulated plate.
 const PLATE: f64 = -10.0;
 
+/// Hang guard of the waits for a job's end.
+const GUARD: Duration = Duration::from_secs(180);
+
 fn machine_with_plate() -> Daemon {
     Daemon::start_sim_with(SIM_SPEED, Some(PLATE))
-}
-
-fn wait_job_end(c: &mut hytask::control::client::Client, what: &str) -> Value {
-    wait_status(c, what, Duration::from_secs(180), |s| {
-        matches!(
-            s["job"]["state"].as_str(),
-            Some("done" | "failed" | "aborted")
-        )
-    })
 }
 
 #[test]
@@ -33,7 +27,7 @@ fn a_job_that_probes_measures_the_plate_and_goes_on_with_the_result() {
     ready(&mut c);
     let info = run_job(&mut c, "jobs/probe.ngc");
     assert_eq!(info["name"], json!("probe.ngc"));
-    let s = wait_job_end(&mut c, "probing job");
+    let s = wait_job_end(&mut c, "probing job", GUARD);
     assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
     assert_eq!(s["mode"], json!("idle"));
     // Two probes; the last (G38.3 along X) made no contact and ended at X170.
@@ -60,7 +54,7 @@ fn g38_2_without_contact_fails_the_job_naming_the_line_and_the_machine_stays_on(
         json!({"text": text, "name": "miss.ngc"}),
     );
     ok(&mut c, "job.run", Value::Null);
-    let s = wait_job_end(&mut c, "failed probe");
+    let s = wait_job_end(&mut c, "failed probe", GUARD);
     assert_eq!(s["job"]["state"], json!("failed"));
     let reason = s["job"]["reason"].as_str().unwrap();
     assert!(
@@ -75,7 +69,7 @@ fn g38_2_without_contact_fails_the_job_naming_the_line_and_the_machine_stays_on(
     );
     // The machine takes the next job at once.
     ok(&mut c, "mdi", json!({"line": "G0 Z-1"}));
-    let s = wait_job_end(&mut c, "mdi after a failed probe");
+    let s = wait_job_end(&mut c, "mdi after a failed probe", GUARD);
     assert_eq!(s["mode"], json!("idle"));
     assert!((axis(&s, "Z")["actual"].as_f64().unwrap() + 1.0).abs() < 0.01);
 }
@@ -91,7 +85,7 @@ fn an_error_that_depends_on_the_measurement_fails_the_job_at_the_probe() {
     let text = "G21 G90 F600\nG38.3 Z-20\nG1 Z[1 / [#5070 - 1]]\nM2\n";
     ok(&mut c, "job.load", json!({"text": text, "name": "div.ngc"}));
     ok(&mut c, "job.run", Value::Null);
-    let s = wait_job_end(&mut c, "error after probe");
+    let s = wait_job_end(&mut c, "error after probe", GUARD);
     assert_eq!(s["job"]["state"], json!("failed"), "{}", s["job"]);
     let reason = s["job"]["reason"].as_str().unwrap();
     assert!(reason.starts_with("div.ngc:3:"), "{reason}");
@@ -116,26 +110,37 @@ fn mdi_probing_touches_off_and_a_tripped_probe_refuses_to_start() {
     // before it moves (LinuxCNC's rule).
     assert_eq!(s["inputs"]["probe"], json!(1.0), "{}", s["inputs"]);
     let z0 = axis(&s, "Z")["actual"].as_f64().unwrap();
-    // The machine fails the job in the cycle that accepts it: whether the call still sees
-    // the acceptance or already the failure depends on when it polls (reported), so both
-    // replies are taken; the job's end is what is asserted.
-    match c.call("mdi", json!({"line": "G38.2 Z-20 F300"})) {
-        Ok(_) => {}
-        Err(hytask::control::client::ClientError::Remote { code: 2, message }) => {
-            assert!(message.contains("program error"), "{message}");
-        }
-        Err(e) => panic!("mdi: {e}"),
+    // Refused as an error before anything moves, whatever the timing (LinuxCNC: "Probe is
+    // already tripped when starting G38.2 or G38.3 move"); the loaded or last job is left
+    // as it was.
+    let before = s["job"].clone();
+    for line in ["G38.2 Z-20 F300", "G38.3 Z-20 F300"] {
+        let (code, message) = err(&mut c, "mdi", json!({ "line": line }));
+        assert_eq!(code, 1, "{message}");
+        assert!(
+            message.contains("probe is already tripped when starting G38.2 or G38.3 move"),
+            "{message}"
+        );
     }
-    let s = wait_status(&mut c, "refused probe", Duration::from_secs(120), |s| {
-        s["mode"] == json!("idle") && s["job"]["state"] == json!("failed")
+    let s = ok(&mut c, "status", Value::Null);
+    assert_eq!(s["mode"], json!("idle"));
+    assert_eq!(s["job"], before);
+    // G38.4 (away from the plate) is what starts from a tripped probe.
+    ok(&mut c, "mdi", json!({"line": "G38.4 Z-5 F300"}));
+    let s = wait_status(&mut c, "probe away", Duration::from_secs(120), |s| {
+        s["mode"] == json!("idle") && s["probe"]["count"] == json!(2)
     });
+    assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
+    assert_eq!(s["inputs"]["probe"], json!(0.0));
+    assert!(axis(&s, "Z")["actual"].as_f64().unwrap() > z0);
+    // And from an untripped probe, G38.4 is refused the same way.
+    let (code, message) = err(&mut c, "mdi", json!({"line": "G38.4 Z-1 F300"}));
+    assert_eq!(code, 1, "{message}");
     assert!(
-        s["job"]["reason"]
-            .as_str()
-            .unwrap()
-            .contains("already tripped"),
-        "{}",
-        s["job"]
+        message.contains("probe is not tripped when starting G38.4 or G38.5 move"),
+        "{message}"
     );
-    assert!((axis(&s, "Z")["actual"].as_f64().unwrap() - z0).abs() < 1e-3);
+    let z1 = axis(&s, "Z")["actual"].as_f64().unwrap();
+    let s = ok(&mut c, "status", Value::Null);
+    assert!((axis(&s, "Z")["actual"].as_f64().unwrap() - z1).abs() < 1e-3);
 }

@@ -5,6 +5,8 @@
 //! timings.
 #![allow(clippy::unwrap_used)]
 
+mod support;
+
 use hytask::machine::api::{ApiError, JobSource, MachineApi, Mode, Status};
 use hytask::machine::Machine;
 use std::sync::Arc;
@@ -14,6 +16,14 @@ fn machine() -> Arc<Machine> {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
     Machine::deploy(hytask::config::load(&path).unwrap()).unwrap()
+}
+
+/// The same mill on the simulated clock (unpaced), for tests about behaviour.
+fn sim_machine() -> (Arc<Machine>, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    let config = support::sim_clock_config(dir.path(), 0, None);
+    let m = Machine::deploy(hytask::config::load(&config).unwrap()).unwrap();
+    (m, dir)
 }
 
 fn wait(m: &Machine, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
@@ -147,5 +157,79 @@ fn status_shows_position_and_progress_of_one_servo_cycle() {
         samples.len(),
         &torn[..torn.len().min(5)]
     );
+    shutdown(&m);
+}
+
+fn x(s: &Status) -> f64 {
+    s.axes.iter().find(|a| a.name == "X").unwrap().actual
+}
+
+/// M0 holds the job (mode `Holding`, job "holding"); `job_resume` goes on with the next line.
+/// M1 is passed over until optional stop is switched on.
+#[test]
+fn job_resume_continues_after_an_m0_and_m1_stops_with_optional_stop_on() {
+    let (m, _dir) = sim_machine();
+    ready(&m);
+    let program = "G21 G90\nG0 X100 Y100 Z-5\nM0\nG0 X110\nM1\nG0 X120\nM2\n";
+    m.job_load(&text("m0.ngc", program)).unwrap();
+    m.job_run().unwrap();
+    let held = wait(&m, "the M0 stop", |s| s.job.state == "holding");
+    assert_eq!(held.mode, Mode::Holding, "{:?}", held.job);
+    assert_eq!(held.job.line, 3);
+    m.job_resume().unwrap();
+    let done = wait(&m, "the end", |s| s.job.state == "done");
+    assert_eq!(done.mode, Mode::Idle);
+    assert!((x(&done) - 120.0).abs() < 0.002, "{}", x(&done));
+
+    assert_eq!(m.set_optional_stop(true), Ok(true));
+    m.mdi("G0 X100").unwrap();
+    wait(&m, "back at X100", |s| {
+        s.mode == Mode::Idle && (x(s) - 100.0).abs() < 0.002
+    });
+    m.job_load(&text("m0.ngc", program)).unwrap();
+    m.job_run().unwrap();
+    wait(&m, "the M0 stop", |s| s.job.state == "holding");
+    m.job_resume().unwrap();
+    let held = wait(&m, "the M1 stop", |s| {
+        s.job.state == "holding" && s.job.line == 5
+    });
+    assert_eq!(held.mode, Mode::Holding);
+    assert!(held.optional_stop);
+    assert!((x(&held) - 110.0).abs() < 0.002, "{}", x(&held));
+    m.job_resume().unwrap();
+    wait(&m, "the end", |s| s.job.state == "done");
+    shutdown(&m);
+}
+
+/// `call` reaches task operations by name, but not the job machinery's own `machine.run` and
+/// `machine.continue`: a hand-made run of a job nothing feeds would hold the machine in
+/// `running` until an abort.
+#[test]
+fn call_refuses_the_job_machinerys_own_operations() {
+    let (m, _dir) = sim_machine();
+    ready(&m);
+    for (op, args) in [
+        (
+            "run",
+            serde_json::json!({"job": 99, "items": 5, "manual": false}),
+        ),
+        ("continue", serde_json::json!({"job": 99, "items": 5})),
+    ] {
+        match m.call("machine", op, &args) {
+            Err(ApiError::Rejected(why)) => assert!(why.contains("use job.run"), "{why}"),
+            other => panic!("machine.{op}: {other:?}"),
+        }
+    }
+    let s = m.status();
+    assert_eq!(s.mode, Mode::Idle);
+    // Other operations stay callable.
+    assert!(m
+        .call(
+            "machine",
+            "set_optional_stop",
+            &serde_json::json!({"on": true})
+        )
+        .is_ok());
+    assert!(m.status().optional_stop);
     shutdown(&m);
 }

@@ -200,6 +200,9 @@ pub struct Status {
     /// The last probe result.
     #[serde(default)]
     pub probe: ProbeStatus,
+    /// Optional stop: M1 holds the job as M0 does (`job.optional_stop`; off at start).
+    #[serde(default)]
+    pub optional_stop: bool,
 }
 
 /// A fault to inject into a simulated machine (`sim.fault`).
@@ -353,6 +356,12 @@ pub trait MachineApi: Send + Sync + 'static {
     fn job_abort(&self) -> Result<(), ApiError>;
     /// Run until the next source line, then hold.
     fn job_step(&self) -> Result<(), ApiError>;
+    /// Optional stop on or off (whether M1 holds the job as M0 does); returns the new state.
+    /// A machine without program stops does not support it.
+    fn set_optional_stop(&self, on: bool) -> Result<bool, ApiError> {
+        let _ = on;
+        Err(ApiError::NotSupported("optional stop".into()))
+    }
     /// Change overrides.
     fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError>;
     /// The tasks with their interfaces.

@@ -3,6 +3,7 @@
 
 pub mod api;
 pub mod devices;
+mod feeder;
 pub mod job;
 pub mod job_file;
 pub mod mode;
@@ -29,17 +30,5 @@ pub fn load_config(
     match path {
         Some(p) => crate::config::load(p),
         None => crate::config::builtin_sim(),
-    }
-}
-
-/// Control socket options from the config's `[control]` section, with an override path.
-pub fn socket_options(
-    config: &crate::config::MachineConfig,
-    path: Option<std::path::PathBuf>,
-) -> crate::control::server::SocketOptions {
-    crate::control::server::SocketOptions {
-        path: path.unwrap_or_else(|| config.control.socket_path.clone()),
-        mode: config.control.mode.0,
-        group: config.control.group.clone(),
     }
 }

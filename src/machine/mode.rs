@@ -46,6 +46,9 @@ pub enum Fact {
     HomingDone,
     /// The jog, job or MDI line finished or came to rest after an abort.
     MotionDone,
+    /// The job reached a program stop (M0, M60, or M1 with optional stop on): it holds,
+    /// and `Resume` goes on with the next line (LinuxCNC's pause and cycle start).
+    ProgramStop,
 }
 
 /// The state machine. `estop_input` mirrors the e-stop input so a reset can be refused
@@ -92,6 +95,7 @@ impl ModeMachine {
             (Fact::Faulted, _) => Mode::Fault,
             (Fact::HomingDone, Mode::Homing) => Mode::Idle,
             (Fact::MotionDone, Mode::Manual | Mode::Running | Mode::Holding) => Mode::Idle,
+            (Fact::ProgramStop, Mode::Running) => Mode::Holding,
             (_, m) => m,
         };
     }
@@ -231,6 +235,22 @@ mod tests {
                 "{mode:?}"
             );
         }
+    }
+
+    #[test]
+    fn a_program_stop_holds_a_running_job_until_resume() {
+        let mut m = on_and_idle();
+        m.fact(Fact::ProgramStop);
+        assert_eq!(m.mode(), M::Idle, "no job, no stop");
+        m.request(R::Run, true).unwrap();
+        m.fact(Fact::ProgramStop);
+        assert_eq!(m.mode(), M::Holding);
+        assert_eq!(m.request(R::Pause, true), Ok(M::Holding));
+        assert_eq!(m.request(R::Resume, true), Ok(M::Running));
+        m.fact(Fact::ProgramStop);
+        assert_eq!(m.request(R::Abort, true), Ok(M::Holding));
+        m.fact(Fact::MotionDone);
+        assert_eq!(m.mode(), M::Idle);
     }
 
     #[test]

@@ -88,6 +88,8 @@ pub struct PieceRunner {
     pub cancel: Arc<AtomicBool>,
     /// Probe results already seen before this job started.
     pub seen_probe_seq: u32,
+    /// The servo thread, whose cycles pace the feeder's waits for room in the queue.
+    pub servo: Arc<crate::rt::activity::ThreadInfo>,
     /// The job's `(MSG, …)` texts: each piece's are appended, and the message ids of its
     /// queue items shifted to match (each piece's plan numbers its own from 0).
     pub messages: Arc<Mutex<Vec<String>>>,
@@ -209,6 +211,42 @@ impl PieceRunner {
 
     /// Pushes every item, waiting while the queue is full; false if cancelled.
     fn feed(&self, items: &[Item]) -> bool {
-        super::runtime::feed(self.queue.clone(), items, self.job, &self.cancel)
+        super::feeder::feed(&self.queue, items, self.job, &self.cancel, &self.servo)
     }
+}
+
+/// Refuses a job whose first move is a probe move that cannot start: G38.2/G38.3 with the
+/// probe already tripped, G38.4/G38.5 with it not tripped (`probe_active`: the probe input
+/// as the last servo cycle saw it; `None` on a machine without one, which the piece runner
+/// refuses with its own message). The machine task checks the same rule again in the cycle
+/// the move arms; checking it here as well makes the reply to an MDI probe against a
+/// touching stylus an error every time, instead of an acceptance or a failure depending on
+/// which servo cycle the call's wait ends in.
+pub fn check_probe_start(
+    job: &super::job::PreparedJob,
+    probe_active: Option<bool>,
+) -> Result<(), ApiError> {
+    use super::servo::JobError;
+    let Some(active) = probe_active else {
+        return Ok(());
+    };
+    let first = job.plan.items.iter().find_map(|i| match i {
+        Item::Segment(_) => Some(None),
+        Item::Aux(a) => match a.kind {
+            AuxKind::ProbeArm { kind } => Some(Some((kind, a.line))),
+            _ => None,
+        },
+    });
+    let Some(Some((kind, line))) = first else {
+        return Ok(());
+    };
+    let error = match (kind.toward(), active) {
+        (true, true) => JobError::ProbeAlreadyTripped(kind),
+        (false, false) => JobError::ProbeNotTripped(kind),
+        _ => return Ok(()),
+    };
+    Err(ApiError::Rejected(format!(
+        "{}: line {line}: {error}",
+        job.name
+    )))
 }

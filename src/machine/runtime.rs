@@ -12,6 +12,7 @@
 
 use super::api::*;
 use super::devices;
+use super::feeder::feed;
 use super::job::{self, PreparedJob};
 use super::mode::{ModeMachine, Request};
 use super::probing;
@@ -105,6 +106,7 @@ pub struct Machine {
     sim_io: Vec<Option<SimIoHandle>>,
     io_map: devices::IoMap,
     overrun_injection: Arc<AtomicU32>,
+    estop_request: Arc<AtomicU32>,
     sim_axes: Vec<(char, SimAxisHandle)>,
     next_job: AtomicU32,
     servo: Arc<crate::rt::activity::ThreadInfo>,
@@ -194,6 +196,8 @@ pub struct Built {
     pub sim_axes: Vec<(char, SimAxisHandle)>,
     /// Overrun injection counter (simulated machines).
     pub overrun_injection: Arc<AtomicU32>,
+    /// E-stop requests to the machine task (see [`MachineTask::with_estop_request`]).
+    pub estop_request: Arc<AtomicU32>,
 }
 
 /// Builds the backends and adds the machine's tasks to a new deployment, in start order
@@ -305,7 +309,12 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         io_task = io_task.with_overrun_injection(overrun_injection.clone());
     }
     app.add_periodic("io", io_task, schedule)?;
-    let machine = app.add_periodic("machine", MachineTask::new(setup), schedule)?;
+    let estop_request = Arc::new(AtomicU32::new(0));
+    let machine = app.add_periodic(
+        "machine",
+        MachineTask::new(setup).with_estop_request(estop_request.clone()),
+        schedule,
+    )?;
     app.add_periodic(
         "interpolator",
         InterpolatorTask::new(motion_cfg.clone(), axes.clone(), queue_r),
@@ -346,6 +355,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
             .map(|(n, h)| (axis_letter(n as usize), h))
             .collect(),
         overrun_injection,
+        estop_request,
     })
 }
 
@@ -368,6 +378,7 @@ impl Machine {
             io_map,
             sim_axes,
             overrun_injection,
+            estop_request,
         } = build(&config)?;
         let report = app.configure()?;
         for w in &report.warnings {
@@ -408,6 +419,7 @@ impl Machine {
             sim_io,
             io_map,
             overrun_injection,
+            estop_request,
             sim_axes,
             next_job: AtomicU32::new(1),
             servo: servo_info,
@@ -509,6 +521,13 @@ impl Machine {
         pose
     }
 
+    /// The probe input as the last servo cycle saw it (`None`: the machine has none).
+    fn probe_active(&self) -> Option<bool> {
+        let name = self.config.motion.probe_input.as_deref()?;
+        let i = self.io_map.di.iter().position(|c| c.point.name == name)?;
+        Some(self.snapshot().inputs.di(i))
+    }
+
     /// Refuses a run or jog the machine cannot take now (e-stop, off, fault, not homed,
     /// busy), with the machine task's own reason: checked before anything about the job, so
     /// that the operator hears about the e-stop, not about a job planned elsewhere.
@@ -524,6 +543,7 @@ impl Machine {
     /// Starts a prepared job (or jog/MDI) as job `id`: feeder first, then the `run` command.
     fn start_job(&self, job: Arc<PreparedJob>, manual: bool) -> Result<(), ApiError> {
         self.check_can_run(manual)?;
+        probing::check_probe_start(&job, self.probe_active())?;
         let pose = self.actual_pose();
         for &(c, i) in self.axes().iter() {
             if (job.plan.start_mm[i] - pose[i]).abs() > 0.01 {
@@ -543,16 +563,17 @@ impl Machine {
                 let items = job.clone();
                 let cancel = cancel.clone();
                 let (book, machine) = (self.book.clone(), self.machine.clone());
+                let servo = self.servo.clone();
                 let feeder = std::thread::Builder::new()
                     .name(format!("feeder-{id}"))
                     .spawn(move || match &items.replay {
                         None => {
-                            feed(queue, &items.plan.items, id, &cancel);
+                            feed(&queue, &items.plan.items, id, &cancel, &servo);
                         }
                         // A large job is planned again as it runs (see `job`).
                         Some(replay) => {
                             let run = replay
-                                .run_ahead(&mut |batch| feed(queue.clone(), batch, id, &cancel));
+                                .run_ahead(&mut |batch| feed(&queue, batch, id, &cancel, &servo));
                             if let Err(msg) = run {
                                 tracing::error!("job {id}: {msg}");
                                 if let Some(a) = lock(&book).active.as_mut().filter(|a| a.id == id)
@@ -658,6 +679,7 @@ impl Machine {
             name: job.name.clone(),
             cancel: cancel.clone(),
             seen_probe_seq: self.snapshot().machine.probe.seq,
+            servo: self.servo.clone(),
             messages: messages.clone(),
         };
         let book = self.book.clone();
@@ -693,33 +715,6 @@ impl Machine {
             data,
         });
     }
-}
-
-/// Pushes a job's items into the segment queue, waiting while it is full, until done or
-/// cancelled (then false). Runs on its own ordinary thread: the realtime side never waits
-/// for it.
-pub(crate) fn feed(
-    queue: BufferWriter<QueueItem>,
-    items: &[motion::Item],
-    job: u32,
-    cancel: &AtomicBool,
-) -> bool {
-    for &item in items {
-        let mut q = QueueItem { job, item };
-        loop {
-            if cancel.load(Ordering::Acquire) {
-                return false;
-            }
-            match queue.try_push(q) {
-                Ok(()) => break,
-                Err(back) => {
-                    q = back;
-                    std::thread::sleep(Duration::from_millis(2));
-                }
-            }
-        }
-    }
-    true
 }
 
 /// Forwards realtime events to subscribers, keeps the job book, publishes progress.
@@ -807,6 +802,18 @@ fn apply_progress(status: &mut JobStatus, a: &ActiveJob, sp: &Setpoints) {
     status.distance_to_go_mm = status.distance_mm * (1.0 - status.progress);
 }
 
+/// Operations `call` refuses, with what to use instead. `machine.run` and
+/// `machine.continue` name a job by id and count the queue items its feeder pushed: called
+/// by hand they start a "job" nothing feeds, which holds the machine in `running` with a
+/// stale job status until an abort.
+fn internal_operation(task: &str, operation: &str) -> Option<&'static str> {
+    match (task, operation) {
+        ("machine", "run") => Some("job.run, mdi or jog"),
+        ("machine", "continue") => Some("job.run (a probing job continues by itself)"),
+        _ => None,
+    }
+}
+
 fn handle_job_event(m: &Machine, e: JobEvent) {
     let mut book = lock(&m.book);
     let (state, reason, end) = match e {
@@ -816,7 +823,10 @@ fn handle_job_event(m: &Machine, e: JobEvent) {
             ("holding", None, false)
         }
         JobEvent::Resumed => ("running", None, false),
-        JobEvent::Finished => ("done", None, true),
+        JobEvent::Finished { line } => {
+            book.status.line = line;
+            ("done", None, true)
+        }
         JobEvent::Aborted { line } => match book.active.as_ref().and_then(|a| a.error.clone()) {
             Some(error) => ("failed", Some(error), true),
             None => ("aborted", Some(format!("aborted at line {line}")), true),
@@ -976,11 +986,26 @@ impl MachineApi for Machine {
                     .map(|&(c, i)| (c.to_string(), snap.probe.probed_mm[i]))
                     .collect(),
             },
+            optional_stop: snap.optional_stop,
         }
     }
 
+    /// Not a queued command: the machine task reads the request counter every cycle, so an
+    /// e-stop is taken in the next cycle even when its command slots are all busy.
     fn estop(&self) -> Result<(), ApiError> {
-        self.command(MachineCmd::Estop).map(|_| ())
+        self.estop_request.fetch_add(1, Ordering::AcqRel);
+        let t0 = Instant::now();
+        loop {
+            self.wait_for_cycle_end();
+            if self.snapshot().machine.mode == Mode::Estop {
+                return Ok(());
+            }
+            if !self.servo.running() || t0.elapsed() > ACCEPT_TIMEOUT {
+                return Err(ApiError::Timeout(
+                    "the machine task did not enter e-stop".into(),
+                ));
+            }
+        }
     }
 
     fn estop_reset(&self) -> Result<(), ApiError> {
@@ -1129,6 +1154,11 @@ impl MachineApi for Machine {
         self.command(MachineCmd::Step).map(|_| ())
     }
 
+    fn set_optional_stop(&self, on: bool) -> Result<bool, ApiError> {
+        self.command(MachineCmd::OptionalStop { on })?;
+        Ok(self.snapshot().machine.optional_stop)
+    }
+
     fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError> {
         let snap = self.snapshot().machine;
         let feed = req.feed.unwrap_or(snap.feed_override);
@@ -1205,6 +1235,12 @@ impl MachineApi for Machine {
     }
 
     fn call(&self, task: &str, operation: &str, args: &Value) -> Result<Value, ApiError> {
+        if let Some(instead) = internal_operation(task, operation) {
+            return Err(ApiError::Rejected(format!(
+                "{task}.{operation} is the job machinery's own operation (it refers to queue \
+                 items only a running job has): use {instead}"
+            )));
+        }
         let handle = {
             let rt = lock(&self.runtime);
             let rt = rt

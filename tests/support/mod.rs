@@ -290,3 +290,20 @@ pub fn run_job(c: &mut Client, rel: &str) -> Value {
     ok(c, "job.run", Value::Null);
     info
 }
+
+/// Waits until the job has ended (done, failed or aborted); returns that status.
+pub fn wait_job_end(c: &mut Client, what: &str, timeout: Duration) -> Value {
+    wait_status(c, what, timeout, |s| {
+        matches!(
+            s["job"]["state"].as_str(),
+            Some("done" | "failed" | "aborted")
+        )
+    })
+}
+
+/// Loads the inline program `text` as `name` and runs it; returns the `job.load` reply.
+pub fn run_text(c: &mut Client, text: &str, name: &str) -> Value {
+    let info = ok(c, "job.load", json!({ "text": text, "name": name }));
+    ok(c, "job.run", Value::Null);
+    info
+}

@@ -10,7 +10,11 @@
 //! → {"id":4,"method":"job.resume"}
 //! → {"id":5,"method":"job.step"}    hold when the next source line begins (resumes a hold)
 //! → {"id":6,"method":"job.abort"}   controlled stop, the rest of the job is dropped
+//! → {"id":7,"method":"job.optional_stop","params":{"on":true}}
+//! ← {"id":7,"result":{"optional_stop":true}}   M1 now holds the job as M0 does
 //! ```
+//! A program stop (M0, M60, M1 with optional stop on) holds the job like a feed hold (mode and
+//! `job.state` "holding"); `job.resume` (or `job.step`) goes on with the next line.
 //! A job file must be a regular file (within `[control] jobs_dir` when set, at most
 //! `[control] max_job_bytes`); a G-code error in a file without a G-code extension does not
 //! quote the file (see `withhold_content`).
@@ -81,6 +85,22 @@ macro_rules! simple {
             Ok(ok())
         }
     };
+}
+
+/// Parameters of `job.optional_stop`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OptionalStop {
+    on: bool,
+}
+
+pub(super) fn handle_optional_stop(
+    m: &dyn MachineApi,
+    params: Value,
+) -> Result<Value, ControlError> {
+    let p: OptionalStop = parse(params)?;
+    let on = m.set_optional_stop(p.on)?;
+    Ok(serde_json::json!({ "optional_stop": on }))
 }
 
 simple!(handle_run, job_run);

@@ -13,7 +13,7 @@ use serde_json::Value;
 fn check(name: &str, v: Option<f64>, max: f64) -> Result<(), ControlError> {
     match v {
         Some(x) if !(0.0..=max).contains(&x) || !x.is_finite() => Err(ControlError::params(
-            format!("{name} must be within 0..={max}, got {x}"),
+            format!("{name} must be within 0..={max}, got {x:?}"),
         )),
         _ => Ok(()),
     }

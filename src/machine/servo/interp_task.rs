@@ -195,7 +195,12 @@ impl Task for InterpolatorTask {
             };
             let out = *self.interp.step(&mut src);
             let dt_s = ctx.period_ns as f64 * 1e-9;
-            self.sp.planned_time_done_s += dt_s * out.scale;
+            // Planned time passes only while a move runs (or decelerates into a hold): the
+            // scale keeps its last value at a barrier (M0, M66, spindle at speed), where
+            // the job stands still.
+            if matches!(out.state, InterpState::Running | InterpState::Holding) {
+                self.sp.planned_time_done_s += dt_s * out.scale;
+            }
             self.sp.joints = out.joints;
             self.sp.pose_mm = out.pose_mm;
             self.sp.line = out.line;

@@ -69,6 +69,11 @@ pub enum MachineCmd {
         /// Queue items added.
         items: u64,
     },
+    /// Optional stop on or off: whether M1 stops the job (M0 always does).
+    OptionalStop {
+        /// On: M1 holds like M0.
+        on: bool,
+    },
     /// Overrides (fractions).
     Overrides {
         /// Feed, 0..=max.
@@ -82,7 +87,7 @@ pub enum MachineCmd {
 
 const NO_PARAMS: &[ParamDescriptor] = &[];
 
-static OPERATIONS: [OperationDescriptor; 12] = [
+static OPERATIONS: [OperationDescriptor; 13] = [
     OperationDescriptor {
         name: "estop",
         doc: "Trip the e-stop: every drive quick-stops this cycle, outputs go safe.",
@@ -195,6 +200,15 @@ static OPERATIONS: [OperationDescriptor; 12] = [
         ],
         next: NextCommand::AfterAcceptance,
     },
+    OperationDescriptor {
+        name: "set_optional_stop",
+        doc: "Optional stop on or off: whether M1 holds the job as M0 does (off at start).",
+        params: &[ParamDescriptor {
+            name: "on",
+            ty: ArgType::Bool,
+        }],
+        next: NextCommand::AfterAcceptance,
+    },
 ];
 
 impl Commands for MachineCmd {
@@ -214,8 +228,9 @@ impl Commands for MachineCmd {
             MachineCmd::Resume => 7,
             MachineCmd::Abort => 8,
             MachineCmd::Overrides { .. } => 9,
-            MachineCmd::Continue { .. } => 10,
-            MachineCmd::Step => 11,
+            MachineCmd::Step => 10,
+            MachineCmd::Continue { .. } => 11,
+            MachineCmd::OptionalStop { .. } => 12,
         }
     }
 
@@ -238,6 +253,7 @@ impl Commands for MachineCmd {
             "resume" => MachineCmd::Resume,
             "abort" => MachineCmd::Abort,
             "step" => MachineCmd::Step,
+            "set_optional_stop" => MachineCmd::OptionalStop { on: a.bool(0)? },
             "continue" => MachineCmd::Continue {
                 job: a.int(0)? as u32,
                 items: a.int(1)?.max(0) as u64,
@@ -372,7 +388,6 @@ pub struct MachineTask {
     last_mode: Mode,
     spindle_dir: Option<SpindleDir>,
     spindle_rpm: f64,
-    optional_stop: bool,
     /// Cycle at which the path of the current job was complete (settling since).
     settle_since: Option<u64>,
     /// Job id of the current or last motion, and how it ended.
@@ -380,6 +395,12 @@ pub struct MachineTask {
     ended: Option<(u32, JobEvent)>,
     /// Single block in progress: the line the step began on (0 until motion shows one).
     step_from: Option<u32>,
+    /// A step from a program stop: the stop's line, which does not count as the step's line.
+    step_skip: u32,
+    /// E-stop requests from the non-realtime side, counted: read every cycle, outside the
+    /// command queue, so that an e-stop is taken even when every command slot is busy.
+    estop_request: Option<std::sync::Arc<std::sync::atomic::AtomicU32>>,
+    estop_seen: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -427,13 +448,26 @@ impl MachineTask {
             last_mode: Mode::Estop,
             spindle_dir: None,
             spindle_rpm: 0.0,
-            optional_stop: false,
             settle_since: None,
             job_id: 0,
             ended: None,
             step_from: None,
+            step_skip: 0,
+            estop_request: None,
+            estop_seen: 0,
             setup,
         }
+    }
+
+    /// Takes e-stop requests from `counter` (each increment is one request), read every
+    /// cycle: the command queue serves a few commands at a time and may be busy.
+    pub fn with_estop_request(
+        mut self,
+        counter: std::sync::Arc<std::sync::atomic::AtomicU32>,
+    ) -> Self {
+        self.estop_seen = counter.load(std::sync::atomic::Ordering::Acquire);
+        self.estop_request = Some(counter);
+        self
     }
 
     fn all_homed(&self) -> bool {
@@ -456,7 +490,7 @@ impl MachineTask {
     fn emit_job(&mut self, e: JobEvent) {
         if matches!(
             e,
-            JobEvent::Finished
+            JobEvent::Finished { .. }
                 | JobEvent::Aborted { .. }
                 | JobEvent::Failed { .. }
                 | JobEvent::Error { .. }
@@ -633,13 +667,11 @@ impl MachineTask {
             AuxKind::Message { id } => self.emit_job(JobEvent::Message { id, line }),
             AuxKind::OverrideEnable { .. } | AuxKind::UserMcode { .. } => {}
             AuxKind::ProgramStop => {
-                self.barrier = Barrier::ProgramStop;
-                self.emit_job(JobEvent::Held { line });
+                self.program_stop(line);
                 done = false;
             }
-            AuxKind::OptionalProgramStop if self.optional_stop => {
-                self.barrier = Barrier::ProgramStop;
-                self.emit_job(JobEvent::Held { line });
+            AuxKind::OptionalProgramStop if self.snap.optional_stop => {
+                self.program_stop(line);
                 done = false;
             }
             AuxKind::OptionalProgramStop => {}
@@ -754,6 +786,15 @@ impl MachineTask {
         }
     }
 
+    /// M0, M60 (and M1 with optional stop on): the interpolator waits at the barrier and the
+    /// machine holds (mode and job "holding") until `resume` or `step` goes on with the next
+    /// line, as LinuxCNC's pause and cycle start do.
+    fn program_stop(&mut self, line: u32) {
+        self.barrier = Barrier::ProgramStop;
+        self.mode.fact(Fact::ProgramStop);
+        self.emit_job(JobEvent::Held { line });
+    }
+
     /// Leaves a feed hold or an M0 stop.
     fn resume_job(&mut self, homed: bool) -> Result<(), RejectReason> {
         self.mode
@@ -781,7 +822,8 @@ impl MachineTask {
         }
         let line = self.setpoints.line;
         if from == 0 {
-            self.step_from = (line != 0).then_some(line).or(Some(0));
+            let begun = line != 0 && line != self.step_skip;
+            self.step_from = Some(if begun { line } else { 0 });
         } else if line != 0 && line != from {
             self.step_from = None;
             if self.mode.request(Request::Pause, true).is_ok() {
@@ -883,7 +925,8 @@ impl MachineTask {
             self.current = Motion::None;
             self.motion.track_actual = true;
             self.mode.fact(Fact::MotionDone);
-            self.emit_job(JobEvent::Finished);
+            let line = self.setpoints.line;
+            self.emit_job(JobEvent::Finished { line });
         }
     }
 }
@@ -975,6 +1018,15 @@ impl Task for MachineTask {
             });
         }
         self.mode.set_estop_input(pressed);
+        let requests = self.estop_request.as_ref().map_or(self.estop_seen, |r| {
+            r.load(std::sync::atomic::Ordering::Acquire)
+        });
+        if requests != self.estop_seen {
+            self.estop_seen = requests;
+            if self.mode.mode() != Mode::Estop {
+                self.enter_estop(Trip::Estop);
+            }
+        }
         self.motion.probe_input = self.setup.probe_input.is_some_and(|i| self.inputs.di(i));
         if self.mode.mode() == Mode::Estop {
             // The quick stop is requested until the drives are off.
@@ -1071,12 +1123,15 @@ impl Task for MachineTask {
                 }
             }
             MachineCmd::Step => {
+                // At a program stop the stop's own line is done: the step runs the next one.
+                let at_stop = self.barrier == Barrier::ProgramStop;
                 match self.mode.mode() {
                     Mode::Holding => self.resume_job(homed)?,
                     Mode::Running => {}
                     _ => return Err(RejectReason::Other("no job is running")),
                 }
-                self.step_from = Some(self.setpoints.line);
+                self.step_skip = if at_stop { self.setpoints.line } else { 0 };
+                self.step_from = Some(if at_stop { 0 } else { self.setpoints.line });
             }
             MachineCmd::Resume => {
                 self.resume_job(homed)?;
@@ -1121,6 +1176,7 @@ impl Task for MachineTask {
                 self.snap.probe.waiting = false;
                 self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
             }
+            MachineCmd::OptionalStop { on } => self.snap.optional_stop = on,
             MachineCmd::Overrides {
                 feed,
                 rapid,
@@ -1185,7 +1241,7 @@ impl Task for MachineTask {
                 _ => Progress::Failed("homing stopped by a fault or e-stop"),
             },
             MachineCmd::Run { job, .. } => match self.ended {
-                Some((j, JobEvent::Finished)) if j == job => Progress::Done,
+                Some((j, JobEvent::Finished { .. })) if j == job => Progress::Done,
                 Some((j, JobEvent::Aborted { .. })) if j == job => Progress::Failed("aborted"),
                 Some((j, JobEvent::Failed { .. })) if j == job => {
                     Progress::Failed("stopped by a fault or e-stop")
@@ -1195,11 +1251,18 @@ impl Task for MachineTask {
                 }
                 _ => Progress::Running,
             },
+            // Done once nothing moves: held on the path, or standing at a barrier (M0, M66,
+            // spindle at speed), where the interpolator waits and never reports `Holding`.
+            // A pause that stayed active there kept one of the task's few command slots;
+            // enough of them and the task took no command at all, e-stop included.
             MachineCmd::Pause => {
                 if mode != Mode::Holding
                     || matches!(
                         self.setpoints.state,
-                        InterpState::Holding | InterpState::Done | InterpState::Idle
+                        InterpState::Holding
+                            | InterpState::Waiting
+                            | InterpState::Done
+                            | InterpState::Idle
                     )
                 {
                     Progress::Done
@@ -1219,6 +1282,7 @@ impl Task for MachineTask {
             | MachineCmd::Resume
             | MachineCmd::Continue { .. }
             | MachineCmd::Step
+            | MachineCmd::OptionalStop { .. }
             | MachineCmd::Overrides { .. } => Progress::Done,
         }
     }

@@ -32,6 +32,8 @@ pub mod monitor_task;
 mod output_tests;
 #[cfg(test)]
 mod probe_tests;
+#[cfg(test)]
+mod program_stop_tests;
 pub mod status;
 #[cfg(test)]
 mod tests;
@@ -287,6 +289,8 @@ pub struct MachineSnapshot {
     pub last_trip: Option<Trip>,
     /// The last probe move's result.
     pub probe: ProbeSnapshot,
+    /// Optional stop: M1 holds the job as M0 does.
+    pub optional_stop: bool,
 }
 
 /// The result of the last G38 move, published when the machine reaches its end. While
@@ -323,6 +327,7 @@ impl Default for MachineSnapshot {
             trips: 0,
             last_trip: None,
             probe: ProbeSnapshot::default(),
+            optional_stop: false,
         }
     }
 }
@@ -358,7 +363,10 @@ pub enum JobEvent {
     /// Resumed.
     Resumed,
     /// Reached the end.
-    Finished,
+    Finished {
+        /// The last line executed (status shows it, not the last progress sample's).
+        line: u32,
+    },
     /// Aborted by the operator; stopped under control.
     Aborted {
         /// Line at the abort.

@@ -54,6 +54,7 @@ fn run_probing(r: &mut Rig, text: &str, surface_z: Option<f64>) -> Outcome {
         name: src.name.clone(),
         cancel: cancel.clone(),
         seen_probe_seq: 0,
+        servo: r.rt.threads()[0].clone(),
         messages: Arc::default(),
     };
     let thread = std::thread::spawn(move || runner.run(first));

@@ -26,6 +26,8 @@ pub(super) struct Rig {
     fb: Vec<DataReader<AxisFeedback>>,
     /// The machine task's `job` events.
     pub(super) jobs: EventReceiver<JobEvent>,
+    /// E-stop requests to the machine task (what `Machine::estop` increments).
+    pub(super) estop_request: Arc<std::sync::atomic::AtomicU32>,
 }
 
 impl Rig {
@@ -48,6 +50,7 @@ impl Rig {
             motion_cfg,
             sim_io,
             sim_axes,
+            estop_request,
             ..
         } = build(cfg).expect("build");
         app.configure().expect("topology");
@@ -73,6 +76,7 @@ impl Rig {
             sp,
             fb,
             jobs,
+            estop_request,
         }
     }
 
