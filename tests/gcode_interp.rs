@@ -343,10 +343,6 @@ fn unsupported_g_codes_say_their_name() {
             "G41.1 D1",
             "G41.1/G42.1 (dynamic cutter radius compensation)",
         ),
-        (
-            "G43.2 H1",
-            "G43.2 (additional tool length offset) is not supported",
-        ),
     ] {
         let e = err(&format!("G21 F100 S100 M3\n{line}\nM2\n"));
         assert_eq!((e.line, e.col), (2, 1), "{line}: {e}");

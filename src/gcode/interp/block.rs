@@ -338,7 +338,7 @@ impl Interp<'_> {
             ),
             (
                 b'h',
-                b.gcode(8) == Some(430) || g10,
+                matches!(b.gcode(8), Some(430 | 432)) || g10,
                 "H word with no G43 or G43.2 to use it",
             ),
             (b'p', p_ok, "P word with no G2 G3 G4 G10 G64 G5 G5.2 G76 G82 G86 G88 G89 or M50 M51 M52 M53 M62 M63 M64 M65 M66 M98 or user M code to use it"),

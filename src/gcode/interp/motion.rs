@@ -286,10 +286,46 @@ impl Interp<'_> {
                 }
             }
             432 => {
-                return Err(self.err(
-                    self.loc.col,
-                    super::unsupported::g_code(g).unwrap_or("G43.2 is not supported by hytask"),
-                ))
+                // G43.2 H: the tool's offset is added to the active one (LinuxCNC 2.9). The
+                // axis-word form is refused, as this rs274 refuses it.
+                let axes = AXES.iter().any(|&c| b.has(c));
+                let h = match (b.get(b'h'), axes) {
+                    (Some(_), true) => {
+                        return Err(
+                            self.err(self.loc.col, "G43.2: Can not have both H and axis words")
+                        )
+                    }
+                    (None, false) => {
+                        return Err(
+                            self.err(self.loc.col, "G43.2: No axes specified and H word missing")
+                        )
+                    }
+                    (None, true) => return Err(self.err(
+                        self.loc.col,
+                        "G43.2 with axis words is not supported (as in rs274): use G43.2 H<tool>",
+                    )),
+                    (Some(h), false) => h,
+                };
+                if h < 0.0 || h.fract() != 0.0 {
+                    return Err(self.err(
+                        b.col_of(b'h'),
+                        "Negative H word tool length offset index used",
+                    ));
+                }
+                let tool = h as u32;
+                let slot = self.tools.slot_of(tool).ok_or_else(|| {
+                    self.err(
+                        self.loc.col,
+                        format!("Requested tool {tool} not found in the tool table"),
+                    )
+                })?;
+                let k = self.s.k_mp();
+                off = self.s.tool_offset;
+                if let Some(t) = self.tools.at_slot(slot) {
+                    for (i, (o, v)) in off.iter_mut().zip(t.offset.iter()).enumerate() {
+                        *o += v * lin9(i, k);
+                    }
+                }
             }
             _ => {}
         }

@@ -14,7 +14,6 @@ pub(crate) fn g_code(g: u16) -> Option<&'static str> {
         411 | 421 => {
             "G41.1/G42.1 (dynamic cutter radius compensation) is not supported by hytask; use a CAM-compensated path"
         }
-        432 => "G43.2 (additional tool length offset) is not supported by hytask",
         760 => "G76 (threading cycle) is not supported by hytask",
         870 => "G87 (back boring cycle) is not supported by hytask",
         _ => return None,
