@@ -16,7 +16,7 @@
 //!
 //! Nothing here allocates; SDO configuration happens before, on the non-realtime path.
 
-use super::cia402::{PowerController, PowerRequest, State402};
+use super::cia402::{DriveState, PowerController, PowerRequest};
 use super::emcy::{EmcyConsumer, EmcyEvent};
 use super::heartbeat::{HeartbeatConsumer, HeartbeatEvent};
 use super::pdo::CspLayout;
@@ -52,8 +52,8 @@ pub struct DriveImage {
 
 impl DriveImage {
     /// The drive's CiA 402 state.
-    pub fn state(&self) -> State402 {
-        State402::from_statusword(self.statusword)
+    pub fn state(&self) -> DriveState {
+        DriveState::from_statusword(self.statusword)
     }
 }
 
