@@ -192,3 +192,24 @@ fn a_bus_off_mid_job_stops_the_machine_and_names_the_bus_error() {
         false,
     );
 }
+
+#[test]
+fn a_bus_over_its_load_budget_does_not_deploy_and_says_what_fits() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = config(dir.path());
+    let text =
+        std::fs::read_to_string(&path)
+            .unwrap()
+            .replacen("period_us = 2000", "period_us = 1000", 1);
+    std::fs::write(&path, text).unwrap();
+    let err = Machine::deploy(hytask::config::load(&path).unwrap())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("drive[0] (x-servo).canopen.interface (sim)")
+            && err.contains("3 drives at 1 kHz need 106 % of 1 Mbit/s")
+            && err.contains("at most 2 fit, or use 500 Hz"),
+        "{err}"
+    );
+}

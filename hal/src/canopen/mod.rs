@@ -46,6 +46,8 @@ pub mod heartbeat;
 pub mod master;
 pub mod nmt;
 pub mod owner;
+#[cfg(test)]
+mod owner_tests;
 pub mod pdo;
 pub mod sdo;
 pub mod slave;
