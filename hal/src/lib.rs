@@ -23,8 +23,8 @@
 //!
 //! Backends: [`sim`] (simulated axis with a motor model, simulated I/O, in-memory CAN bus)
 //! now; [`canopen`] holds the sans-IO CANopen (CiA 301) master and CiA 402 layer with a
-//! loopback drive, tested on the in-memory bus; its SocketCAN wiring and Modbus come later
-//! and implement the same traits.
+//! loopback drive, tested on the in-memory bus; [`socketcan`] is the [`CanBus`] on a Linux
+//! SocketCAN socket. Modbus comes later and implements the same traits.
 //! Backends chosen by configuration live side by side behind [`Erased`] / [`DynAxis`],
 //! which give every backend the same error type ([`HalError`]) without allocating.
 //! This crate depends on nothing of the daemon.
@@ -55,6 +55,8 @@ pub mod erased;
 pub mod error;
 pub mod io;
 pub mod sim;
+#[cfg(target_os = "linux")]
+pub mod socketcan;
 
 pub use axis::{
     Axis, AxisDrive, AxisFeedback, AxisStatus, AxisSwitches, DriveState, FaultCode, Homing,

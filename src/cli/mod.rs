@@ -12,6 +12,7 @@ mod plan;
 mod plot;
 mod run;
 mod serve;
+mod sim_drive;
 
 /// hytask: realtime hybrid task-based controller for machine tools and robots.
 #[derive(Debug, Parser)]
@@ -42,6 +43,8 @@ pub enum Command {
     Plan(plan::PlanArgs),
     /// Plot the planned toolpath of a G-code file to SVG.
     Plot(plot::PlotArgs),
+    /// Loopback CiA 402 drives (CANopen slaves) on a SocketCAN interface, for tests.
+    SimDrive(sim_drive::SimDriveArgs),
 }
 
 /// Entry point of the binary.
@@ -56,6 +59,7 @@ pub fn main() -> ExitCode {
         Command::Gcode(a) => gcode::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Plot(a) => plot::run(a),
+        Command::SimDrive(a) => sim_drive::run(a),
     };
     match result {
         Ok(code) => code,

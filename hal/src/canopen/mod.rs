@@ -32,7 +32,8 @@
 //! configuration time or on a non-realtime path, never in the servo step.
 //!
 //! Not yet here (issue 9): SDO block transfer (the server answers a block request with abort
-//! 0x05040001, the client never starts one).
+//! 0x05040001, the client never starts one). The SocketCAN [`CanBus`](crate::CanBus) is
+//! [`crate::socketcan`].
 
 use crate::can::{CanFrame, CanId};
 use core::fmt;
