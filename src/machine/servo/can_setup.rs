@@ -4,7 +4,8 @@
 //! the bus-owner halves for the `can.<iface>.*` tasks, and the runtime SDO access.
 //!
 //! `interface = "sim"` puts loopback CiA 402 drives on an in-memory bus in this process:
-//! the start-up steps them itself, then the `tx` task steps them after every SYNC.
+//! the start-up steps them itself, then the `tx` task steps them after every SYNC. Any
+//! other interface is SocketCAN, with three sockets filtered by COB-ID (rx, tx, SDO).
 
 use super::can_bus::{RxHalf, SimTx, TxHalf};
 use crate::config::{
@@ -15,12 +16,13 @@ use hytask_hal::can::CanBus;
 use hytask_hal::canopen::axis::{CanAxis, DriveLink};
 use hytask_hal::canopen::busload::CycleTraffic;
 use hytask_hal::canopen::owner::{BusDrive, BusRx, BusTx, SimDrives, MAX_DRIVES};
-use hytask_hal::canopen::pdo::CspLayout;
+use hytask_hal::canopen::pdo::{CspLayout, PdoDirection};
 use hytask_hal::canopen::slave::{DriveSlave, SlaveConfig};
 use hytask_hal::canopen::startup::{sdo_transfer, start_nodes, NodePlan};
 use hytask_hal::canopen::sync::SyncProducer;
-use hytask_hal::canopen::NodeId;
+use hytask_hal::canopen::{NodeId, COB_EMCY, COB_HEARTBEAT, COB_SDO_TX};
 use hytask_hal::sim::SimCanBus;
+use hytask_hal::socketcan::{IdFilter, SocketCanBus};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -338,11 +340,45 @@ fn build_bus(
         out.sim_buses.push(wire);
         return Ok(());
     }
-    Err(invalid(
-        cfg,
-        format!("{}.interface", first.key),
-        format!("SocketCAN interface {iface:?}: this build has no SocketCAN bus yet (use interface = \"sim\")"),
-    ))
+    // SocketCAN: one socket per purpose, each filtered to what it reads. rx: the TPDOs,
+    // heartbeats and EMCYs of these nodes; tx: nothing; SDO/start-up: SDO answers and
+    // boot-ups.
+    let open = |filters: &[IdFilter]| {
+        let mut b = SocketCanBus::open(iface)
+            .map_err(|e| invalid(cfg, format!("{}.interface", first.key), e.to_string()))?;
+        b.set_filters(filters)
+            .map_err(|e| invalid(cfg, format!("{}.interface", first.key), e.to_string()))?;
+        Ok::<_, ConfigError>(b)
+    };
+    let mut rx_ids = Vec::new();
+    let mut sdo_ids = Vec::new();
+    for (d, p) in drives.iter().zip(&plans) {
+        let tpdos = d
+            .layout
+            .pdos()
+            .filter(|p| p.direction == PdoDirection::Tpdo);
+        rx_ids.extend(tpdos.map(|t| IdFilter::exact(t.can_id())));
+        rx_ids.push(IdFilter::exact(p.node.cob(COB_HEARTBEAT)));
+        rx_ids.push(IdFilter::exact(p.node.cob(COB_EMCY)));
+        sdo_ids.push(IdFilter::exact(p.node.cob(COB_SDO_TX)));
+        sdo_ids.push(IdFilter::exact(p.node.cob(COB_HEARTBEAT)));
+    }
+    let rx = open(&rx_ids)?;
+    let tx = open(&[])?;
+    let mut sdo = open(&sdo_ids)?;
+    let t0 = Instant::now();
+    let mut pass = || {
+        std::thread::sleep(Duration::from_micros(500));
+        t0.elapsed()
+    };
+    start_nodes(iface, &mut sdo, &plans, boot_timeout, &mut pass).map_err(startup)?;
+    out.buses.push(CanBusSetup {
+        iface: iface.to_string(),
+        rx: Box::new(BusRx::new(rx, &drives).map_err(rx_err)?),
+        tx: Box::new(BusTx::new(tx, &drives, sync).map_err(rx_err)?),
+    });
+    out.sdo.buses.push(Mutex::new(Box::new(SdoPort(sdo))));
+    Ok(())
 }
 
 /// The loopback drive's motor for `axis`, in counts: the simulated axis's headroom over
