@@ -66,7 +66,14 @@ fn start_up_then_cycles_enable_a_drive_and_follow_targets_and_a_lost_heartbeat_n
             t = sim.step_by(MS);
             t
         };
-        start_nodes("sim", &mut cfg_port, &[p.clone()], 200 * MS, &mut pass).unwrap();
+        start_nodes(
+            "sim",
+            &mut cfg_port,
+            std::slice::from_ref(&p),
+            200 * MS,
+            &mut pass,
+        )
+        .unwrap();
     }
     let link = DriveLink::new(node);
     let drives = [BusDrive {
