@@ -11,6 +11,8 @@
 //! Every wait is a hang guard, never a timing.
 #![allow(clippy::unwrap_used)]
 
+mod support;
+
 use hytask::machine::api::{JobSource, MachineApi, Mode, Status};
 use hytask::machine::Machine;
 use std::sync::Arc;
@@ -212,4 +214,70 @@ fn a_bus_over_its_load_budget_does_not_deploy_and_says_what_fits() {
             && err.contains("at most 2 fit, or use 500 Hz"),
         "{err}"
     );
+}
+
+#[test]
+fn the_control_socket_reads_and_writes_drive_objects_by_sdo_and_an_emcy_names_its_node() {
+    use serde_json::json;
+    let dir = tempfile::tempdir().unwrap();
+    let d = support::Daemon::start(&config(dir.path()));
+    let mut c = d.client();
+    ok_sub(&mut c);
+    let hb = support::ok(
+        &mut c,
+        "drive.sdo_read",
+        json!({"drive": "y-servo", "index": "0x1017", "sub": 0}),
+    );
+    assert_eq!(hb, json!({"data": "3200", "value": 50}), "heartbeat 50 ms");
+    let (code, msg) = support::err(
+        &mut c,
+        "drive.sdo_read",
+        json!({"drive": "nope", "index": 4096}),
+    );
+    assert!(
+        code != 0 && msg.contains("no CANopen drive 'nope'"),
+        "{msg}"
+    );
+    let (_, msg) = support::err(
+        &mut c,
+        "drive.sdo_read",
+        json!({"drive": "x-servo", "index": "0x5555"}),
+    );
+    assert!(msg.contains("node 1: SDO 5555:00 aborted"), "{msg}");
+    // The CLI goes through the same method.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .args(["sdo-read", "z-servo", "0x6060", "--socket"])
+        .arg(&d.socket)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("\"value\": 8"),
+        "{text}"
+    );
+    support::ready(&mut c);
+    support::ok(
+        &mut c,
+        "drive.sdo_write",
+        json!({"drive": "z-servo", "index": "0x2000", "sub": 3, "value": 0x4210, "size": 2}),
+    );
+    let events = support::wait_event(&mut c, "fault", GUARD, |e| e.topic == "fault");
+    let f = &events.last().unwrap().data;
+    assert!(
+        f["message"]
+            .as_str()
+            .unwrap()
+            .contains("axis Z: CANopen node 3: emergency (error code 0x4210"),
+        "{f}"
+    );
+    let s = support::wait_status(&mut c, "fault mode", GUARD, |s| s["mode"] == json!("fault"));
+    assert!(
+        s["faults"].to_string().contains("CANopen node 3"),
+        "{}",
+        s["faults"]
+    );
+}
+
+fn ok_sub(c: &mut hytask::control::client::Client) {
+    support::ok(c, "subscribe", serde_json::Value::Null);
 }

@@ -125,6 +125,15 @@ fn axis_letter(i: usize) -> char {
     AXIS_NAMES.get(i).copied().unwrap_or('?')
 }
 
+fn sdo_error(e: crate::machine::servo::can_setup::SdoError) -> ApiError {
+    match e {
+        crate::machine::servo::can_setup::SdoError::UnknownDrive(_) => {
+            ApiError::InvalidParams(e.to_string())
+        }
+        crate::machine::servo::can_setup::SdoError::Transfer(m) => ApiError::Failed(m),
+    }
+}
+
 /// Words an operator can act on, for each trip.
 pub fn describe_trip(trip: &Trip, line: u32) -> String {
     let at = if line > 0 {
@@ -1245,6 +1254,16 @@ impl MachineApi for Machine {
                 }
             })
             .collect()
+    }
+
+    fn sdo_read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, ApiError> {
+        self.can_sdo.read(drive, index, sub).map_err(sdo_error)
+    }
+
+    fn sdo_write(&self, drive: &str, index: u16, sub: u8, data: &[u8]) -> Result<(), ApiError> {
+        self.can_sdo
+            .write(drive, index, sub, data)
+            .map_err(sdo_error)
     }
 
     fn call(&self, task: &str, operation: &str, args: &Value) -> Result<Value, ApiError> {

@@ -85,15 +85,26 @@ pub struct CanSdo {
     buses: Vec<Mutex<Box<dyn SdoBus>>>,
 }
 
+/// Why a runtime SDO request failed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SdoError {
+    /// The name is not a CANopen drive of this machine.
+    #[error("no CANopen drive '{0}'")]
+    UnknownDrive(String),
+    /// The transfer failed (abort, timeout, bus error; names node and object).
+    #[error("{0}")]
+    Transfer(String),
+}
+
 impl CanSdo {
     /// Reads object `index:sub` of drive `drive`.
-    pub fn read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, String> {
+    pub fn read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, SdoError> {
         self.transfer(drive, index, sub, None)
             .map(Option::unwrap_or_default)
     }
 
     /// Writes `data` (little-endian) to object `index:sub` of drive `drive`.
-    pub fn write(&self, drive: &str, index: u16, sub: u8, data: &[u8]) -> Result<(), String> {
+    pub fn write(&self, drive: &str, index: u16, sub: u8, data: &[u8]) -> Result<(), SdoError> {
         self.transfer(drive, index, sub, Some(data)).map(|_| ())
     }
 
@@ -103,18 +114,17 @@ impl CanSdo {
         index: u16,
         sub: u8,
         data: Option<&[u8]>,
-    ) -> Result<Option<Vec<u8>>, String> {
+    ) -> Result<Option<Vec<u8>>, SdoError> {
+        let unknown = || SdoError::UnknownDrive(drive.to_string());
         let &(_, bus, node, timeout) = self
             .drives
             .iter()
             .find(|d| d.0 == drive)
-            .ok_or_else(|| format!("no CANopen drive '{drive}'"))?;
-        let bus = self
-            .buses
-            .get(bus)
-            .ok_or_else(|| format!("no bus for drive '{drive}'"))?;
+            .ok_or_else(unknown)?;
+        let bus = self.buses.get(bus).ok_or_else(unknown)?;
         let mut bus = bus.lock().unwrap_or_else(|p| p.into_inner());
         bus.transfer(node, timeout, index, sub, data)
+            .map_err(SdoError::Transfer)
     }
 }
 
