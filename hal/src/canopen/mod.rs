@@ -119,11 +119,13 @@ impl fmt::Display for NodeId {
 }
 
 /// A standard id from a COB-ID that is known to fit 11 bits (all CANopen predefined ids do).
+#[inline]
 pub(crate) fn cob_id(raw: u16) -> CanId {
     CanId::standard(raw & 0x7FF).expect("an id masked to 11 bits is a standard id")
 }
 
 /// A frame with at most 8 bytes of data (longer input is cut at 8; callers never pass more).
+#[inline]
 pub(crate) fn frame(id: CanId, data: &[u8]) -> CanFrame {
     CanFrame::new(id, &data[..data.len().min(8)]).expect("at most 8 bytes fit a classic frame")
 }
