@@ -4,6 +4,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
+mod canopen_tool;
 mod check;
 mod client;
 mod gcode;
@@ -45,6 +46,8 @@ pub enum Command {
     Plot(plot::PlotArgs),
     /// Loopback CiA 402 drives (CANopen slaves) on a SocketCAN interface, for tests.
     SimDrive(sim_drive::SimDriveArgs),
+    /// CANopen master tool on a SocketCAN interface: sdo-read, sdo-write, nmt, scan, heartbeat.
+    Canopen(canopen_tool::CanopenArgs),
 }
 
 /// Entry point of the binary.
@@ -60,6 +63,7 @@ pub fn main() -> ExitCode {
         Command::Plan(a) => plan::run(a),
         Command::Plot(a) => plot::run(a),
         Command::SimDrive(a) => sim_drive::run(a),
+        Command::Canopen(a) => canopen_tool::run(a),
     };
     match result {
         Ok(code) => code,
