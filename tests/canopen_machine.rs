@@ -281,3 +281,20 @@ fn the_control_socket_reads_and_writes_drive_objects_by_sdo_and_an_emcy_names_it
 fn ok_sub(c: &mut hytask::control::client::Client) {
     support::ok(c, "subscribe", serde_json::Value::Null);
 }
+
+#[test]
+fn a_canopen_axis_that_homes_on_a_switch_is_refused_by_the_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = config(dir.path());
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "home = { method = \"current_position\", position = 0.0 }",
+        "home = { method = \"switch\", position = 0.0, velocity = 10.0 }",
+        1,
+    );
+    std::fs::write(&path, text).unwrap();
+    let err = hytask::config::load(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("drive[0] (x-servo).canopen: axis X homes with a switch: CANopen drives home with method = \"current_position\" only"),
+        "{err}"
+    );
+}

@@ -277,7 +277,19 @@ impl DriveConfig {
                 }
             }
             DriveBackend::Canopen => match &self.canopen {
-                Some(c) => c.validate(&format!("{key}.canopen"), issues),
+                Some(c) => {
+                    c.validate(&format!("{key}.canopen"), issues);
+                    if let Some(a) = axis.filter(|a| a.home.method != HomeMethod::CurrentPosition) {
+                        // The master homes in CSP by an offset: no switch search on the bus.
+                        issues.push(
+                            format!("{key}.canopen"),
+                            format!(
+                                "axis {} homes with a switch: CANopen drives home with method = \"current_position\" only",
+                                a.name
+                            ),
+                        );
+                    }
+                }
                 None => issues.push(
                     format!("{key}.canopen"),
                     "required with backend = \"canopen\" (interface, node_id)",

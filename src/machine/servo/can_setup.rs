@@ -9,8 +9,8 @@
 
 use super::can_bus::{RxHalf, SimTx, TxHalf};
 use crate::config::{
-    AxisConfig, CanopenDriveConfig, ConfigError, HomeMethod, Issue, MachineConfig,
-    SIM_DRIVE_HEADROOM, SIM_INTERFACE,
+    AxisConfig, CanopenDriveConfig, ConfigError, Issue, MachineConfig, SIM_DRIVE_HEADROOM,
+    SIM_INTERFACE,
 };
 use hytask_hal::can::CanBus;
 use hytask_hal::canopen::axis::{CanAxis, DriveLink};
@@ -210,14 +210,6 @@ fn check_group(
     }
     let first = &members[0];
     for (k, m) in members.iter().enumerate() {
-        if m.axis.home.method != HomeMethod::CurrentPosition {
-            return Err(invalid(
-                cfg,
-                format!("{}.home.method", AxisConfig::key(m.axis_index, m.axis.name)),
-                "CANopen axes home with method = \"current_position\" (the master homes in CSP)"
-                    .into(),
-            ));
-        }
         if members[..k].iter().any(|o| o.co.node_id == m.co.node_id) {
             return Err(invalid(
                 cfg,
