@@ -6,9 +6,10 @@
 //! a failed job naming its line.
 //!
 //! Runs under `tests/vcan/run` (host vcan0 or the VM it boots), which sets `HYTASK_VCAN`;
-//! elsewhere each test says why and returns. The servo period is stretched to 10 ms and
-//! the heartbeat to 200 ms here: under software emulation a 2 ms loop overruns, which is a
-//! property of the emulator, not of the code under test. Waits are hang guards.
+//! elsewhere each test says why and returns. The servo period is stretched to 10 ms, the
+//! heartbeat to 500 ms and the SDO timeout to 2 s here: under software emulation a 2 ms
+//! loop overruns and processes stall for hundreds of ms, which is a property of the
+//! emulator, not of the code under test. Waits are hang guards.
 #![allow(clippy::unwrap_used)]
 
 mod support;
@@ -64,7 +65,10 @@ fn daemon(iface: &str, dir: &std::path::Path) -> Daemon {
         .replace("interface = \"vcan0\"", &format!("interface = \"{iface}\""))
         .replacen("period_us = 10000", "period_us = 20000", 1)
         .replacen("period_us = 2000", &format!("period_us = {PERIOD_US}"), 1)
-        .replace("heartbeat_ms = 50", "heartbeat_ms = 200");
+        .replace(
+            "heartbeat_ms = 50",
+            "heartbeat_ms = 500\nsdo_timeout_ms = 2000",
+        );
     let path = dir.join("vcan.toml");
     std::fs::write(&path, text).unwrap();
     Daemon::start(&path)

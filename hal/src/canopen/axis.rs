@@ -261,6 +261,8 @@ pub struct CanAxis {
     offset: f64,
     homing: HomingStatus,
     seen: u32,
+    missed: u32,
+    max_missed: u32,
 }
 
 impl CanAxis {
@@ -272,7 +274,17 @@ impl CanAxis {
             offset: 0.0,
             homing: HomingStatus::NotHomed,
             seen: 0,
+            missed: 0,
+            max_missed: 0,
         }
+    }
+
+    /// Tolerates `n` consecutive cycles without a TPDO (the last values stand) before the
+    /// feedback counts as stale: a drive on a real bus may answer a SYNC a little after the
+    /// next cycle starts. A lost drive is caught by its heartbeat anyway.
+    pub fn with_missed_cycles(mut self, n: u32) -> CanAxis {
+        self.max_missed = n;
+        self
     }
 
     /// The link fault of this drive, if any (the monitor names node and cause with it).
@@ -339,12 +351,18 @@ impl AxisDrive for CanAxis {
 }
 
 impl AxisFeedback for CanAxis {
-    /// Fails when no TPDO arrived since the previous call: the drive task counts that as a
-    /// stale cycle, and the monitor turns too many into "communication lost".
+    /// Fails when no TPDO arrived in more than the tolerated cycles
+    /// ([`CanAxis::with_missed_cycles`]): the drive task counts that as a stale cycle, and
+    /// the monitor turns too many into "communication lost".
     fn actual_position(&mut self) -> Result<f64, CanAxisError> {
         let fresh = self.link.fresh.load(Relaxed);
         if fresh == self.seen {
-            return Err(CanAxisError::Stale(self.node()));
+            self.missed = self.missed.saturating_add(1);
+            if self.missed > self.max_missed || fresh == 0 {
+                return Err(CanAxisError::Stale(self.node()));
+            }
+        } else {
+            self.missed = 0;
         }
         self.seen = fresh;
         Ok(self.position())
@@ -438,6 +456,11 @@ mod tests {
         assert_eq!(a.actual_position().unwrap(), 12.5);
         assert_eq!(a.actual_position(), Err(CanAxisError::Stale(3)));
         assert_eq!(a.actual_velocity().unwrap(), -2.0);
+        let mut tolerant = CanAxis::new(link.clone(), 1000.0).with_missed_cycles(2);
+        assert_eq!(tolerant.actual_position().unwrap(), 12.5);
+        assert_eq!(tolerant.actual_position().unwrap(), 12.5, "1 missed");
+        assert_eq!(tolerant.actual_position().unwrap(), 12.5, "2 missed");
+        assert_eq!(tolerant.actual_position(), Err(CanAxisError::Stale(3)));
         assert_eq!(a.drive_state().unwrap(), DriveState::OperationEnabled);
         let home = HomingParams {
             method: HomingMethod::CurrentPosition,

@@ -266,7 +266,11 @@ fn build_bus(
         let layout = CspLayout::new(node, m.co.velocity_pdo)
             .map_err(|e| invalid(cfg, format!("{}.velocity_pdo", m.key), e.to_string()))?;
         let link = DriveLink::new(node);
-        out.axes[m.axis_index] = Some(CanAxis::new(link.clone(), m.axis.scale));
+        // 50 ms (at least 3 cycles) without process data is a lost drive; shorter gaps are
+        // a drive answering SYNC late, and the last values stand.
+        let missed = (50_000 / period_us.max(1)).max(3);
+        out.axes[m.axis_index] =
+            Some(CanAxis::new(link.clone(), m.axis.scale).with_missed_cycles(missed));
         let hb = Duration::from_millis(u64::from(m.co.heartbeat_ms));
         drives.push(BusDrive {
             link,
