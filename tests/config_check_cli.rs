@@ -51,7 +51,7 @@ fn declared_but_unbuilt_backends_are_noted_not_failed() {
     assert!(out.status.success(), "{stderr}");
     assert!(
         stderr.contains(
-            "note: drive[0] (x-servo).backend: backend \"canopen\" is not available in this build"
+            "note: io[0] (cabinet).backend: backend \"modbus_tcp\" is not available in this build"
         ),
         "{stderr}"
     );

@@ -57,17 +57,13 @@ fn example_canopen_validates_but_is_not_deployable_in_this_build() {
     let keys: Vec<&str> = missing.iter().map(|i| i.key.as_str()).collect();
     assert_eq!(
         keys,
-        [
-            "drive[0] (x-servo).backend",
-            "drive[1] (y-servo).backend",
-            "drive[2] (z-servo).backend",
-            "io[0] (cabinet).backend",
-        ]
+        ["io[0] (cabinet).backend"],
+        "canopen drives deploy; the Modbus I/O coupler does not yet"
     );
     let err = config::require_available(&m).unwrap_err();
     assert!(
         err.to_string()
-            .contains("\"canopen\" is not available in this build"),
+            .contains("\"modbus_tcp\" is not available in this build"),
         "{err}"
     );
     // The tool table path is resolved next to the file.

@@ -109,6 +109,7 @@ pub struct CanFrame {
 
 impl CanFrame {
     /// A data frame carrying `data` (at most 8 bytes).
+    #[inline]
     pub fn new(id: CanId, data: &[u8]) -> Result<CanFrame, FrameError> {
         if data.len() > 8 {
             return Err(FrameError::DataTooLong { len: data.len() });

@@ -114,6 +114,35 @@ pub enum ClientCommand {
         #[command(flatten)]
         sock: SocketArg,
     },
+    /// Read an object of a CANopen drive by SDO (`drive.sdo_read`).
+    SdoRead {
+        /// Drive name from the config.
+        drive: String,
+        /// Object index, e.g. 0x6064.
+        index: String,
+        /// Sub-index.
+        #[arg(default_value_t = 0)]
+        sub: u8,
+        #[command(flatten)]
+        sock: SocketArg,
+    },
+    /// Write an object of a CANopen drive by SDO (`drive.sdo_write`).
+    SdoWrite {
+        /// Drive name from the config.
+        drive: String,
+        /// Object index, e.g. 0x1017.
+        index: String,
+        /// Sub-index.
+        sub: u8,
+        /// Integer value.
+        #[arg(allow_hyphen_values = true)]
+        value: i64,
+        /// Bytes to write (1, 2 or 4).
+        #[arg(long, default_value_t = 4)]
+        size: u8,
+        #[command(flatten)]
+        sock: SocketArg,
+    },
 }
 
 /// Runs a client subcommand.
@@ -181,6 +210,28 @@ pub fn run(cmd: ClientCommand) -> anyhow::Result<ExitCode> {
         C::SimInput { name, value, sock } => {
             (sock, "sim.input", json!({"name": name, "value": value}))
         }
+        C::SdoRead {
+            drive,
+            index,
+            sub,
+            sock,
+        } => (
+            sock,
+            "drive.sdo_read",
+            json!({"drive": drive, "index": index, "sub": sub}),
+        ),
+        C::SdoWrite {
+            drive,
+            index,
+            sub,
+            value,
+            size,
+            sock,
+        } => (
+            sock,
+            "drive.sdo_write",
+            json!({"drive": drive, "index": index, "sub": sub, "value": value, "size": size}),
+        ),
     };
     let params = strip_nulls(params);
     let mut client = Client::connect(&sock.socket)

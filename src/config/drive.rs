@@ -3,9 +3,12 @@
 //!
 //! The backend is declared in the file (`backend = "sim" | "canopen"`) with its settings in
 //! a sub-table named after it (`[drive.sim]`, `[drive.canopen]`). A backend that this build
-//! cannot run (today: `canopen`) still parses and validates, so a real machine's file can
-//! be checked on any computer; deploying it reports "not available in this build" (see
+//! cannot run still parses and validates, so a real machine's file can be checked on any
+//! computer; deploying it reports "not available in this build" (see
 //! [`DriveBackend::is_available`]).
+//!
+//! A CANopen drive on `interface = "sim"` runs as an in-process loopback CiA 402 drive on
+//! an in-memory bus, stepped by the servo thread: the whole CANopen path without hardware.
 
 use super::axis::{AxisConfig, HomeMethod};
 use super::error::Issues;
@@ -41,7 +44,6 @@ pub enum DriveBackend {
     /// The simulated axis of `hytask-hal` (motor model, switches, fault injection).
     Sim,
     /// A CiA 402 drive on a CAN bus (SocketCAN), in cyclic synchronous position mode.
-    /// Not available in this build yet.
     Canopen,
 }
 
@@ -50,7 +52,7 @@ impl DriveBackend {
     pub fn is_available(self) -> bool {
         match self {
             DriveBackend::Sim => true,
-            DriveBackend::Canopen => false,
+            DriveBackend::Canopen => true,
         }
     }
 
@@ -151,6 +153,49 @@ pub struct CanopenDriveConfig {
     /// How long to wait for an SDO answer during configuration, in ms.
     #[serde(default = "default_sdo_timeout_ms")]
     pub sdo_timeout_ms: u32,
+    /// Mode of operation; only `"csp"` (cyclic synchronous position, 0x6060 = 8).
+    #[serde(default)]
+    pub mode: CanopenMode,
+    /// PDO layout: also map velocity actual + modes display in TPDO2 (one more frame per
+    /// drive and cycle). Without it the velocity reads 0.
+    #[serde(default = "default_true")]
+    pub velocity_pdo: bool,
+    /// Bus bitrate in bit/s (for the bus-load budget); the same for every drive of the
+    /// interface.
+    #[serde(default = "default_bitrate")]
+    pub bitrate: u32,
+    /// Most bus load SYNC + PDOs may take, percent of the bitrate; the same for every
+    /// drive of the interface. A configuration over it does not deploy.
+    #[serde(default = "default_busload_limit_pct")]
+    pub busload_limit_pct: u8,
+    /// SYNC counter overflow value (2 ..= 240), or 0 for SYNC without counter; the same
+    /// for every drive of the interface.
+    #[serde(default)]
+    pub sync_counter: u8,
+}
+
+/// `[drive.canopen] mode`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CanopenMode {
+    /// Cyclic synchronous position: a target every SYNC.
+    #[default]
+    Csp,
+}
+
+/// The interface name that runs loopback drives in-process on an in-memory bus.
+pub const SIM_INTERFACE: &str = "sim";
+
+fn default_true() -> bool {
+    true
+}
+
+fn default_bitrate() -> u32 {
+    1_000_000
+}
+
+fn default_busload_limit_pct() -> u8 {
+    80
 }
 
 fn default_heartbeat_ms() -> u32 {
@@ -232,7 +277,19 @@ impl DriveConfig {
                 }
             }
             DriveBackend::Canopen => match &self.canopen {
-                Some(c) => c.validate(&format!("{key}.canopen"), issues),
+                Some(c) => {
+                    c.validate(&format!("{key}.canopen"), issues);
+                    if let Some(a) = axis.filter(|a| a.home.method != HomeMethod::CurrentPosition) {
+                        // The master homes in CSP by an offset: no switch search on the bus.
+                        issues.push(
+                            format!("{key}.canopen"),
+                            format!(
+                                "axis {} homes with a switch: CANopen drives home with method = \"current_position\" only",
+                                a.name
+                            ),
+                        );
+                    }
+                }
                 None => issues.push(
                     format!("{key}.canopen"),
                     "required with backend = \"canopen\" (interface, node_id)",
@@ -331,5 +388,21 @@ impl CanopenDriveConfig {
             1,
             10_000,
         );
+        issues.in_range(format!("{key}.bitrate"), self.bitrate, 10_000, 1_000_000);
+        issues.in_range(
+            format!("{key}.busload_limit_pct"),
+            self.busload_limit_pct,
+            1,
+            100,
+        );
+        if self.sync_counter == 1 || self.sync_counter > 240 {
+            issues.push(
+                format!("{key}.sync_counter"),
+                format!(
+                    "must be 0 (no counter) or 2..=240, got {}",
+                    self.sync_counter
+                ),
+            );
+        }
     }
 }

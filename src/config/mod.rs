@@ -45,7 +45,8 @@ mod thread;
 
 pub use axis::{AxisConfig, AxisName, HomeConfig, HomeMethod};
 pub use drive::{
-    CanopenDriveConfig, DriveBackend, DriveConfig, SimDriveConfig, SwitchConfig, SIM_DRIVE_HEADROOM,
+    CanopenDriveConfig, CanopenMode, DriveBackend, DriveConfig, SimDriveConfig, SwitchConfig,
+    SIM_DRIVE_HEADROOM, SIM_INTERFACE,
 };
 pub use error::{ConfigError, Issue, Issues};
 pub use io::{AnalogPoint, DigitalPoint, IoBackend, IoConfig, IoKind, IoRef, TouchPlate};

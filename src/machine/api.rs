@@ -379,4 +379,18 @@ pub trait MachineApi: Send + Sync + 'static {
     fn sim_fault(&self, fault: &SimFault) -> Result<(), ApiError>;
     /// A receiver of machine events (for `subscribe`).
     fn subscribe(&self) -> tokio::sync::broadcast::Receiver<MachineEvent>;
+    /// Reads object `index:sub` of CANopen drive `drive` by SDO (non-realtime path).
+    fn sdo_read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, ApiError> {
+        let _ = (index, sub);
+        Err(ApiError::NotSupported(format!(
+            "no CANopen drive '{drive}'"
+        )))
+    }
+    /// Writes `data` to object `index:sub` of CANopen drive `drive` by SDO.
+    fn sdo_write(&self, drive: &str, index: u16, sub: u8, data: &[u8]) -> Result<(), ApiError> {
+        let _ = (index, sub, data);
+        Err(ApiError::NotSupported(format!(
+            "no CANopen drive '{drive}'"
+        )))
+    }
 }

@@ -7,8 +7,10 @@
 //! numbering is what M62–M68 `P`/`E` words and M66 address, and what the I/O task packs into
 //! [`super::servo::Inputs`]/[`super::servo::Outputs`].
 
+use super::servo::can_setup::CanDrives;
 use super::servo::{Outputs, MAX_ANALOG, MAX_DIGITAL};
 use crate::config::{AnalogPoint, AxisName, ConfigError, DigitalPoint, IoKind, MachineConfig};
+use hytask_hal::canopen::axis::{CanAxis, LinkFault};
 use hytask_hal::erased::{DynAxis, Erased, HalError};
 use hytask_hal::error::ErrorType;
 use hytask_hal::io::{AnalogInputs, AnalogOutputs, DigitalInputs, DigitalOutputs};
@@ -38,6 +40,8 @@ impl<T> IoDevice for T where
 pub enum AxisDevice {
     /// A simulated drive.
     Sim(Box<Erased<SimAxis>>),
+    /// A CiA 402 drive on a CAN bus (its bus owner runs as the `can.<iface>.*` tasks).
+    Can(Box<Erased<CanAxis>>),
     /// Any other backend.
     Other(DynAxis),
 }
@@ -47,7 +51,16 @@ impl AxisDevice {
     pub fn axis(&mut self) -> &mut dyn Axis<Error = HalError> {
         match self {
             AxisDevice::Sim(s) => s.as_mut(),
+            AxisDevice::Can(c) => c.as_mut(),
             AxisDevice::Other(d) => d.as_mut(),
+        }
+    }
+
+    /// The fieldbus fault of a CANopen drive (node and cause), `None` for other backends.
+    pub fn link_fault(&mut self) -> Option<LinkFault> {
+        match self {
+            AxisDevice::Can(c) => c.inner().link_fault(),
+            _ => None,
         }
     }
 
@@ -183,6 +196,8 @@ pub struct Devices {
     pub sim_axes: Vec<(AxisName, SimAxisHandle)>,
     /// Input handles of simulated I/O devices (`None` for real devices), by device.
     pub sim_io: Vec<Option<SimIoHandle>>,
+    /// CANopen bus owners, runtime SDO access and in-memory buses.
+    pub can: CanDrives,
 }
 
 /// Builds the backends. Fails, naming the key, for a backend this build does not have.
@@ -194,8 +209,13 @@ pub fn build(cfg: &MachineConfig) -> Result<Devices, ConfigError> {
     };
     let mut axes = Vec::new();
     let mut sim_axes = Vec::new();
+    let mut can = super::servo::can_setup::build(cfg)?;
     for (i, a) in cfg.axes.iter().enumerate() {
         let key = crate::config::AxisConfig::key(i, a.name);
+        if let Some(c) = can.axes.get_mut(i).and_then(Option::take) {
+            axes.push((a.name, AxisDevice::Can(Box::new(Erased(c)))));
+            continue;
+        }
         let drive = cfg
             .drive(&a.drive)
             .ok_or_else(|| invalid(format!("{key}.drive"), format!("no drive '{}'", a.drive)))?;
@@ -229,6 +249,7 @@ pub fn build(cfg: &MachineConfig) -> Result<Devices, ConfigError> {
         io_map,
         sim_axes,
         sim_io,
+        can,
     })
 }
 

@@ -18,6 +18,8 @@ use super::mode::{ModeMachine, Request};
 use super::probing;
 use super::safety::{AxisGuard, Trip};
 use super::servo::axis_task::AxisTask;
+use super::servo::can_bus::{CanRxTask, CanTxTask};
+use super::servo::can_setup::CanSdo;
 use super::servo::interp_task::InterpolatorTask;
 use super::servo::io_task::{IoTask, SimPlate, SimSpindle};
 use super::servo::machine_task::{MachineCmd, MachineSetup, MachineTask, SpindleIo};
@@ -108,6 +110,8 @@ pub struct Machine {
     overrun_injection: Arc<AtomicU32>,
     estop_request: Arc<AtomicU32>,
     sim_axes: Vec<(char, SimAxisHandle)>,
+    can_sdo: CanSdo,
+    can_sim_buses: Vec<hytask_hal::sim::SimCanBus>,
     next_job: AtomicU32,
     servo: Arc<crate::rt::activity::ThreadInfo>,
     bridge_stop: Arc<AtomicBool>,
@@ -121,6 +125,15 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 
 fn axis_letter(i: usize) -> char {
     AXIS_NAMES.get(i).copied().unwrap_or('?')
+}
+
+fn sdo_error(e: crate::machine::servo::can_setup::SdoError) -> ApiError {
+    match e {
+        crate::machine::servo::can_setup::SdoError::UnknownDrive(_) => {
+            ApiError::InvalidParams(e.to_string())
+        }
+        crate::machine::servo::can_setup::SdoError::Transfer(m) => ApiError::Failed(m),
+    }
 }
 
 /// Words an operator can act on, for each trip.
@@ -152,6 +165,7 @@ pub fn describe_trip(trip: &Trip, line: u32) -> String {
         }
         Trip::SpindleNotAtSpeed => format!("spindle did not reach speed{at}"),
         Trip::HomingFailed { axis } => format!("axis {}: homing failed", axis_letter(axis)),
+        Trip::Fieldbus { axis, fault } => format!("axis {}: {fault}{at}", axis_letter(axis)),
         Trip::OverrunStorm { consecutive } => {
             format!("servo thread overran its period {consecutive} times in a row{at}")
         }
@@ -161,6 +175,7 @@ pub fn describe_trip(trip: &Trip, line: u32) -> String {
 fn trip_json(trip: &Trip, line: u32) -> Value {
     let (axis, value) = match *trip {
         Trip::DriveFault { axis, code } => (Some(axis), Some(f64::from(code))),
+        Trip::Fieldbus { axis, fault } => (Some(axis), Some(f64::from(fault.code))),
         Trip::FollowingError { axis, error, .. } => (Some(axis), Some(error)),
         Trip::SoftLimit { axis, position } => (Some(axis), Some(position)),
         _ => (trip.axis(), None),
@@ -198,6 +213,10 @@ pub struct Built {
     pub overrun_injection: Arc<AtomicU32>,
     /// E-stop requests to the machine task (see [`MachineTask::with_estop_request`]).
     pub estop_request: Arc<AtomicU32>,
+    /// Runtime SDO access to CANopen drives.
+    pub can_sdo: CanSdo,
+    /// In-memory buses of `sim` CAN interfaces.
+    pub can_sim_buses: Vec<hytask_hal::sim::SimCanBus>,
 }
 
 /// Builds the backends and adds the machine's tasks to a new deployment, in start order
@@ -302,7 +321,20 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         io_map,
         sim_axes,
         sim_io,
+        can,
     } = devs;
+    let crate::machine::servo::can_setup::CanDrives {
+        buses: can_buses,
+        sdo: can_sdo,
+        sim_buses: can_sim_buses,
+        ..
+    } = can;
+    let mut can_tx = Vec::new();
+    // CANopen bus owners: rx first of all, tx right after the axis tasks (cycle order).
+    for b in can_buses {
+        app.add_periodic(&format!("can.{}.rx", b.iface), CanRxTask(b.rx), schedule)?;
+        can_tx.push((format!("can.{}.tx", b.iface), CanTxTask(b.tx)));
+    }
     let overrun_injection = Arc::new(AtomicU32::new(0));
     let mut io_task = IoTask::new(io, io_map.clone(), sim_spindle).with_plates(plates);
     if sim_io.iter().all(Option::is_some) {
@@ -341,6 +373,9 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
             },
         ));
     }
+    for (name, task) in can_tx {
+        app.add_periodic(&name, task, schedule)?;
+    }
     app.add_periodic("monitor", MonitorTask::new(guards), schedule)?;
     Ok(Built {
         app,
@@ -356,6 +391,8 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
             .collect(),
         overrun_injection,
         estop_request,
+        can_sdo,
+        can_sim_buses,
     })
 }
 
@@ -379,6 +416,8 @@ impl Machine {
             sim_axes,
             overrun_injection,
             estop_request,
+            can_sdo,
+            can_sim_buses,
         } = build(&config)?;
         let report = app.configure()?;
         for w in &report.warnings {
@@ -421,6 +460,8 @@ impl Machine {
             overrun_injection,
             estop_request,
             sim_axes,
+            can_sdo,
+            can_sim_buses,
             next_job: AtomicU32::new(1),
             servo: servo_info,
             bridge_stop: Arc::new(AtomicBool::new(false)),
@@ -452,6 +493,17 @@ impl Machine {
             .iter()
             .find(|(c, _)| *c == axis)
             .map(|(_, h)| h)
+    }
+
+    /// Runtime SDO access to the CANopen drives (non-realtime; one request per interface
+    /// at a time).
+    pub fn can_sdo(&self) -> &CanSdo {
+        &self.can_sdo
+    }
+
+    /// The in-memory bus of the `index`-th `sim` CAN interface (tests take it off).
+    pub fn sim_can_bus(&self, index: usize) -> Option<&hytask_hal::sim::SimCanBus> {
+        self.can_sim_buses.get(index)
     }
 
     /// The simulated I/O device `device` (config order), if it is simulated: what the
@@ -1232,6 +1284,16 @@ impl MachineApi for Machine {
                 }
             })
             .collect()
+    }
+
+    fn sdo_read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, ApiError> {
+        self.can_sdo.read(drive, index, sub).map_err(sdo_error)
+    }
+
+    fn sdo_write(&self, drive: &str, index: u16, sub: u8, data: &[u8]) -> Result<(), ApiError> {
+        self.can_sdo
+            .write(drive, index, sub, data)
+            .map_err(sdo_error)
     }
 
     fn call(&self, task: &str, operation: &str, args: &Value) -> Result<Value, ApiError> {

@@ -57,6 +57,14 @@ pub enum Trip {
         /// Axis index.
         axis: usize,
     },
+    /// A CANopen drive's link failed: heartbeat lost, emergency, drive fault, boot-up, bus
+    /// error (node and cause in `fault`).
+    Fieldbus {
+        /// Axis index.
+        axis: usize,
+        /// Node, cause and error code.
+        fault: hytask_hal::canopen::axis::LinkFault,
+    },
     /// The servo thread overran its period too many times in a row.
     OverrunStorm {
         /// Consecutive overruns seen.
@@ -92,7 +100,8 @@ impl Trip {
             | Trip::SoftLimit { axis, .. }
             | Trip::LimitSwitch { axis }
             | Trip::CommunicationLost { axis }
-            | Trip::HomingFailed { axis } => Some(axis),
+            | Trip::HomingFailed { axis }
+            | Trip::Fieldbus { axis, .. } => Some(axis),
             Trip::Estop | Trip::OverrunStorm { .. } | Trip::SpindleNotAtSpeed => None,
         }
     }

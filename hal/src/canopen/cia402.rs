@@ -3,87 +3,51 @@
 //! a drive to Operation enabled (fault reset on a rising edge of bit 7), and modes of
 //! operation 0x6060 / 0x6061 with confirmation. No allocation anywhere.
 
-use core::fmt;
+pub use crate::axis::DriveState;
 
-/// The eight states of the power state machine.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum State402 {
-    /// Initialising; no command accepted.
-    NotReadyToSwitchOn,
-    /// Power stage off, waiting for Shutdown.
-    SwitchOnDisabled,
-    /// Ready; Switch on closes the power stage.
-    ReadyToSwitchOn,
-    /// Power stage on, no torque.
-    SwitchedOn,
-    /// Torque on, following setpoints.
-    OperationEnabled,
-    /// Quick stop ramp running or finished.
-    QuickStopActive,
-    /// Fault detected, fault reaction (braking) running.
-    FaultReactionActive,
-    /// Fault; needs a fault reset (rising edge of controlword bit 7).
-    Fault,
-}
+/// The eight states of the power state machine: the HAL's [`DriveState`], one type for the
+/// axis traits and the protocol (this name stays for the CiA 402 code that reads better
+/// with it).
+pub type State402 = DriveState;
 
-impl State402 {
+impl DriveState {
     /// The state a statusword shows (CiA 402 table: bits 0-3, 5, 6).
-    pub fn from_statusword(sw: u16) -> State402 {
+    pub fn from_statusword(sw: u16) -> DriveState {
         if sw & 0x4F == 0x00 {
-            State402::NotReadyToSwitchOn
+            DriveState::NotReadyToSwitchOn
         } else if sw & 0x4F == 0x40 {
-            State402::SwitchOnDisabled
+            DriveState::SwitchOnDisabled
         } else if sw & 0x6F == 0x21 {
-            State402::ReadyToSwitchOn
+            DriveState::ReadyToSwitchOn
         } else if sw & 0x6F == 0x23 {
-            State402::SwitchedOn
+            DriveState::SwitchedOn
         } else if sw & 0x6F == 0x27 {
-            State402::OperationEnabled
+            DriveState::OperationEnabled
         } else if sw & 0x6F == 0x07 {
-            State402::QuickStopActive
+            DriveState::QuickStopActive
         } else if sw & 0x4F == 0x0F {
-            State402::FaultReactionActive
+            DriveState::FaultReactionActive
         } else if sw & 0x4F == 0x08 {
-            State402::Fault
+            DriveState::Fault
         } else {
             // The remaining patterns are not defined; reading them as "not ready" keeps the
             // master from enabling a drive that says something it does not understand.
-            State402::NotReadyToSwitchOn
+            DriveState::NotReadyToSwitchOn
         }
     }
 
     /// The state bits of the statusword (bits 0-3, 5, 6) a drive in this state reports.
     pub fn statusword_bits(self) -> u16 {
         match self {
-            State402::NotReadyToSwitchOn => 0x00,
-            State402::SwitchOnDisabled => 0x40,
-            State402::ReadyToSwitchOn => 0x21,
-            State402::SwitchedOn => 0x23,
-            State402::OperationEnabled => 0x27,
-            State402::QuickStopActive => 0x07,
-            State402::FaultReactionActive => 0x0F,
-            State402::Fault => 0x08,
+            DriveState::NotReadyToSwitchOn => 0x00,
+            DriveState::SwitchOnDisabled => 0x40,
+            DriveState::ReadyToSwitchOn => 0x21,
+            DriveState::SwitchedOn => 0x23,
+            DriveState::OperationEnabled => 0x27,
+            DriveState::QuickStopActive => 0x07,
+            DriveState::FaultReactionActive => 0x0F,
+            DriveState::Fault => 0x08,
         }
-    }
-
-    /// True in Fault or Fault reaction active.
-    pub fn is_fault(self) -> bool {
-        matches!(self, State402::Fault | State402::FaultReactionActive)
-    }
-}
-
-impl fmt::Display for State402 {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            State402::NotReadyToSwitchOn => "Not ready to switch on",
-            State402::SwitchOnDisabled => "Switch on disabled",
-            State402::ReadyToSwitchOn => "Ready to switch on",
-            State402::SwitchedOn => "Switched on",
-            State402::OperationEnabled => "Operation enabled",
-            State402::QuickStopActive => "Quick stop active",
-            State402::FaultReactionActive => "Fault reaction active",
-            State402::Fault => "Fault",
-        })
     }
 }
 
@@ -165,6 +129,8 @@ pub enum PowerRequest {
     Disable,
     /// Quick stop, then stay there until Disable.
     QuickStop,
+    /// Reset a fault (rising edge of bit 7) and stay in Switch on disabled.
+    FaultReset,
 }
 
 /// The master side of the power state machine: one [`step`](PowerController::step) per
@@ -199,31 +165,38 @@ impl PowerController {
 
     /// The controlword to send for a drive reporting `statusword`. Never allocates.
     pub fn step(&mut self, statusword: u16) -> u16 {
-        let state = State402::from_statusword(statusword);
+        let state = DriveState::from_statusword(statusword);
         let cw = match (self.request, state) {
             // Fault reset needs a rising edge: send bit 7 low for a cycle first.
-            (_, State402::Fault) => {
-                if self.request == PowerRequest::Enable && self.last_cw & CW_FAULT_RESET == 0 {
+            (_, DriveState::Fault) => {
+                let resetting = matches!(
+                    self.request,
+                    PowerRequest::Enable | PowerRequest::FaultReset
+                );
+                if resetting && self.last_cw & CW_FAULT_RESET == 0 {
                     Command::FaultReset.controlword()
                 } else {
                     Command::DisableVoltage.controlword()
                 }
             }
-            (_, State402::FaultReactionActive | State402::NotReadyToSwitchOn) => {
+            (_, DriveState::FaultReactionActive | DriveState::NotReadyToSwitchOn) => {
                 Command::DisableVoltage.controlword()
             }
-            (PowerRequest::Disable, _) => Command::DisableVoltage.controlword(),
-            (PowerRequest::QuickStop, State402::OperationEnabled | State402::QuickStopActive) => {
-                Command::QuickStop.controlword()
+            (PowerRequest::Disable | PowerRequest::FaultReset, _) => {
+                Command::DisableVoltage.controlword()
             }
+            (
+                PowerRequest::QuickStop,
+                DriveState::OperationEnabled | DriveState::QuickStopActive,
+            ) => Command::QuickStop.controlword(),
             (PowerRequest::QuickStop, _) => Command::DisableVoltage.controlword(),
-            (PowerRequest::Enable, State402::SwitchOnDisabled) => Command::Shutdown.controlword(),
-            (PowerRequest::Enable, State402::ReadyToSwitchOn) => Command::SwitchOn.controlword(),
-            (PowerRequest::Enable, State402::SwitchedOn | State402::OperationEnabled) => {
+            (PowerRequest::Enable, DriveState::SwitchOnDisabled) => Command::Shutdown.controlword(),
+            (PowerRequest::Enable, DriveState::ReadyToSwitchOn) => Command::SwitchOn.controlword(),
+            (PowerRequest::Enable, DriveState::SwitchedOn | DriveState::OperationEnabled) => {
                 Command::EnableOperation.controlword()
             }
             // Leave quick stop through Switch on disabled before enabling again.
-            (PowerRequest::Enable, State402::QuickStopActive) => {
+            (PowerRequest::Enable, DriveState::QuickStopActive) => {
                 Command::DisableVoltage.controlword()
             }
         };
@@ -322,36 +295,39 @@ impl ModeRequest {
 mod tests {
     use super::*;
 
-    const ALL: [State402; 8] = [
-        State402::NotReadyToSwitchOn,
-        State402::SwitchOnDisabled,
-        State402::ReadyToSwitchOn,
-        State402::SwitchedOn,
-        State402::OperationEnabled,
-        State402::QuickStopActive,
-        State402::FaultReactionActive,
-        State402::Fault,
+    const ALL: [DriveState; 8] = [
+        DriveState::NotReadyToSwitchOn,
+        DriveState::SwitchOnDisabled,
+        DriveState::ReadyToSwitchOn,
+        DriveState::SwitchedOn,
+        DriveState::OperationEnabled,
+        DriveState::QuickStopActive,
+        DriveState::FaultReactionActive,
+        DriveState::Fault,
     ];
 
     #[test]
     fn statusword_decodes_to_the_eight_states_ignoring_other_bits() {
         for s in ALL {
-            assert_eq!(State402::from_statusword(s.statusword_bits()), s);
+            assert_eq!(DriveState::from_statusword(s.statusword_bits()), s);
             // Voltage enabled, warning, remote, target reached, mode bits do not matter.
             let noisy = s.statusword_bits() | 0x3690;
-            assert_eq!(State402::from_statusword(noisy), s, "{s}");
+            assert_eq!(DriveState::from_statusword(noisy), s, "{s}");
         }
         // Typical drive values.
         assert_eq!(
-            State402::from_statusword(0x0250),
-            State402::SwitchOnDisabled
+            DriveState::from_statusword(0x0250),
+            DriveState::SwitchOnDisabled
         );
-        assert_eq!(State402::from_statusword(0x0231), State402::ReadyToSwitchOn);
         assert_eq!(
-            State402::from_statusword(0x1637),
-            State402::OperationEnabled
+            DriveState::from_statusword(0x0231),
+            DriveState::ReadyToSwitchOn
         );
-        assert_eq!(State402::from_statusword(0x0218), State402::Fault);
+        assert_eq!(
+            DriveState::from_statusword(0x1637),
+            DriveState::OperationEnabled
+        );
+        assert_eq!(DriveState::from_statusword(0x0218), DriveState::Fault);
     }
 
     #[test]

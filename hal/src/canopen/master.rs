@@ -16,7 +16,7 @@
 //!
 //! Nothing here allocates; SDO configuration happens before, on the non-realtime path.
 
-use super::cia402::{PowerController, PowerRequest, State402};
+use super::cia402::{DriveState, PowerController, PowerRequest};
 use super::emcy::{EmcyConsumer, EmcyEvent};
 use super::heartbeat::{HeartbeatConsumer, HeartbeatEvent};
 use super::pdo::CspLayout;
@@ -48,12 +48,15 @@ pub struct DriveImage {
     pub fresh: u32,
     fault_reported: bool,
     seen: bool,
+    /// The PDOs use the default CSP layout ([`CspLayout::new`]): decode and encode them at
+    /// fixed offsets instead of walking the mapping (the per-cycle hot path).
+    default_layout: bool,
 }
 
 impl DriveImage {
     /// The drive's CiA 402 state.
-    pub fn state(&self) -> State402 {
-        State402::from_statusword(self.statusword)
+    pub fn state(&self) -> DriveState {
+        DriveState::from_statusword(self.statusword)
     }
 }
 
@@ -121,6 +124,7 @@ impl<const N: usize> CspMaster<N> {
             fresh: 0,
             fault_reported: false,
             seen: false,
+            default_layout: CspLayout::new(node, layout.tpdo2.is_some()).is_ok_and(|d| d == layout),
         });
         // Cannot truncate: slot < N, and a route entry is only used for N < 32 767.
         let code = 1 + 2 * slot as u16;
@@ -158,7 +162,6 @@ impl<const N: usize> CspMaster<N> {
 
     /// Handles one received frame. Never allocates.
     pub fn read_frame(&mut self, f: &CanFrame, now: Duration) -> Option<MasterEvent> {
-        let mut v = [0i64; 8];
         let route = if f.id().is_extended() {
             0
         } else {
@@ -167,6 +170,22 @@ impl<const N: usize> CspMaster<N> {
         if route != 0 {
             let slot = usize::from((route - 1) / 2);
             let d = self.drives.get_mut(slot).and_then(Option::as_mut)?;
+            let data = f.data();
+            if d.default_layout {
+                // statusword u16 + position i32 / velocity i32 + mode i8, little-endian. A
+                // malformed TPDO keeps the last image; the stale `fresh` count tells.
+                if route % 2 == 1 && data.len() == 6 && !f.is_remote() {
+                    d.statusword = u16::from_le_bytes([data[0], data[1]]);
+                    d.position = i32::from_le_bytes([data[2], data[3], data[4], data[5]]);
+                    d.fresh += 1;
+                    d.seen = true;
+                } else if route % 2 == 0 && data.len() == 5 && !f.is_remote() {
+                    d.velocity = i32::from_le_bytes([data[0], data[1], data[2], data[3]]);
+                    d.mode_display = data[4] as i8;
+                }
+                return None;
+            }
+            let mut v = [0i64; 8];
             if route % 2 == 1 {
                 // A malformed TPDO keeps the last image; the stale `fresh` count tells.
                 if d.layout
@@ -242,6 +261,16 @@ impl<const N: usize> CspMaster<N> {
         for d in self.drives.iter_mut().flatten() {
             let cw = d.power.step(d.statusword);
             let r = &d.layout.rpdo1;
+            if d.default_layout {
+                let c = cw.to_le_bytes();
+                let t = d.target.to_le_bytes();
+                bus.try_send(&super::frame(
+                    r.can_id(),
+                    &[c[0], c[1], t[0], t[1], t[2], t[3]],
+                ))?;
+                d.fresh = 0;
+                continue;
+            }
             // The default layout's RPDO1 maps exactly controlword + target.
             if let Ok(f) = r
                 .mapping

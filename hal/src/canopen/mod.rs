@@ -17,6 +17,9 @@
 //! | [`master`] | the cyclic CSP master: process image of N drives, TPDOs in, RPDOs + SYNC out |
 //! | [`slave`] | a CiA 402 slave core (the loopback drive) with its object dictionary |
 //! | [`busload`] | bus-load budget of SYNC + PDOs, and the table of what fits |
+//! | [`axis`] | a CiA 402 drive behind the HAL axis traits, over a shared process image |
+//! | [`owner`] | the bus owner's two servo-thread halves (rx at cycle start, tx at cycle end) |
+//! | [`startup`] | NMT reset, boot-up, SDO configuration and NMT start before the servo thread |
 //!
 //! Order in a servo cycle and the resulting feedback delay: see [`master`] (read the
 //! TPDOs that arrived since the last SYNC, run the tasks, write RPDOs, send SYNC; the tasks
@@ -29,12 +32,13 @@
 //! configuration time or on a non-realtime path, never in the servo step.
 //!
 //! Not yet here (issue 9): SDO block transfer (the server answers a block request with abort
-//! 0x05040001, the client never starts one) and the daemon wiring. The SocketCAN
-//! [`CanBus`](crate::CanBus) is [`crate::socketcan`].
+//! 0x05040001, the client never starts one). The SocketCAN [`CanBus`](crate::CanBus) is
+//! [`crate::socketcan`].
 
 use crate::can::{CanFrame, CanId};
 use core::fmt;
 
+pub mod axis;
 pub mod busload;
 pub mod cia402;
 pub mod emcy;
@@ -42,9 +46,13 @@ pub mod error;
 pub mod heartbeat;
 pub mod master;
 pub mod nmt;
+pub mod owner;
+#[cfg(test)]
+mod owner_tests;
 pub mod pdo;
 pub mod sdo;
 pub mod slave;
+pub mod startup;
 pub mod sync;
 #[cfg(test)]
 mod tests;
@@ -111,11 +119,13 @@ impl fmt::Display for NodeId {
 }
 
 /// A standard id from a COB-ID that is known to fit 11 bits (all CANopen predefined ids do).
+#[inline]
 pub(crate) fn cob_id(raw: u16) -> CanId {
     CanId::standard(raw & 0x7FF).expect("an id masked to 11 bits is a standard id")
 }
 
 /// A frame with at most 8 bytes of data (longer input is cut at 8; callers never pass more).
+#[inline]
 pub(crate) fn frame(id: CanId, data: &[u8]) -> CanFrame {
     CanFrame::new(id, &data[..data.len().min(8)]).expect("at most 8 bytes fit a classic frame")
 }

@@ -3,7 +3,7 @@
 //! Operation enabled, CSP for some hundred cycles, then each injected fault (drive fault,
 //! EMCY, heartbeat loss) reported by the master with node and cause.
 
-use super::cia402::{Mode, ModeRequest, PowerController, PowerRequest, State402};
+use super::cia402::{DriveState, Mode, ModeRequest, PowerController, PowerRequest};
 use super::emcy::{EmcyConsumer, EmcyEvent};
 use super::heartbeat::{HeartbeatConsumer, HeartbeatEvent};
 use super::nmt::{NmtCommand, NmtState};
@@ -151,7 +151,7 @@ impl Rig {
         }
         // Bits 0-3 and 7 only; the layout's u16 statusword cannot exceed u16.
         let sw = self.statusword as u16;
-        if State402::from_statusword(sw).is_fault()
+        if DriveState::from_statusword(sw).is_fault()
             && !self
                 .faults
                 .iter()
@@ -173,8 +173,8 @@ impl Rig {
         self.pump_slave();
     }
 
-    fn state(&self) -> State402 {
-        State402::from_statusword(self.statusword as u16)
+    fn state(&self) -> DriveState {
+        DriveState::from_statusword(self.statusword as u16)
     }
 
     fn cycles_until(&mut self, max: usize, what: &str, done: impl Fn(&Rig) -> bool) -> usize {
@@ -229,7 +229,7 @@ fn master_configures_enables_runs_csp_and_reports_each_injected_fault() {
     // Power state machine to Operation enabled, one transition per cycle.
     r.power.request(PowerRequest::Enable);
     let n = r.cycles_until(20, "Operation enabled", |r| {
-        r.state() == State402::OperationEnabled
+        r.state() == DriveState::OperationEnabled
     });
     assert!(n <= 6, "{n} cycles");
     assert_eq!(r.mode_display, 8, "TPDO2 shows CSP");
@@ -261,7 +261,7 @@ fn master_configures_enables_runs_csp_and_reports_each_injected_fault() {
     r.write(od::INJECT, 1, &0x2310u16.to_le_bytes());
     // The machine's reaction to a fault: a controlled stop, no automatic reset.
     r.power.request(PowerRequest::Disable);
-    r.cycles_until(50, "Fault", |r| r.state() == State402::Fault);
+    r.cycles_until(50, "Fault", |r| r.state() == DriveState::Fault);
     let emcy = r
         .faults
         .iter()
@@ -281,7 +281,7 @@ fn master_configures_enables_runs_csp_and_reports_each_injected_fault() {
     assert_eq!(r.read(0x1001, 0), [0x03], "generic + current");
     r.power.request(PowerRequest::Enable);
     r.cycles_until(20, "re-enabled after fault reset", |r| {
-        r.state() == State402::OperationEnabled
+        r.state() == DriveState::OperationEnabled
     });
     assert_eq!(
         r.cleared,
@@ -298,7 +298,7 @@ fn master_configures_enables_runs_csp_and_reports_each_injected_fault() {
         "{:?}",
         r.faults
     );
-    assert_eq!(r.state(), State402::OperationEnabled);
+    assert_eq!(r.state(), DriveState::OperationEnabled);
     r.faults.clear();
 
     // 3. Heartbeat loss.
@@ -400,7 +400,7 @@ fn csp_master_runs_three_drives_and_names_the_lost_and_rebooted_node() {
             }
             for i in 0..3 {
                 let d = m.drive_mut(i).unwrap();
-                if d.state() == State402::OperationEnabled {
+                if d.state() == DriveState::OperationEnabled {
                     d.target += 10 * (i as i32 + 1);
                 }
             }
@@ -422,7 +422,7 @@ fn csp_master_runs_three_drives_and_names_the_lost_and_rebooted_node() {
     assert!(events.is_empty(), "{events:?}");
     for i in 0..3 {
         let d = m.drive(i).unwrap();
-        assert_eq!(d.state(), State402::OperationEnabled);
+        assert_eq!(d.state(), DriveState::OperationEnabled);
         assert_eq!(d.mode_display, 8);
         let speed = 10_000 * (i as i32 + 1);
         assert!((d.velocity - speed).abs() <= 1, "drive {i}: {}", d.velocity);

@@ -9,6 +9,7 @@ use serde::de::DeserializeOwned;
 use serde_json::Value;
 
 mod call;
+mod drive;
 mod estop;
 mod home;
 mod job;
@@ -45,6 +46,8 @@ pub const METHODS: &[&str] = &[
     "call",
     "sim.input",
     "sim.fault",
+    "drive.sdo_read",
+    "drive.sdo_write",
 ];
 
 /// Runs one method against the machine.
@@ -71,6 +74,8 @@ pub fn dispatch(m: &dyn MachineApi, method: &str, params: Value) -> Result<Value
         "call" => call::handle(m, params),
         "sim.input" => sim_input::handle(m, params),
         "sim.fault" => sim_input::handle_fault(m, params),
+        "drive.sdo_read" => drive::handle_read(m, params),
+        "drive.sdo_write" => drive::handle_write(m, params),
         other => Err(ControlError::new(
             ErrorCode::MethodNotFound,
             format!("unknown method '{other}' (methods: {})", METHODS.join(", ")),

@@ -13,7 +13,9 @@
 //! 3. [`interp_task::InterpolatorTask`] `interpolator`: turns the segment queue into
 //!    [`Setpoints`]; follows the actual position whenever no motion is commanded.
 //! 4. [`axis_task::AxisTask`] `axis.X`, `axis.Y`, ...: one per axis, writes the setpoint to
-//!    its drive through the HAL and publishes [`AxisFeedback`].
+//!    its drive through the HAL and publishes [`AxisFeedback`]. With CANopen drives, the
+//!    bus owner's `can.<iface>.rx` runs before `io` and `can.<iface>.tx` right after the
+//!    axis tasks ([`can_bus`] explains).
 //! 5. [`monitor_task::MonitorTask`] `monitor`: checks this cycle's setpoints against this
 //!    cycle's feedback (following error, soft limits, drive faults, limit switches,
 //!    communication) and emits a `fault` event; tracks the largest following errors.
@@ -24,6 +26,8 @@
 //! one task (the topology check enforces it).
 
 pub mod axis_task;
+pub mod can_bus;
+pub mod can_setup;
 pub mod interp_task;
 pub mod io_task;
 pub mod machine_task;
@@ -43,6 +47,7 @@ use super::safety::Trip;
 use crate::gcode::{ProbeKind, NUM_AXES};
 use crate::motion::{AuxItem, InterpState};
 use hytask_hal::axis::DriveState;
+use hytask_hal::canopen::axis::LinkFault;
 
 /// Most digital channels of each direction (bit masks are `u64`).
 pub const MAX_DIGITAL: usize = 64;
@@ -247,6 +252,8 @@ pub struct AxisFeedback {
     pub stale_cycles: u32,
     /// The drive answered at least once (before that, positions are meaningless).
     pub valid: bool,
+    /// Fieldbus fault of a CANopen drive: node and cause.
+    pub link: Option<LinkFault>,
 }
 
 impl Default for AxisFeedback {
@@ -262,6 +269,7 @@ impl Default for AxisFeedback {
             limit_switch: false,
             stale_cycles: 0,
             valid: false,
+            link: None,
         }
     }
 }

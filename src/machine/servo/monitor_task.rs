@@ -11,7 +11,7 @@
 use super::status::StatusPublisher;
 use super::{ports, AxisFeedback, FaultEvent, MonitorSnapshot, MotionControl, Setpoints};
 use crate::gcode::NUM_AXES;
-use crate::machine::safety::{check_axis, AxisGuard, AxisSample};
+use crate::machine::safety::{check_axis, AxisGuard, AxisSample, Trip};
 use crate::rt::prelude::*;
 use hytask_hal::axis::DriveState;
 
@@ -113,7 +113,11 @@ impl Task for MonitorTask {
                 enabled: fb.state == DriveState::OperationEnabled && !fb.homing,
             };
             let bit = 1u32 << i;
-            match check_axis(i, &guard, &sample) {
+            let trip = match fb.link {
+                Some(fault) => Some(Trip::Fieldbus { axis: i, fault }),
+                None => check_axis(i, &guard, &sample),
+            };
+            match trip {
                 Some(trip) if self.tripped & bit == 0 => {
                     self.tripped |= bit;
                     if let Some(ev) = &mut self.fault_ev {

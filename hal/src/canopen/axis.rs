@@ -1,0 +1,503 @@
+//! A CiA 402 drive behind the HAL axis traits, over the bus owner's process image.
+//!
+//! The bus owner of an interface ([`super::owner`]) runs as two tasks on the servo thread:
+//! `rx` at the start of the cycle (TPDOs, heartbeats, EMCYs into the image), `tx` at the end
+//! (RPDOs from the image, then SYNC). The axis tasks run between them. They share one
+//! [`DriveLink`] per drive: a block of atomics written by one side and read by the other.
+//! All three run on the same thread in a fixed order, so the atomics never contend; they
+//! only make the sharing `Send` without a lock, and nothing allocates.
+//!
+//! Homing: the loopback and most CiA 402 drives home in homing mode (0x6060 = 6), but
+//! switching modes needs SDO traffic, which never runs on the servo thread. So a CANopen
+//! axis homes on the master side, in CSP: method `current_position` (the only one the
+//! configuration accepts for CANopen drives) makes the present position the home position
+//! by an offset kept here, exactly as CiA 402 methods 35/37 would.
+
+use super::cia402::PowerRequest;
+use super::NodeId;
+use crate::axis::{
+    AxisDrive, AxisFeedback, AxisSwitches, DriveState, FaultCode, Homing, HomingMethod,
+    HomingParams, HomingStatus,
+};
+use crate::error::{Error, ErrorKind, ErrorType};
+use core::fmt;
+use std::sync::atomic::{AtomicI32, AtomicU32, AtomicU64, AtomicU8, Ordering::Relaxed};
+use std::sync::Arc;
+
+/// Why the link to a drive failed (the cause a fault event names).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkCause {
+    /// No heartbeat within the consumer time.
+    HeartbeatLost,
+    /// The drive sent an emergency message.
+    Emergency,
+    /// The statusword shows the CiA 402 Fault state.
+    DriveFault,
+    /// The drive booted again and lost its configuration.
+    UnexpectedBootUp,
+    /// The interface failed (bus off, interface down, transmit queue full).
+    BusError,
+}
+
+impl LinkCause {
+    const ALL: [LinkCause; 5] = [
+        LinkCause::HeartbeatLost,
+        LinkCause::Emergency,
+        LinkCause::DriveFault,
+        LinkCause::UnexpectedBootUp,
+        LinkCause::BusError,
+    ];
+
+    /// Words for the cause.
+    pub fn text(self) -> &'static str {
+        match self {
+            LinkCause::HeartbeatLost => "heartbeat lost",
+            LinkCause::Emergency => "emergency",
+            LinkCause::DriveFault => "drive fault",
+            LinkCause::UnexpectedBootUp => "unexpected boot-up",
+            LinkCause::BusError => "CAN bus error",
+        }
+    }
+
+    fn index(self) -> u64 {
+        LinkCause::ALL.iter().position(|c| *c == self).unwrap_or(0) as u64
+    }
+}
+
+/// A fault of a CANopen drive: node, cause and the CiA 301 error code (the EMCY code, or
+/// 0x8130 heartbeat, 0x8100 communication, 0x8140 bus off, 0x1000 generic).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LinkFault {
+    /// The node.
+    pub node: u8,
+    /// What happened.
+    pub cause: LinkCause,
+    /// CiA 301 error code.
+    pub code: u16,
+}
+
+impl LinkFault {
+    /// Error code of a lost heartbeat (CiA 301: life guard or heartbeat error).
+    pub const HEARTBEAT_CODE: u16 = 0x8130;
+    /// Error code of a communication fault (boot-up: configuration lost).
+    pub const COMMUNICATION_CODE: u16 = 0x8100;
+    /// Error code of a bus-off / interface failure.
+    pub const BUS_OFF_CODE: u16 = 0x8140;
+
+    fn pack(self) -> u64 {
+        1 << 40 | self.cause.index() << 24 | u64::from(self.node) << 16 | u64::from(self.code)
+    }
+
+    fn unpack(v: u64) -> Option<LinkFault> {
+        if v & 1 << 40 == 0 {
+            return None;
+        }
+        Some(LinkFault {
+            node: (v >> 16) as u8,
+            cause: LinkCause::ALL[((v >> 24) & 0xFF) as usize % LinkCause::ALL.len()],
+            code: v as u16,
+        })
+    }
+}
+
+impl fmt::Display for LinkFault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "CANopen node {}: {} (error code 0x{:04X}, {})",
+            self.node,
+            self.cause.text(),
+            self.code,
+            super::emcy::error_class(self.code)
+        )
+    }
+}
+
+/// The process image of one drive shared by the bus owner and the axis (see the module
+/// doc). Rx side: [`publish`](DriveLink::publish), [`raise`](DriveLink::raise); axis side:
+/// the request, target and fault reset.
+#[derive(Debug)]
+pub struct DriveLink {
+    node: NodeId,
+    statusword: AtomicU32,
+    position: AtomicI32,
+    velocity: AtomicI32,
+    fresh: AtomicU32,
+    fault: AtomicU64,
+    request: AtomicU8,
+    target: AtomicI32,
+}
+
+impl DriveLink {
+    /// The link of `node`, power request Disable, no data yet.
+    pub fn new(node: NodeId) -> Arc<DriveLink> {
+        Arc::new(DriveLink {
+            node,
+            statusword: AtomicU32::new(0),
+            position: AtomicI32::new(0),
+            velocity: AtomicI32::new(0),
+            fresh: AtomicU32::new(0),
+            fault: AtomicU64::new(0),
+            request: AtomicU8::new(0),
+            target: AtomicI32::new(0),
+        })
+    }
+
+    /// The node.
+    pub fn node(&self) -> NodeId {
+        self.node
+    }
+
+    /// Rx: a fresh TPDO image (statusword, position and velocity in counts).
+    pub fn publish(&self, statusword: u16, position: i32, velocity: i32) {
+        self.statusword.store(u32::from(statusword), Relaxed);
+        self.position.store(position, Relaxed);
+        self.velocity.store(velocity, Relaxed);
+        self.fresh.fetch_add(1, Relaxed);
+    }
+
+    /// Rx: records a fault. The first cause is kept (it is what went wrong first), except
+    /// that a drive fault following its own EMCY names the fault with the EMCY's code.
+    pub fn raise(&self, cause: LinkCause, code: u16) {
+        let new = LinkFault {
+            node: self.node.get(),
+            cause,
+            code,
+        };
+        let _ = self
+            .fault
+            .fetch_update(Relaxed, Relaxed, |old| match LinkFault::unpack(old) {
+                None => Some(new.pack()),
+                Some(f) if f.cause == LinkCause::Emergency && cause == LinkCause::DriveFault => {
+                    Some(
+                        LinkFault {
+                            cause,
+                            code: f.code,
+                            ..f
+                        }
+                        .pack(),
+                    )
+                }
+                Some(_) => None,
+            });
+    }
+
+    /// The recorded fault, if any.
+    pub fn fault(&self) -> Option<LinkFault> {
+        LinkFault::unpack(self.fault.load(Relaxed))
+    }
+
+    /// Last statusword received.
+    pub fn statusword(&self) -> u16 {
+        self.statusword.load(Relaxed) as u16
+    }
+
+    /// Tx: what the axis asks of the power state machine.
+    pub fn request(&self) -> PowerRequest {
+        match self.request.load(Relaxed) {
+            1 => PowerRequest::Enable,
+            2 => PowerRequest::QuickStop,
+            3 => PowerRequest::FaultReset,
+            _ => PowerRequest::Disable,
+        }
+    }
+
+    fn set_request(&self, r: PowerRequest) {
+        let v = match r {
+            PowerRequest::Disable => 0,
+            PowerRequest::Enable => 1,
+            PowerRequest::QuickStop => 2,
+            PowerRequest::FaultReset => 3,
+        };
+        self.request.store(v, Relaxed);
+    }
+
+    /// Tx: the target position, counts.
+    pub fn target(&self) -> i32 {
+        self.target.load(Relaxed)
+    }
+}
+
+/// Why a CANopen axis refused a request or has no fresh feedback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum CanAxisError {
+    /// Enable while faulted.
+    #[error("CANopen node {0}: drive is faulted, reset the fault first")]
+    Faulted(u8),
+    /// A target while not in Operation enabled.
+    #[error("CANopen node {0}: not in operation enabled")]
+    NotOperational(u8),
+    /// No TPDO arrived since the last cycle.
+    #[error("CANopen node {0}: no process data this cycle")]
+    Stale(u8),
+    /// The link failed.
+    #[error("{0}")]
+    Link(LinkFault),
+    /// A homing method the master cannot run in CSP.
+    #[error("CANopen node {0}: only current-position homing runs on CANopen drives")]
+    HomingUnsupported(u8),
+    /// A target that does not fit the drive's 32-bit position.
+    #[error("CANopen node {0}: target out of the drive's position range")]
+    OutOfRange(u8),
+}
+
+impl Error for CanAxisError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            CanAxisError::Faulted(_) | CanAxisError::Link(_) => ErrorKind::DeviceFault,
+            CanAxisError::NotOperational(_) => ErrorKind::NotReady,
+            CanAxisError::Stale(_) => ErrorKind::Timeout,
+            CanAxisError::HomingUnsupported(_) => ErrorKind::Unsupported,
+            CanAxisError::OutOfRange(_) => ErrorKind::InvalidArgument,
+        }
+    }
+}
+
+/// A CiA 402 drive in CSP as a HAL axis. Positions are `counts / scale + offset`.
+#[derive(Debug)]
+pub struct CanAxis {
+    link: Arc<DriveLink>,
+    scale: f64,
+    offset: f64,
+    homing: HomingStatus,
+    seen: u32,
+    missed: u32,
+    max_missed: u32,
+}
+
+impl CanAxis {
+    /// The axis of `link`, `scale` counts per machine unit (non-zero, finite).
+    pub fn new(link: Arc<DriveLink>, scale: f64) -> CanAxis {
+        CanAxis {
+            link,
+            scale,
+            offset: 0.0,
+            homing: HomingStatus::NotHomed,
+            seen: 0,
+            missed: 0,
+            max_missed: 0,
+        }
+    }
+
+    /// Tolerates `n` consecutive cycles without a TPDO (the last values stand) before the
+    /// feedback counts as stale: a drive on a real bus may answer a SYNC a little after the
+    /// next cycle starts. A lost drive is caught by its heartbeat anyway.
+    pub fn with_missed_cycles(mut self, n: u32) -> CanAxis {
+        self.max_missed = n;
+        self
+    }
+
+    /// The link fault of this drive, if any (the monitor names node and cause with it).
+    pub fn link_fault(&self) -> Option<LinkFault> {
+        self.link.fault()
+    }
+
+    fn node(&self) -> u8 {
+        self.link.node.get()
+    }
+
+    fn state(&self) -> DriveState {
+        DriveState::from_statusword(self.link.statusword())
+    }
+
+    fn position(&self) -> f64 {
+        f64::from(self.link.position.load(Relaxed)) / self.scale + self.offset
+    }
+}
+
+impl ErrorType for CanAxis {
+    type Error = CanAxisError;
+}
+
+impl AxisDrive for CanAxis {
+    fn enable(&mut self) -> Result<(), CanAxisError> {
+        if self.state().is_fault() || self.link.fault().is_some() {
+            return Err(CanAxisError::Faulted(self.node()));
+        }
+        self.link.set_request(PowerRequest::Enable);
+        Ok(())
+    }
+
+    fn disable(&mut self) -> Result<(), CanAxisError> {
+        self.link.set_request(PowerRequest::Disable);
+        Ok(())
+    }
+
+    fn set_target_position(&mut self, position: f64) -> Result<(), CanAxisError> {
+        if !self.state().is_operational() {
+            return Err(CanAxisError::NotOperational(self.node()));
+        }
+        let counts = ((position - self.offset) * self.scale).round();
+        if !(counts >= f64::from(i32::MIN) && counts <= f64::from(i32::MAX)) {
+            return Err(CanAxisError::OutOfRange(self.node()));
+        }
+        // In range (checked above), so the cast is exact.
+        self.link.target.store(counts as i32, Relaxed);
+        Ok(())
+    }
+
+    fn quick_stop(&mut self) -> Result<(), CanAxisError> {
+        self.link.set_request(PowerRequest::QuickStop);
+        Ok(())
+    }
+
+    fn fault_reset(&mut self) -> Result<(), CanAxisError> {
+        self.link.fault.store(0, Relaxed);
+        if self.state().is_fault() {
+            self.link.set_request(PowerRequest::FaultReset);
+        }
+        Ok(())
+    }
+}
+
+impl AxisFeedback for CanAxis {
+    /// Fails when no TPDO arrived in more than the tolerated cycles
+    /// ([`CanAxis::with_missed_cycles`]): the drive task counts that as a stale cycle, and
+    /// the monitor turns too many into "communication lost".
+    fn actual_position(&mut self) -> Result<f64, CanAxisError> {
+        let fresh = self.link.fresh.load(Relaxed);
+        if fresh == self.seen {
+            self.missed = self.missed.saturating_add(1);
+            if self.missed > self.max_missed || fresh == 0 {
+                return Err(CanAxisError::Stale(self.node()));
+            }
+        } else {
+            self.missed = 0;
+        }
+        self.seen = fresh;
+        Ok(self.position())
+    }
+
+    fn actual_velocity(&mut self) -> Result<f64, CanAxisError> {
+        Ok(f64::from(self.link.velocity.load(Relaxed)) / self.scale)
+    }
+
+    fn drive_state(&mut self) -> Result<DriveState, CanAxisError> {
+        Ok(self.state())
+    }
+
+    fn fault_code(&mut self) -> Result<Option<FaultCode>, CanAxisError> {
+        Ok(match self.link.fault() {
+            Some(f) => Some(FaultCode(f.code)),
+            None if self.state().is_fault() => Some(FaultCode::GENERIC),
+            None => None,
+        })
+    }
+
+    fn switches(&mut self) -> Result<AxisSwitches, CanAxisError> {
+        Ok(AxisSwitches::default())
+    }
+}
+
+impl Homing for CanAxis {
+    fn start_homing(&mut self, params: &HomingParams) -> Result<(), CanAxisError> {
+        if params.method != HomingMethod::CurrentPosition {
+            self.homing = HomingStatus::Failed(crate::axis::HomingFailure::Aborted);
+            return Err(CanAxisError::HomingUnsupported(self.node()));
+        }
+        if !self.state().is_operational() {
+            self.homing = HomingStatus::Failed(crate::axis::HomingFailure::DriveStopped);
+            return Err(CanAxisError::NotOperational(self.node()));
+        }
+        let counts = f64::from(self.link.position.load(Relaxed));
+        self.offset = params.home_position - counts / self.scale;
+        // Hold where the motor is, in the new coordinates.
+        self.link
+            .target
+            .store(self.link.position.load(Relaxed), Relaxed);
+        self.homing = HomingStatus::Homed;
+        Ok(())
+    }
+
+    fn homing_status(&mut self) -> Result<HomingStatus, CanAxisError> {
+        Ok(self.homing)
+    }
+
+    fn abort_homing(&mut self) -> Result<(), CanAxisError> {
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn axis() -> (Arc<DriveLink>, CanAxis) {
+        let link = DriveLink::new(NodeId::new(3).unwrap());
+        (link.clone(), CanAxis::new(link, 1000.0))
+    }
+
+    #[test]
+    fn fault_packs_and_keeps_the_first_cause_but_names_a_drive_fault_after_its_emcy() {
+        let (link, mut a) = axis();
+        link.raise(LinkCause::Emergency, 0x2310);
+        link.raise(LinkCause::DriveFault, 0x1000);
+        let f = a.link_fault().unwrap();
+        assert_eq!(
+            (f.node, f.cause, f.code),
+            (3, LinkCause::DriveFault, 0x2310)
+        );
+        link.raise(LinkCause::HeartbeatLost, 0x8130);
+        assert_eq!(a.link_fault().unwrap().cause, LinkCause::DriveFault);
+        assert_eq!(a.fault_code().unwrap(), Some(FaultCode(0x2310)));
+        assert!(f
+            .to_string()
+            .starts_with("CANopen node 3: drive fault (error code 0x2310"));
+        assert!(a.enable().is_err());
+        a.fault_reset().unwrap();
+        assert_eq!(a.link_fault(), None);
+    }
+
+    #[test]
+    fn positions_scale_feedback_is_fresh_once_and_homing_offsets() {
+        let (link, mut a) = axis();
+        assert_eq!(a.actual_position(), Err(CanAxisError::Stale(3)));
+        link.publish(0x0237, 12_500, -2000);
+        assert_eq!(a.actual_position().unwrap(), 12.5);
+        assert_eq!(a.actual_position(), Err(CanAxisError::Stale(3)));
+        assert_eq!(a.actual_velocity().unwrap(), -2.0);
+        let mut tolerant = CanAxis::new(link.clone(), 1000.0).with_missed_cycles(2);
+        assert_eq!(tolerant.actual_position().unwrap(), 12.5);
+        assert_eq!(tolerant.actual_position().unwrap(), 12.5, "1 missed");
+        assert_eq!(tolerant.actual_position().unwrap(), 12.5, "2 missed");
+        assert_eq!(tolerant.actual_position(), Err(CanAxisError::Stale(3)));
+        assert_eq!(a.drive_state().unwrap(), DriveState::OperationEnabled);
+        let home = HomingParams {
+            method: HomingMethod::CurrentPosition,
+            search_velocity: 0.0,
+            latch_velocity: 0.0,
+            home_position: 100.0,
+        };
+        a.start_homing(&home).unwrap();
+        assert!(a.is_homed().unwrap());
+        link.publish(0x0237, 12_500, 0);
+        assert_eq!(a.actual_position().unwrap(), 100.0);
+        a.set_target_position(101.0).unwrap();
+        assert_eq!(link.target(), 13_500);
+        let switch = HomingParams {
+            method: HomingMethod::HomeSwitch,
+            ..home
+        };
+        assert_eq!(
+            a.start_homing(&switch),
+            Err(CanAxisError::HomingUnsupported(3))
+        );
+    }
+
+    #[test]
+    fn requests_reach_the_link() {
+        let (link, mut a) = axis();
+        assert_eq!(link.request(), PowerRequest::Disable);
+        a.enable().unwrap();
+        assert_eq!(link.request(), PowerRequest::Enable);
+        a.quick_stop().unwrap();
+        assert_eq!(link.request(), PowerRequest::QuickStop);
+        link.publish(0x0208, 0, 0);
+        assert_eq!(
+            a.set_target_position(1.0),
+            Err(CanAxisError::NotOperational(3))
+        );
+        a.fault_reset().unwrap();
+        assert_eq!(link.request(), PowerRequest::FaultReset);
+    }
+}

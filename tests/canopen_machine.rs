@@ -1,0 +1,300 @@
+//! The machine on CANopen drives, in this process: `config/vcan.toml` with its interface
+//! switched to `sim`, so the master, the bus-owner tasks and three loopback CiA 402 drives
+//! run on an in-memory bus stepped by the servo thread, on the simulated clock.
+//!
+//! Homing and a job to completion with the final position checked; then a drive fault, a
+//! heartbeat loss, an EMCY and a bus error injected mid-job: each must give a controlled
+//! stop, a fault naming the node and its cause, and a failed job naming its line. Faults
+//! are injected as a test would on a real drive: an SDO write to the loopback drive's
+//! fault-injection object 0x2000, over the runtime SDO path (never the servo thread).
+//!
+//! Every wait is a hang guard, never a timing.
+#![allow(clippy::unwrap_used)]
+
+mod support;
+
+use hytask::machine::api::{JobSource, MachineApi, Mode, Status};
+use hytask::machine::Machine;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+const GUARD: Duration = Duration::from_secs(120);
+
+fn config(dir: &std::path::Path) -> std::path::PathBuf {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let base = std::fs::read_to_string(root.join("config/vcan.toml")).unwrap();
+    assert_eq!(base.matches("interface = \"vcan0\"").count(), 3);
+    let text = base
+        .replace("interface = \"vcan0\"", "interface = \"sim\"")
+        .replace(
+            "[[thread]]\n",
+            "[[thread]]\nclock = \"simulated\"\nsim_speed = 4\n",
+        );
+    let path = dir.join("canopen-sim.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn machine() -> (tempfile::TempDir, Arc<Machine>) {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = hytask::config::load(&config(dir.path())).unwrap();
+    (dir, Machine::deploy(cfg).unwrap())
+}
+
+fn wait(m: &Machine, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
+    let t0 = Instant::now();
+    loop {
+        let s = m.status();
+        if pred(&s) {
+            return s;
+        }
+        assert!(
+            t0.elapsed() < GUARD,
+            "timed out waiting for {what}: mode {:?}, job {:?}, faults {:?}, axes {:?}",
+            s.mode,
+            s.job,
+            s.faults,
+            s.axes
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+fn ready(m: &Machine) {
+    m.estop_reset().unwrap();
+    m.machine_on().unwrap();
+    wait(m, "drives enabled", |s| {
+        s.mode == Mode::Idle && s.axes.iter().all(|a| a.drive_state == "operation enabled")
+    });
+    m.home(None).unwrap();
+    wait(m, "homed and idle", |s| {
+        s.mode == Mode::Idle && s.axes.iter().all(|a| a.homed)
+    });
+}
+
+fn job(program: &str) -> JobSource {
+    JobSource {
+        path: None,
+        text: Some(program.into()),
+        name: Some("canopen.ngc".into()),
+    }
+}
+
+fn shutdown(m: &Machine) {
+    hytask::daemon::Deployed::shutdown(m).unwrap();
+}
+
+const SQUARE: &str = "G21 G90\nG1 X20 Y10 Z-5 F3000\nG1 X40 Y30\nG1 X12.5 Y7.25 Z-2\nM2\n";
+
+#[test]
+fn homes_and_runs_a_job_to_completion_on_canopen_drives() {
+    let (_dir, m) = machine();
+    ready(&m);
+    m.job_load(&job(SQUARE)).unwrap();
+    m.job_run().unwrap();
+    let s = wait(&m, "job done", |s| {
+        s.job.state == "done" || s.job.state == "failed"
+    });
+    assert_eq!(s.job.state, "done", "{:?} {:?}", s.job, s.faults);
+    let s = wait(&m, "at rest", |s| {
+        s.axes.iter().all(|a| a.velocity.abs() < 1e-6)
+    });
+    for (a, want) in s.axes.iter().zip([12.5, 7.25, -2.0]) {
+        assert!(
+            (a.actual - want).abs() < 1e-3,
+            "axis {} at {} (want {want})",
+            a.name,
+            a.actual
+        );
+    }
+    // The drives themselves report the final target, in counts (scale 1000/mm).
+    let counts = m.can_sdo().read("x-servo", 0x6064, 0).unwrap();
+    let counts = i32::from_le_bytes(counts[..4].try_into().unwrap());
+    assert!((counts - 12_500).abs() <= 1, "0x6064 = {counts}");
+    shutdown(&m);
+}
+
+/// Runs a long job, injects `inject` once it moves, and checks the controlled stop, the
+/// fault naming node and cause, and the failed job with its line.
+fn fault_mid_job(inject: impl FnOnce(&Machine), node: u8, cause: &str, bus_alive: bool) {
+    let (_dir, m) = machine();
+    ready(&m);
+    m.job_load(&job(
+        "G21 G90\nG1 X10 F600\nG1 X250 Y250 F1200\nG1 X0 Y0\nM2\n",
+    ))
+    .unwrap();
+    m.job_run().unwrap();
+    wait(&m, "job moving on line 3", |s| {
+        s.mode == Mode::Running && s.job.line >= 3
+    });
+    inject(&m);
+    let s = wait(&m, "job failed", |s| s.job.state == "failed");
+    let reason = s.job.reason.clone().unwrap();
+    assert!(
+        reason.contains(&format!("CANopen node {node}")) && reason.contains(cause),
+        "{reason}"
+    );
+    assert!(reason.contains("line 3"), "{reason}");
+    // Without a bus the feedback is stale: only the mode can be checked.
+    let s = wait(&m, "stopped in fault", |s| {
+        s.mode == Mode::Fault && (!bus_alive || s.axes.iter().all(|a| a.velocity.abs() < 1e-6))
+    });
+    assert!(
+        s.faults.iter().any(|f| f.contains(&format!("node {node}"))),
+        "{:?}",
+        s.faults
+    );
+    shutdown(&m);
+}
+
+#[test]
+fn a_drive_fault_mid_job_stops_the_machine_and_names_the_node() {
+    fault_mid_job(
+        |m| {
+            m.can_sdo()
+                .write("y-servo", 0x2000, 1, &0x2310u16.to_le_bytes())
+                .unwrap()
+        },
+        2,
+        "0x2310",
+        true,
+    );
+}
+
+#[test]
+fn a_lost_heartbeat_mid_job_stops_the_machine_and_names_the_node() {
+    fault_mid_job(
+        |m| m.can_sdo().write("z-servo", 0x2000, 2, &[1]).unwrap(),
+        3,
+        "heartbeat lost",
+        true,
+    );
+}
+
+#[test]
+fn an_emcy_mid_job_stops_the_machine_and_names_the_node() {
+    fault_mid_job(
+        |m| {
+            m.can_sdo()
+                .write("x-servo", 0x2000, 3, &0x4210u16.to_le_bytes())
+                .unwrap()
+        },
+        1,
+        "emergency (error code 0x4210",
+        true,
+    );
+}
+
+#[test]
+fn a_bus_off_mid_job_stops_the_machine_and_names_the_bus_error() {
+    fault_mid_job(
+        |m| m.sim_can_bus(0).unwrap().set_bus_off(true),
+        1,
+        "CAN bus error",
+        false,
+    );
+}
+
+#[test]
+fn a_bus_over_its_load_budget_does_not_deploy_and_says_what_fits() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = config(dir.path());
+    let text =
+        std::fs::read_to_string(&path)
+            .unwrap()
+            .replacen("period_us = 2000", "period_us = 1000", 1);
+    std::fs::write(&path, text).unwrap();
+    let err = Machine::deploy(hytask::config::load(&path).unwrap())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("drive[0] (x-servo).canopen.interface (sim)")
+            && err.contains("3 drives at 1 kHz need 106 % of 1 Mbit/s")
+            && err.contains("at most 2 fit, or use 500 Hz"),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_control_socket_reads_and_writes_drive_objects_by_sdo_and_an_emcy_names_its_node() {
+    use serde_json::json;
+    let dir = tempfile::tempdir().unwrap();
+    let d = support::Daemon::start(&config(dir.path()));
+    let mut c = d.client();
+    ok_sub(&mut c);
+    let hb = support::ok(
+        &mut c,
+        "drive.sdo_read",
+        json!({"drive": "y-servo", "index": "0x1017", "sub": 0}),
+    );
+    assert_eq!(hb, json!({"data": "3200", "value": 50}), "heartbeat 50 ms");
+    let (code, msg) = support::err(
+        &mut c,
+        "drive.sdo_read",
+        json!({"drive": "nope", "index": 4096}),
+    );
+    assert!(
+        code != 0 && msg.contains("no CANopen drive 'nope'"),
+        "{msg}"
+    );
+    let (_, msg) = support::err(
+        &mut c,
+        "drive.sdo_read",
+        json!({"drive": "x-servo", "index": "0x5555"}),
+    );
+    assert!(msg.contains("node 1: SDO 5555:00 aborted"), "{msg}");
+    // The CLI goes through the same method.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .args(["sdo-read", "z-servo", "0x6060", "--socket"])
+        .arg(&d.socket)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("\"value\": 8"),
+        "{text}"
+    );
+    support::ready(&mut c);
+    support::ok(
+        &mut c,
+        "drive.sdo_write",
+        json!({"drive": "z-servo", "index": "0x2000", "sub": 3, "value": 0x4210, "size": 2}),
+    );
+    let events = support::wait_event(&mut c, "fault", GUARD, |e| e.topic == "fault");
+    let f = &events.last().unwrap().data;
+    assert!(
+        f["message"]
+            .as_str()
+            .unwrap()
+            .contains("axis Z: CANopen node 3: emergency (error code 0x4210"),
+        "{f}"
+    );
+    let s = support::wait_status(&mut c, "fault mode", GUARD, |s| s["mode"] == json!("fault"));
+    assert!(
+        s["faults"].to_string().contains("CANopen node 3"),
+        "{}",
+        s["faults"]
+    );
+}
+
+fn ok_sub(c: &mut hytask::control::client::Client) {
+    support::ok(c, "subscribe", serde_json::Value::Null);
+}
+
+#[test]
+fn a_canopen_axis_that_homes_on_a_switch_is_refused_by_the_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = config(dir.path());
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "home = { method = \"current_position\", position = 0.0 }",
+        "home = { method = \"switch\", position = 0.0, velocity = 10.0 }",
+        1,
+    );
+    std::fs::write(&path, text).unwrap();
+    let err = hytask::config::load(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("drive[0] (x-servo).canopen: axis X homes with a switch: CANopen drives home with method = \"current_position\" only"),
+        "{err}"
+    );
+}
