@@ -54,6 +54,7 @@ pub mod canopen;
 pub mod erased;
 pub mod error;
 pub mod io;
+pub mod modbus;
 pub mod sim;
 
 pub use axis::{
