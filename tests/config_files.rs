@@ -61,7 +61,6 @@ fn example_canopen_validates_but_is_not_deployable_in_this_build() {
             "drive[0] (x-servo).backend",
             "drive[1] (y-servo).backend",
             "drive[2] (z-servo).backend",
-            "io[0] (cabinet).backend",
         ]
     );
     let err = config::require_available(&m).unwrap_err();
@@ -187,9 +186,10 @@ fn channel_inversion_and_scaling() {
     );
     assert!(!estop.active(true));
     assert!(estop.level(false));
-    let speed = &cab.analog_outputs[0];
-    assert_eq!(speed.to_engineering(10_000.0), 24_000.0);
-    assert_eq!(speed.to_raw(24_000.0), 10_000.0);
+    // The VFD's frequency setpoint: 0.01 Hz counts, 24000 rpm at 400.00 Hz.
+    let speed = &m.io[1].analog_outputs[0];
+    assert_eq!(speed.to_engineering(40_000.0), 24_000.0);
+    assert_eq!(speed.to_raw(24_000.0), 40_000.0);
 }
 
 #[test]

@@ -8,6 +8,7 @@ mod check;
 mod client;
 mod gcode;
 mod latency;
+mod modbus_sim;
 mod plan;
 mod plot;
 mod run;
@@ -42,6 +43,8 @@ pub enum Command {
     Plan(plan::PlanArgs),
     /// Plot the planned toolpath of a G-code file to SVG.
     Plot(plot::PlotArgs),
+    /// Simulate Modbus devices (TCP and RTU) from a device map, with fault injection.
+    ModbusSim(modbus_sim::ModbusSimArgs),
 }
 
 /// Entry point of the binary.
@@ -56,6 +59,7 @@ pub fn main() -> ExitCode {
         Command::Gcode(a) => gcode::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Plot(a) => plot::run(a),
+        Command::ModbusSim(a) => modbus_sim::run(a),
     };
     match result {
         Ok(code) => code,

@@ -3,6 +3,7 @@
 
 pub mod api;
 pub mod devices;
+pub mod io_devices;
 pub mod job;
 pub mod job_file;
 pub mod mode;

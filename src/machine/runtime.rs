@@ -111,6 +111,8 @@ pub struct Machine {
     bridge_stop: Arc<AtomicBool>,
     bridge: Mutex<Option<std::thread::JoinHandle<()>>>,
     receivers: Mutex<Option<Receivers>>,
+    /// Modbus link events, published as topic `io` by the bridge.
+    link_events: Mutex<Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -194,6 +196,8 @@ pub struct Built {
     pub sim_axes: Vec<(char, SimAxisHandle)>,
     /// Overrun injection counter (simulated machines).
     pub overrun_injection: Arc<AtomicU32>,
+    /// Modbus link events (`None` without Modbus devices).
+    pub link_events: Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>,
 }
 
 /// Builds the backends and adds the machine's tasks to a new deployment, in start order
@@ -298,6 +302,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         io_map,
         sim_axes,
         sim_io,
+        link_events,
     } = devs;
     let overrun_injection = Arc::new(AtomicU32::new(0));
     let mut io_task = IoTask::new(io, io_map.clone(), sim_spindle).with_plates(plates);
@@ -346,6 +351,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
             .map(|(n, h)| (axis_letter(n as usize), h))
             .collect(),
         overrun_injection,
+        link_events,
     })
 }
 
@@ -368,6 +374,7 @@ impl Machine {
             io_map,
             sim_axes,
             overrun_injection,
+            link_events,
         } = build(&config)?;
         let report = app.configure()?;
         for w in &report.warnings {
@@ -418,6 +425,7 @@ impl Machine {
                 job: job_rx,
                 fault: fault_rx,
             })),
+            link_events: Mutex::new(link_events),
         });
         let weak = Arc::downgrade(&m);
         let stop = m.bridge_stop.clone();
@@ -758,6 +766,12 @@ impl Machine {
         }
         while let Some(e) = rx.job.pop() {
             handle_job_event(self, e);
+        }
+        drop(guard);
+        if let Some(links) = lock(&self.link_events).as_ref() {
+            while let Ok(e) = links.try_recv() {
+                self.publish("io", e.to_json());
+            }
         }
     }
 }
