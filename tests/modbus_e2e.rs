@@ -12,88 +12,31 @@
 //! timing.
 #![allow(clippy::unwrap_used)]
 
+mod modbus_support;
 mod support;
 
+use modbus_support::{listen_addr, Proc, GUARD};
 use serde_json::{json, Value};
-use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
-use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc::{channel, Receiver};
-use std::time::{Duration, Instant};
 use support::{err, ok, ready, wait_event, wait_status, Daemon};
 
-const GUARD: Duration = Duration::from_secs(90);
-
-/// A running `hytask modbus-sim`, killed when dropped; its stdout lines arrive on `lines`.
-struct ModbusSim {
-    child: Child,
-    stdin: ChildStdin,
-    lines: Receiver<String>,
-    addr: String,
-}
-
-impl ModbusSim {
-    fn start(config: &Path, listen: &str) -> ModbusSim {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_hytask"))
-            .args(["modbus-sim", "--config"])
-            .arg(config)
-            .args(["--listen", listen])
-            .args(["--exec", "follow spindle_at_speed spindle_on 200"])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap();
-        let stdin = child.stdin.take().unwrap();
-        let out = BufReader::new(child.stdout.take().unwrap());
-        let (tx, lines) = channel();
-        std::thread::spawn(move || {
-            for l in out.lines() {
-                let Ok(l) = l else { return };
-                if tx.send(l).is_err() {
-                    return;
-                }
-            }
-        });
-        let first = lines.recv_timeout(GUARD).expect("simulator did not start");
-        let addr = first
-            .strip_prefix("listening tcp ")
-            .unwrap_or_else(|| panic!("unexpected first line {first:?}"))
-            .to_string();
-        ModbusSim {
-            child,
-            stdin,
-            lines,
-            addr,
-        }
-    }
-
-    fn send(&mut self, cmd: &str) {
-        writeln!(self.stdin, "{cmd}").unwrap();
-        self.stdin.flush().unwrap();
-    }
-
-    /// Waits for the line `want` (an output change `out NAME VALUE`).
-    fn expect(&self, want: &str) {
-        let t0 = Instant::now();
-        let mut seen = Vec::new();
-        while t0.elapsed() < GUARD {
-            if let Ok(l) = self.lines.recv_timeout(Duration::from_millis(100)) {
-                if l == want {
-                    return;
-                }
-                seen.push(l);
-            }
-        }
-        panic!("simulator never printed {want:?}; printed {seen:#?}");
-    }
-}
-
-impl Drop for ModbusSim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// `hytask modbus-sim` serving the map of `config` on `listen`, with the spindle's at-speed
+/// input following its run coil; returns it and its address.
+fn start_sim(config: &Path, listen: &str) -> (Proc, String) {
+    let config = config.display().to_string();
+    let args = [
+        "--config",
+        &config,
+        "--listen",
+        listen,
+        "--exec",
+        "follow spindle_at_speed spindle_on 200",
+    ];
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"));
+    cmd.arg("modbus-sim").args(args);
+    let p = Proc::spawn(cmd);
+    let l = p.expect("listening", |l| l.starts_with("listening tcp "));
+    (p, listen_addr(&l))
 }
 
 /// `config/sim-modbus.toml` with the panel at `addr` and the test fixture's fast homing.
@@ -153,8 +96,8 @@ fn coils_follow_the_job_the_estop_input_stops_it_and_a_lost_link_needs_a_reset()
     // The simulator serves the map of the shipped file on a free port; the machine is then
     // pointed at that port.
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-modbus.toml");
-    let mut sim = ModbusSim::start(&shipped, "127.0.0.1:0");
-    let config = machine_config(dir.path(), &sim.addr);
+    let (mut sim, addr) = start_sim(&shipped, "127.0.0.1:0");
+    let config = machine_config(dir.path(), &addr);
     let daemon = Daemon::start(&config);
     let mut c = daemon.client();
     ready(&mut c);
@@ -168,11 +111,11 @@ fn coils_follow_the_job_the_estop_input_stops_it_and_a_lost_link_needs_a_reset()
         json!({"path": job.display().to_string()}),
     );
     ok(&mut c, "job.run", Value::Null);
-    sim.expect("out spindle_on 1");
-    sim.expect("out spindle_speed 1200");
-    sim.expect("out coolant_flood 1");
-    sim.expect("out coolant_flood 0");
-    sim.expect("out spindle_on 0");
+    sim.expect_line("out spindle_on 1");
+    sim.expect_line("out spindle_speed 1200");
+    sim.expect_line("out coolant_flood 1");
+    sim.expect_line("out coolant_flood 0");
+    sim.expect_line("out spindle_on 0");
     wait_status(&mut c, "job done", GUARD, |s| {
         s["job"]["state"] == json!("done")
     });
@@ -186,13 +129,13 @@ fn coils_follow_the_job_the_estop_input_stops_it_and_a_lost_link_needs_a_reset()
         json!({"path": long.display().to_string()}),
     );
     ok(&mut c, "job.run", Value::Null);
-    sim.expect("out coolant_flood 1");
+    sim.expect_line("out coolant_flood 1");
     sim.send("set estop 1");
     let s = wait_status(&mut c, "e-stop from the Modbus input", GUARD, |s| {
         mode(s) == "estop"
     });
     assert_ne!(s["job"]["state"], json!("running"), "{s}");
-    sim.expect("out coolant_flood 0");
+    sim.expect_line("out coolant_flood 0");
     sim.send("set estop 0");
     wait_status(&mut c, "e-stop input released", GUARD, |s| {
         s["inputs"]["estop"] == json!(0.0)
@@ -202,7 +145,6 @@ fn coils_follow_the_job_the_estop_input_stops_it_and_a_lost_link_needs_a_reset()
 
     // 3. Killing the simulator stops the machine, naming the link, unit and point.
     ok(&mut c, "subscribe", Value::Null);
-    let addr = sim.addr.clone();
     drop(sim);
     let seen = wait_event(&mut c, "an io event for the lost link", GUARD, |e| {
         e.topic == "io" && e.data["kind"] != json!("recovered")
@@ -227,7 +169,7 @@ fn coils_follow_the_job_the_estop_input_stops_it_and_a_lost_link_needs_a_reset()
     assert!(!why.is_empty());
 
     // 4. The simulator is back: the points recover, and a reset brings the machine back.
-    let sim = ModbusSim::start(&shipped, &addr);
+    let (sim, _) = start_sim(&shipped, &addr);
     wait_event(&mut c, "the link's recovery", GUARD, |e| {
         e.topic == "io" && e.data["kind"] == json!("recovered")
     });
@@ -239,5 +181,5 @@ fn coils_follow_the_job_the_estop_input_stops_it_and_a_lost_link_needs_a_reset()
     ok(&mut c, "estop.reset", Value::Null);
     ready(&mut c);
     ok(&mut c, "mdi", json!({"line": "M8"}));
-    sim.expect("out coolant_flood 1");
+    sim.expect_line("out coolant_flood 1");
 }
