@@ -407,10 +407,10 @@ impl Link {
         u.bad = now_bad;
         u.fault = fault.clone();
         if !recovered.is_empty() {
-            self.emit(k, &recovered, None);
+            self.emit(k, &recovered, None, false);
         }
         if let (Some(f), false) = (fault, newly.is_empty()) {
-            self.emit(k, &newly, Some(f));
+            self.emit(k, &newly, Some(f), false);
         }
     }
 
@@ -429,7 +429,7 @@ impl Link {
                 u.bad = vec![true; u.cfg.inputs.len()];
                 u.fault = Some(f.clone());
                 let all: Vec<usize> = (0..u.cfg.inputs.len()).collect();
-                self.emit(k, &all, Some(f.clone()));
+                self.emit(k, &all, Some(f.clone()), true);
             }
         }
     }
@@ -446,14 +446,15 @@ impl Link {
         });
     }
 
-    fn emit(&self, k: usize, inputs: &[usize], fault: Option<FaultKind>) {
+    /// Reports the inputs `inputs` of unit `k` bad (`fault`) or good again; `outputs`: the
+    /// whole device is unreachable, so its outputs are named too.
+    fn emit(&self, k: usize, inputs: &[usize], fault: Option<FaultKind>, outputs: bool) {
         let u = &self.units[k];
         let mut points: Vec<String> = inputs
             .iter()
             .map(|&i| u.cfg.inputs[i].name.clone())
             .collect();
-        if fault.is_some() && inputs.len() == u.cfg.inputs.len() {
-            // The whole device: its outputs are not written either.
+        if outputs {
             points.extend(u.cfg.outputs.iter().map(|o| o.name.clone()));
         }
         let critical = inputs
