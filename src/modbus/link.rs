@@ -135,6 +135,56 @@ fn tx<T>(r: Result<tokio_modbus::Result<T>, tokio::time::error::Elapsed>) -> Res
     }
 }
 
+/// Round-trip statistics of a link's transactions: a count and a histogram of 10 µs bins
+/// up to 20 ms (atomics: read by anyone, never blocking the poller).
+#[derive(Debug)]
+pub struct TxStats {
+    bins: Box<[std::sync::atomic::AtomicU64]>,
+}
+
+/// Width of a [`TxStats`] bin.
+pub const TX_BIN_US: u64 = 10;
+
+impl Default for TxStats {
+    fn default() -> Self {
+        TxStats {
+            bins: (0..2000)
+                .map(|_| std::sync::atomic::AtomicU64::new(0))
+                .collect(),
+        }
+    }
+}
+
+impl TxStats {
+    fn record(&self, d: Duration) {
+        let i = usize::try_from(d.as_micros() / u128::from(TX_BIN_US)).unwrap_or(usize::MAX);
+        let last = self.bins.len() - 1;
+        self.bins[i.min(last)].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Transactions recorded.
+    pub fn count(&self) -> u64 {
+        self.bins
+            .iter()
+            .map(|b| b.load(std::sync::atomic::Ordering::Relaxed))
+            .sum()
+    }
+
+    /// The `p` quantile (0..=1) of the round trip, in µs (upper edge of its bin).
+    pub fn quantile_us(&self, p: f64) -> u64 {
+        let n = self.count();
+        let want = ((n as f64) * p).ceil() as u64;
+        let mut seen = 0;
+        for (i, b) in self.bins.iter().enumerate() {
+            seen += b.load(std::sync::atomic::Ordering::Relaxed);
+            if seen >= want.max(1) {
+                return (i as u64 + 1) * TX_BIN_US;
+            }
+        }
+        self.bins.len() as u64 * TX_BIN_US
+    }
+}
+
 /// Per-unit poll state.
 struct UnitState {
     cfg: UnitConfig,
@@ -189,6 +239,7 @@ pub struct Link {
     backoff: Backoff,
     units: Vec<UnitState>,
     events: Sender<LinkEvent>,
+    stats: Arc<TxStats>,
 }
 
 impl Link {
@@ -208,7 +259,13 @@ impl Link {
             backoff: Backoff::new(min, cfg.max_backoff),
             units: cfg.units.into_iter().map(UnitState::new).collect(),
             events,
+            stats: Arc::default(),
         }
+    }
+
+    /// The link's transaction statistics.
+    pub fn stats(&self) -> Arc<TxStats> {
+        self.stats.clone()
     }
 
     fn closed(&self) -> bool {
@@ -315,7 +372,11 @@ impl Link {
             }
             // Outputs changed by the machine are picked up within a millisecond.
             let wait = next.saturating_duration_since(Instant::now());
-            tokio::time::sleep(wait.min(Duration::from_millis(1))).await;
+            if wait.is_zero() {
+                tokio::task::yield_now().await;
+            } else {
+                tokio::time::sleep(wait.min(Duration::from_millis(1))).await;
+            }
         }
     }
 
@@ -340,7 +401,10 @@ impl Link {
             let Some((seq, value)) = cell.pending().or(refresh.then(|| cell.current())) else {
                 continue;
             };
-            match write(ctx, &p.spec, value, timeout).await {
+            let t0 = Instant::now();
+            let r = write(ctx, &p.spec, value, timeout).await;
+            self.stats.record(t0.elapsed());
+            match r {
                 Ok(()) => cell.confirm(seq),
                 Err(e) if e.reconnect => return Err(e.fault),
                 Err(e) => {
@@ -364,7 +428,9 @@ impl Link {
         let mut failed: Vec<(FaultKind, Vec<usize>)> = Vec::new();
         for b in 0..u.reads.len() {
             let block = &u.reads[b];
+            let t0 = Instant::now();
             let r = read_block(ctx, block, timeout).await;
+            self.stats.record(t0.elapsed());
             let stamp = u.cfg.image.now_ns();
             match r {
                 Ok(data) => {
