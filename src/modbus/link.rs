@@ -372,9 +372,8 @@ impl Link {
             }
             // Outputs changed by the machine are picked up within a millisecond.
             let wait = next.saturating_duration_since(Instant::now());
-            if wait.is_zero() {
-                tokio::task::yield_now().await;
-            } else {
+            // Work due now: go on (every transaction awaits the network, which yields).
+            if !wait.is_zero() {
                 tokio::time::sleep(wait.min(Duration::from_millis(1))).await;
             }
         }
@@ -457,6 +456,9 @@ impl Link {
     /// Compares the unit's bad points with the last report and reports the changes.
     fn update_health(&mut self, k: usize, failed: Vec<(FaultKind, Vec<usize>)>) {
         let u = &mut self.units[k];
+        if failed.is_empty() && u.fault.is_none() && !u.bad.contains(&true) {
+            return; // healthy and was healthy: the common case, nothing to compare
+        }
         let mut now_bad = vec![false; u.cfg.inputs.len()];
         for (_, pts) in &failed {
             for &i in pts {
