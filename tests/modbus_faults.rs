@@ -203,3 +203,34 @@ fn the_simulator_survives_malformed_frames() {
     let _ev = run_link("after-garbage", Endpoint::Tcp(addr), vec![u]);
     wait_until("a good poll after the garbage", || all_good(&img));
 }
+
+#[test]
+fn an_output_refused_with_an_exception_is_reported_once_and_retried_at_the_poll_rate() {
+    let (mut sim, addr) = tcp_sim();
+    let u = panel(1);
+    let img = u.image.clone();
+    let ev = run_link("refused-output", Endpoint::Tcp(addr), vec![u]);
+    wait_until("healthy", || all_good(&img));
+    sim.send("exception 4");
+    wait_link_event(&ev, |e| {
+        e.fault == Some(FaultKind::Exception(4)) && e.points == ["a", "b"]
+    });
+    img.dout[0].command(1.0);
+    let first = wait_link_event(&ev, |e| e.points == ["lamp"]);
+    assert_eq!(first.fault, Some(FaultKind::Exception(4)));
+    // A few polls later (each poll reads the inputs again), the refusal is still one report.
+    std::thread::sleep(Duration::from_millis(100));
+    sim.send("exception 0");
+    let mut lamp_reports = 0;
+    loop {
+        let e = wait_link_event(&ev, |_| true);
+        if e.points == ["lamp"] && e.fault.is_some() {
+            lamp_reports += 1;
+        }
+        if e.fault.is_none() && e.points == ["a", "b"] {
+            break;
+        }
+    }
+    assert_eq!(lamp_reports, 0, "the refused output was reported again");
+    sim.expect_line("out lamp 1");
+}

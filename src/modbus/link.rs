@@ -195,6 +195,9 @@ struct UnitState {
     fault: Option<FaultKind>,
     /// Points currently bad (by input index in `cfg.inputs`).
     bad: Vec<bool>,
+    /// The device refused an output write (reported once; retried at the poll rate, not
+    /// as soon as possible, until a write succeeds).
+    out_fault: Option<FaultKind>,
 }
 
 impl UnitState {
@@ -208,6 +211,7 @@ impl UnitState {
             reads,
             next_poll: now,
             fault: None,
+            out_fault: None,
             cfg,
         }
     }
@@ -365,7 +369,8 @@ impl Link {
                     .outputs
                     .iter()
                     .any(|o| self.units[k].output_cell(o).pending().is_some());
-                if due || pending {
+                let retry_later = self.units[k].out_fault.is_some();
+                if due || (pending && !retry_later) {
                     self.poll_unit(k, ctx, due).await?;
                 }
                 next = next.min(self.units[k].next_poll);
@@ -393,7 +398,8 @@ impl Link {
         if refresh {
             u.next_refresh = u.cfg.refresh.map(|r| now + r);
         }
-        let mut exception = None;
+        let mut exception: Option<(FaultKind, Vec<String>)> = None;
+        let mut wrote = false;
         for o in 0..u.cfg.outputs.len() {
             let p = &u.cfg.outputs[o];
             let cell = u.output_cell(p);
@@ -404,17 +410,30 @@ impl Link {
             let r = write(ctx, &p.spec, value, timeout).await;
             self.stats.record(t0.elapsed());
             match r {
-                Ok(()) => cell.confirm(seq),
+                Ok(()) => {
+                    cell.confirm(seq);
+                    wrote = true;
+                }
                 Err(e) if e.reconnect => return Err(e.fault),
                 Err(e) => {
                     cell.invalidate();
-                    exception.get_or_insert((e.fault, vec![p.name.clone()]));
+                    match &mut exception {
+                        Some((_, names)) => names.push(p.name.clone()),
+                        None => exception = Some((e.fault, vec![p.name.clone()])),
+                    }
                 }
             }
         }
-        if let Some((f, points)) = exception {
-            // Output exceptions: reported, retried next poll.
-            self.report_outputs(k, f, points);
+        match exception {
+            Some((f, points)) => {
+                // Reported when it starts or changes; retried at the poll rate.
+                if u.out_fault.as_ref() != Some(&f) {
+                    u.out_fault = Some(f.clone());
+                    self.report_outputs(k, f, points);
+                }
+            }
+            None if wrote => u.out_fault = None,
+            None => {}
         }
         if !read {
             return Ok(());
