@@ -424,14 +424,13 @@ impl Link {
                 }
             }
         }
+        // An output refusal is reported when it starts or changes; retried at the poll rate.
         match exception {
-            Some((f, points)) => {
-                // Reported when it starts or changes; retried at the poll rate.
-                if u.out_fault.as_ref() != Some(&f) {
-                    u.out_fault = Some(f.clone());
-                    self.report_outputs(k, f, points);
-                }
+            Some((f, points)) if u.out_fault.as_ref() != Some(&f) => {
+                u.out_fault = Some(f.clone());
+                self.report_outputs(k, f, points);
             }
+            Some(_) => {}
             None if wrote => u.out_fault = None,
             None => {}
         }
