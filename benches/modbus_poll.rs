@@ -137,12 +137,17 @@ fn main() {
     let u = hytask::modbus::unit(&io, "io[0]", "-").unwrap();
     let specs: Vec<Option<PointSpec>> = u.inputs.iter().map(|p| Some(p.spec)).collect();
     let per_cycle = plan_reads(&specs, 0).len();
-    let window = Duration::from_secs(
-        std::env::var("MODBUS_BENCH_S")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(5),
-    );
+    // `cargo test --all-targets` runs this main without `--bench`: a short smoke run then.
+    let bench = std::env::args().any(|a| a == "--bench");
+    let secs = std::env::var("MODBUS_BENCH_S")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(5);
+    let window = if bench {
+        Duration::from_secs(secs)
+    } else {
+        Duration::from_millis(200)
+    };
 
     // 1a. Bare tokio-modbus loop.
     let _ = bare(&addr, &specs, 500); // warm up
@@ -194,7 +199,7 @@ fn main() {
     while img.di[0].sample().quality != Quality::Good {
         std::thread::sleep(Duration::from_millis(1));
     }
-    let samples = 200;
+    let samples = if bench { 200 } else { 10 };
     let mut input = Vec::new();
     let mut output = Vec::new();
     for k in 0..samples {
