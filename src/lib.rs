@@ -25,5 +25,7 @@ pub mod daemon;
 pub mod gcode;
 #[cfg(not(loom))]
 pub mod machine;
+#[cfg(not(loom))]
+pub mod modbus;
 pub mod motion;
 pub mod rt;

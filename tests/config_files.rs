@@ -50,22 +50,13 @@ fn builtin_sim_is_the_shipped_sim_toml() {
 }
 
 #[test]
-fn example_canopen_validates_but_is_not_deployable_in_this_build() {
+fn example_canopen_validates_and_every_backend_is_available() {
     let m = shipped("example-canopen.toml");
     assert!(m.drives.iter().all(|d| d.backend == DriveBackend::Canopen));
-    let missing = m.unavailable_backends();
-    let keys: Vec<&str> = missing.iter().map(|i| i.key.as_str()).collect();
-    assert_eq!(
-        keys,
-        ["io[0] (cabinet).backend"],
-        "canopen drives deploy; the Modbus I/O coupler does not yet"
-    );
-    let err = config::require_available(&m).unwrap_err();
-    assert!(
-        err.to_string()
-            .contains("\"modbus_tcp\" is not available in this build"),
-        "{err}"
-    );
+    // CANopen drives and Modbus I/O are both built: nothing is refused before deploying
+    // (deploying needs can0 and the devices, and names what is missing).
+    assert!(m.unavailable_backends().is_empty());
+    config::require_available(&m).unwrap();
     // The tool table path is resolved next to the file.
     let table = &m.tool_table.as_ref().unwrap().path;
     assert!(
@@ -183,9 +174,10 @@ fn channel_inversion_and_scaling() {
     );
     assert!(!estop.active(true));
     assert!(estop.level(false));
-    let speed = &cab.analog_outputs[0];
-    assert_eq!(speed.to_engineering(10_000.0), 24_000.0);
-    assert_eq!(speed.to_raw(24_000.0), 10_000.0);
+    // The VFD's frequency setpoint: 0.01 Hz counts, 24000 rpm at 400.00 Hz.
+    let speed = &m.io[1].analog_outputs[0];
+    assert_eq!(speed.to_engineering(40_000.0), 24_000.0);
+    assert_eq!(speed.to_raw(24_000.0), 40_000.0);
 }
 
 #[test]

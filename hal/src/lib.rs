@@ -24,7 +24,9 @@
 //! Backends: [`sim`] (simulated axis with a motor model, simulated I/O, in-memory CAN bus)
 //! now; [`canopen`] holds the sans-IO CANopen (CiA 301) master and CiA 402 layer with a
 //! loopback drive, tested on the in-memory bus; [`socketcan`] is the [`CanBus`] on a Linux
-//! SocketCAN socket. Modbus comes later and implements the same traits.
+//! SocketCAN socket. [`modbus`] holds the sans-IO Modbus pieces (register map,
+//! read merging, server framing) and [`modbus::ModbusIo`], the I/O traits over a lock-free
+//! image that the daemon's async poller (in the main crate, on `tokio-modbus`) fills.
 //! Backends chosen by configuration live side by side behind [`Erased`] / [`DynAxis`],
 //! which give every backend the same error type ([`HalError`]) without allocating.
 //! This crate depends on nothing of the daemon.
@@ -54,6 +56,7 @@ pub mod canopen;
 pub mod erased;
 pub mod error;
 pub mod io;
+pub mod modbus;
 pub mod sim;
 #[cfg(target_os = "linux")]
 pub mod socketcan;

@@ -9,6 +9,7 @@ mod check;
 mod client;
 mod gcode;
 mod latency;
+mod modbus_sim;
 mod plan;
 mod plot;
 mod run;
@@ -48,6 +49,8 @@ pub enum Command {
     SimDrive(sim_drive::SimDriveArgs),
     /// CANopen master tool on a SocketCAN interface: sdo-read, sdo-write, nmt, scan, heartbeat.
     Canopen(canopen_tool::CanopenArgs),
+    /// Simulate Modbus devices (TCP and RTU) from a device map, with fault injection.
+    ModbusSim(modbus_sim::ModbusSimArgs),
 }
 
 /// Entry point of the binary.
@@ -64,6 +67,7 @@ pub fn main() -> ExitCode {
         Command::Plot(a) => plot::run(a),
         Command::SimDrive(a) => sim_drive::run(a),
         Command::Canopen(a) => canopen_tool::run(a),
+        Command::ModbusSim(a) => modbus_sim::run(a),
     };
     match result {
         Ok(code) => code,

@@ -3,9 +3,11 @@
 //! Every channel has a machine-wide unique name (`estop`, `coolant_flood`); the rest of the
 //! configuration (spindle, coolant, safety) refers to channels by name, and a channel's
 //! index on its device is its position in the device's list. `backend = "sim"` is the
-//! simulated I/O of `hytask-hal`; `backend = "modbus_tcp"` (not available in this build yet)
-//! is a Modbus TCP device at `address`, where `register` gives each channel's coil, discrete
-//! input or register number.
+//! simulated I/O of `hytask-hal`; `backend = "modbus_tcp"` is a Modbus TCP device at
+//! `address`, `backend = "modbus_rtu"` a Modbus RTU device on the serial line
+//! `[io.modbus] device`; each channel's `table`, `register`, `bit`, `type` and `word_order`
+//! place it in the device's tables (see [`super::modbus`]), and `critical = true` marks an
+//! input whose loss stops the machine.
 
 use super::error::Issues;
 use hytask_hal::sim::SimIo;
@@ -21,7 +23,7 @@ pub struct IoConfig {
     pub name: String,
     /// Which backend runs it.
     pub backend: IoBackend,
-    /// Network address `host:port` (Modbus TCP); refused for `sim`.
+    /// Network address `host:port` (Modbus TCP); refused otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub address: Option<String>,
     /// Modbus unit (slave) id; Modbus only, default 1.
@@ -39,6 +41,9 @@ pub struct IoConfig {
     /// Analog outputs, in channel order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub analog_outputs: Vec<AnalogPoint>,
+    /// Modbus link settings (`[io.modbus]`); Modbus only, defaults apply when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub modbus: Option<super::modbus::ModbusSettings>,
     /// Simulation only: a flat plate under the tool, so probing (G38.x) can be tried on the
     /// simulated machine.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -65,8 +70,10 @@ pub struct TouchPlate {
 pub enum IoBackend {
     /// Simulated I/O (inputs set through the control socket or tests).
     Sim,
-    /// A Modbus TCP device. Not available in this build yet.
+    /// A Modbus TCP device.
     ModbusTcp,
+    /// A Modbus RTU device on a serial line.
+    ModbusRtu,
 }
 
 impl IoBackend {
@@ -74,7 +81,7 @@ impl IoBackend {
     pub fn is_available(self) -> bool {
         match self {
             IoBackend::Sim => true,
-            IoBackend::ModbusTcp => false,
+            IoBackend::ModbusTcp | IoBackend::ModbusRtu => true,
         }
     }
 
@@ -83,6 +90,7 @@ impl IoBackend {
         match self {
             IoBackend::Sim => "sim",
             IoBackend::ModbusTcp => "modbus_tcp",
+            IoBackend::ModbusRtu => "modbus_rtu",
         }
     }
 }
@@ -101,6 +109,17 @@ pub struct DigitalPoint {
     /// Modbus coil / discrete input number; Modbus only, default: the channel index.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub register: Option<u16>,
+    /// Modbus table (default: discrete input for inputs, coil for outputs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table: Option<super::modbus::ModbusTable>,
+    /// Modbus: bit 0..=15 of a register (with a register `table`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bit: Option<u8>,
+    /// Inputs on Modbus: losing this input (timeout, exception, dropped link) stops the
+    /// machine, and resuming needs a reset. For the e-stop chain, guard door, drive-enable
+    /// feedback. The `[safety] estop_input` is always critical.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub critical: bool,
     /// Outputs only: the logical state the output takes in the machine's safe state (e-stop,
     /// machine off, daemon shutdown). Default `false` (inactive); set `true` for an output
     /// whose safe state is active, such as a clamp that must hold when the machine stops.
@@ -140,6 +159,18 @@ pub struct AnalogPoint {
     /// Modbus register number; Modbus only, default: the channel index.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub register: Option<u16>,
+    /// Modbus table (default: input register for inputs, holding register for outputs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table: Option<super::modbus::ModbusTable>,
+    /// Modbus register encoding (default `u16`).
+    #[serde(default, rename = "type", skip_serializing_if = "Option::is_none")]
+    pub value_type: Option<super::modbus::ValueType>,
+    /// Modbus: word order of a 32-bit value (default `high_first`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub word_order: Option<super::modbus::WordOrderConfig>,
+    /// Inputs on Modbus: losing this input stops the machine (see [`DigitalPoint::critical`]).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub critical: bool,
     /// Outputs only: the value (engineering units) the output takes in the machine's safe
     /// state (e-stop, machine off, daemon shutdown). Default 0.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -164,6 +195,14 @@ pub enum IoKind {
 }
 
 impl IoKind {
+    /// Every kind, in the order of the lists.
+    pub const ALL: [IoKind; 4] = [
+        IoKind::DigitalInput,
+        IoKind::DigitalOutput,
+        IoKind::AnalogInput,
+        IoKind::AnalogOutput,
+    ];
+
     /// The key of this kind's list in `[[io]]`.
     pub fn list_key(self) -> &'static str {
         match self {
@@ -240,12 +279,32 @@ impl IoConfig {
         })
     }
 
-    fn registers(&self, kind: IoKind) -> Vec<Option<u16>> {
+    /// The Modbus-only keys each channel of `kind` sets (refused with `sim`).
+    fn modbus_keys(&self, kind: IoKind) -> Vec<Vec<&'static str>> {
+        let d = |p: &DigitalPoint| {
+            let set = [
+                (p.register.is_some(), "register"),
+                (p.table.is_some(), "table"),
+                (p.bit.is_some(), "bit"),
+                (p.critical, "critical"),
+            ];
+            set.iter().filter(|s| s.0).map(|s| s.1).collect()
+        };
+        let a = |p: &AnalogPoint| {
+            let set = [
+                (p.register.is_some(), "register"),
+                (p.table.is_some(), "table"),
+                (p.value_type.is_some(), "type"),
+                (p.word_order.is_some(), "word_order"),
+                (p.critical, "critical"),
+            ];
+            set.iter().filter(|s| s.0).map(|s| s.1).collect()
+        };
         match kind {
-            IoKind::DigitalInput => self.digital_inputs.iter().map(|p| p.register).collect(),
-            IoKind::DigitalOutput => self.digital_outputs.iter().map(|p| p.register).collect(),
-            IoKind::AnalogInput => self.analog_inputs.iter().map(|p| p.register).collect(),
-            IoKind::AnalogOutput => self.analog_outputs.iter().map(|p| p.register).collect(),
+            IoKind::DigitalInput => self.digital_inputs.iter().map(d).collect(),
+            IoKind::DigitalOutput => self.digital_outputs.iter().map(d).collect(),
+            IoKind::AnalogInput => self.analog_inputs.iter().map(a).collect(),
+            IoKind::AnalogOutput => self.analog_outputs.iter().map(a).collect(),
         }
     }
 
@@ -281,6 +340,38 @@ impl IoConfig {
                 ),
                 Some(_) => {}
             },
+            IoBackend::ModbusRtu => {
+                if self.address.is_some() {
+                    issues.push(
+                        format!("{key}.address"),
+                        "TCP only: an RTU device is on `modbus.device`",
+                    );
+                }
+                if self.modbus.is_none() {
+                    issues.push(
+                        format!("{key}.modbus.device"),
+                        "required with backend = \"modbus_rtu\" (a serial device such as /dev/ttyUSB0)",
+                    );
+                }
+            }
+        }
+        if self.backend == IoBackend::Sim {
+            if self.modbus.is_some() {
+                issues.push(format!("{key}.modbus"), "not used with backend = \"sim\"");
+            }
+        } else {
+            if let Some(m) = &self.modbus {
+                m.validate(&format!("{key}.modbus"), self.backend, issues);
+            }
+            if self.unit_id == Some(0) {
+                issues.push(
+                    format!("{key}.unit_id"),
+                    "must be 1..=247 (0 is broadcast, which never answers)",
+                );
+            } else if self.unit_id.is_some_and(|u| u > 247) {
+                issues.push(format!("{key}.unit_id"), "must be 1..=247");
+            }
+            super::modbus::validate_points(self, key, issues);
         }
         if self.backend != IoBackend::Sim && self.touch_plate.is_some() {
             issues.push(
@@ -298,25 +389,20 @@ impl IoConfig {
             IoKind::AnalogOutput,
         ] {
             let list = kind.list_key();
-            let mut seen: HashMap<u16, usize> = HashMap::new();
-            for (i, (name, register)) in self
+            for (i, (name, modbus_keys)) in self
                 .names(kind)
                 .into_iter()
-                .zip(self.registers(kind))
+                .zip(self.modbus_keys(kind))
                 .enumerate()
             {
                 issues.name(format!("{key}.{list}[{i}].name"), name);
-                let Some(r) = register else { continue };
                 if self.backend == IoBackend::Sim {
-                    issues.push(
-                        format!("{key}.{list}[{i}] ({name}).register"),
-                        "not used with backend = \"sim\"",
-                    );
-                } else if let Some(first) = seen.insert(r, i) {
-                    issues.push(
-                        format!("{key}.{list}[{i}] ({name}).register"),
-                        format!("register {r} is already used by {list}[{first}]"),
-                    );
+                    for k in modbus_keys {
+                        issues.push(
+                            format!("{key}.{list}[{i}] ({name}).{k}"),
+                            "Modbus only: not used with backend = \"sim\"",
+                        );
+                    }
                 }
             }
         }

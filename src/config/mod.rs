@@ -7,7 +7,7 @@
 //! [[axis]]        X/Y/Z/A/B/C/U/V/W: drive, scale, soft limits, velocity/acceleration/jerk,
 //!                 following error limit, [axis.home]
 //! [[drive]]       name, backend = "sim" | "canopen", [drive.sim] / [drive.canopen]
-//! [[io]]          name, backend = "sim" | "modbus_tcp", named digital/analog channels
+//! [[io]]          name, backend = "sim" | "modbus_tcp" | "modbus_rtu", named channels, [io.modbus]
 //! [spindle]       max/min rpm, enable/direction/speed/at-speed channels
 //! [coolant]       flood/mist outputs
 //! [tool_table]    path
@@ -25,7 +25,7 @@
 //! `axis[1] (Y).max_velocity: must be > 0, got -5`. Finally [`MachineConfig::resolve`] fills
 //! defaults that depend on other sections, so the resolved machine states every value.
 //!
-//! Backends that are declared but not built yet (`canopen` drives, `modbus_tcp` I/O)
+//! Backends that are declared but not built yet (`canopen` drives)
 //! validate normally; [`MachineConfig::unavailable_backends`] lists them and the deployment
 //! refuses to start with them ([`require_available`]). That keeps one file per machine,
 //! checkable on any computer.
@@ -38,6 +38,7 @@ mod drive;
 mod error;
 mod io;
 mod machine;
+pub mod modbus;
 mod root;
 mod settings;
 mod spindle;

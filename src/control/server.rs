@@ -535,8 +535,9 @@ async fn handle_line(line: &[u8], conn: &mut Conn<'_>) -> String {
     reply_line(&req.id, result)
 }
 
-/// Topics a client may subscribe to.
-pub const TOPICS: &[&str] = &["mode", "fault", "progress", "job", "message", "task"];
+/// Topics a client may subscribe to (`io`: health changes of Modbus links, naming link, unit
+/// and points).
+pub const TOPICS: &[&str] = &["mode", "fault", "progress", "job", "message", "task", "io"];
 
 fn subscribe(
     machine: &Arc<dyn MachineApi>,

@@ -317,7 +317,7 @@ pub struct OperationInfo {
 /// An event pushed to subscribers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MachineEvent {
-    /// Topic: `mode`, `fault`, `progress`, `job`, `message`, `task`.
+    /// Topic: `mode`, `fault`, `progress`, `job`, `message`, `task`, `io`.
     pub topic: String,
     /// Event data.
     pub data: serde_json::Value,

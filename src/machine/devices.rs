@@ -198,6 +198,8 @@ pub struct Devices {
     pub sim_io: Vec<Option<SimIoHandle>>,
     /// CANopen bus owners, runtime SDO access and in-memory buses.
     pub can: CanDrives,
+    /// Events of the Modbus links (`None` without Modbus devices).
+    pub link_events: Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>,
 }
 
 /// Builds the backends. Fails, naming the key, for a backend this build does not have.
@@ -230,18 +232,11 @@ pub fn build(cfg: &MachineConfig) -> Result<Devices, ConfigError> {
         sim_axes.push((a.name, sim.handle()));
         axes.push((a.name, AxisDevice::Sim(Box::new(Erased(sim)))));
     }
-    let mut io: Vec<DynIo> = Vec::new();
-    let mut sim_io = Vec::new();
-    for (i, dev) in cfg.io.iter().enumerate() {
-        let sim = dev.sim_io().ok_or_else(|| {
-            invalid(
-                format!("{}.backend", crate::config::IoConfig::key(i, &dev.name)),
-                "backend not available in this build".into(),
-            )
-        })?;
-        sim_io.push(Some(sim.handle()));
-        io.push(Box::new(Erased(sim)));
-    }
+    let super::io_devices::IoDevices {
+        io,
+        sim_io,
+        link_events,
+    } = super::io_devices::build_io(cfg).map_err(|(k, m)| invalid(k, m))?;
     let io_map = IoMap::new(cfg).map_err(|m| invalid("io".into(), m))?;
     Ok(Devices {
         axes,
@@ -250,6 +245,7 @@ pub fn build(cfg: &MachineConfig) -> Result<Devices, ConfigError> {
         sim_axes,
         sim_io,
         can,
+        link_events,
     })
 }
 

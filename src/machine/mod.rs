@@ -4,6 +4,7 @@
 pub mod api;
 pub mod devices;
 mod feeder;
+pub mod io_devices;
 pub mod job;
 pub mod job_file;
 pub mod mode;

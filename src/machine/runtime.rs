@@ -117,6 +117,8 @@ pub struct Machine {
     bridge_stop: Arc<AtomicBool>,
     bridge: Mutex<Option<std::thread::JoinHandle<()>>>,
     receivers: Mutex<Option<Receivers>>,
+    /// Modbus link events, published as topic `io` by the bridge.
+    link_events: Mutex<Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -217,6 +219,8 @@ pub struct Built {
     pub can_sdo: CanSdo,
     /// In-memory buses of `sim` CAN interfaces.
     pub can_sim_buses: Vec<hytask_hal::sim::SimCanBus>,
+    /// Modbus link events (`None` without Modbus devices).
+    pub link_events: Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>,
 }
 
 /// Builds the backends and adds the machine's tasks to a new deployment, in start order
@@ -322,6 +326,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         sim_axes,
         sim_io,
         can,
+        link_events,
     } = devs;
     let crate::machine::servo::can_setup::CanDrives {
         buses: can_buses,
@@ -393,6 +398,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         estop_request,
         can_sdo,
         can_sim_buses,
+        link_events,
     })
 }
 
@@ -418,6 +424,7 @@ impl Machine {
             estop_request,
             can_sdo,
             can_sim_buses,
+            link_events,
         } = build(&config)?;
         let report = app.configure()?;
         for w in &report.warnings {
@@ -471,6 +478,7 @@ impl Machine {
                 job: job_rx,
                 fault: fault_rx,
             })),
+            link_events: Mutex::new(link_events),
         });
         let weak = Arc::downgrade(&m);
         let stop = m.bridge_stop.clone();
@@ -805,6 +813,12 @@ impl Machine {
         }
         while let Some(e) = rx.job.pop() {
             handle_job_event(self, e);
+        }
+        drop(guard);
+        if let Some(links) = lock(&self.link_events).as_ref() {
+            while let Ok(e) = links.try_recv() {
+                self.publish("io", e.to_json());
+            }
         }
     }
 }
