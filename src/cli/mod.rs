@@ -9,6 +9,7 @@ mod client;
 mod gcode;
 mod latency;
 mod plan;
+mod plc;
 mod plot;
 mod run;
 mod serve;
@@ -42,6 +43,8 @@ pub enum Command {
     Plan(plan::PlanArgs),
     /// Plot the planned toolpath of a G-code file to SVG.
     Plot(plot::PlotArgs),
+    /// PLC tools: compile-check or run a Structured Text program offline.
+    Plc(plc::PlcArgs),
 }
 
 /// Entry point of the binary.
@@ -56,6 +59,7 @@ pub fn main() -> ExitCode {
         Command::Gcode(a) => gcode::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Plot(a) => plot::run(a),
+        Command::Plc(a) => plc::run(a),
     };
     match result {
         Ok(code) => code,
