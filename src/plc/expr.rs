@@ -325,23 +325,23 @@ impl Parser {
             if self.eat_p("#") {
                 let id = self.ident()?;
                 e = Expr {
+                    span: e.span,
                     kind: ExprKind::Member(Box::new(e), id),
-                    span,
                 };
             } else if self.eat_p(".") {
                 match self.peek().clone() {
                     Tok::Int(b, None) if (0..64).contains(&b) => {
                         self.bump();
                         e = Expr {
+                            span: e.span,
                             kind: ExprKind::Bit(Box::new(e), b as u8),
-                            span,
                         };
                     }
                     _ => {
                         let id = self.ident()?;
                         e = Expr {
+                            span: e.span,
                             kind: ExprKind::Member(Box::new(e), id),
-                            span,
                         };
                     }
                 }
@@ -352,8 +352,8 @@ impl Parser {
                 }
                 self.expect_p("]");
                 e = Expr {
+                    span: e.span,
                     kind: ExprKind::Index(Box::new(e), idx),
-                    span,
                 };
             } else if self.is_p("(") {
                 self.bump();

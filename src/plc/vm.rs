@@ -1,7 +1,8 @@
 //! The bytecode and its interpreter: a stack machine over 64-bit cells. Memory is one flat
 //! array of cells laid out by the compiler; a POU's own variables are addressed relative to
-//! its base (the instance or frame), globals absolutely. Every instruction costs one unit of
-//! the scan's budget, so a runaway loop ends in a fault instead of an overrun.
+//! its base (the instance or frame), globals absolutely. Every loop iteration is charged
+//! against the scan's instruction budget, so a runaway loop ends in a fault at its line
+//! instead of an overrun.
 
 use super::stdfb::StdFb;
 use super::types::IntKind;
@@ -263,7 +264,8 @@ pub struct Vm<'a> {
     pub frames: &'a mut [(u32, u32)],
     /// Scan time stamp (ns).
     pub now: i64,
-    /// Instructions left this scan.
+    /// Budget left this scan: each loop iteration costs its length in instructions (a
+    /// cheap, deterministic bound; straight-line code and calls are bounded by the code).
     pub fuel: u64,
 }
 
@@ -319,11 +321,22 @@ impl Vm<'_> {
                 return Err(($k, pc as u32));
             }};
         }
+        // Loops are charged at their backward jump with the instructions of one iteration,
+        // so straight-line code costs nothing extra and a fault names the loop's line.
+        macro_rules! charge {
+            ($t:expr) => {{
+                let t = $t as usize;
+                if t < pc {
+                    let cost = (pc - t) as u64;
+                    if fuel < cost {
+                        pc -= 1;
+                        fault!(FaultKind::BudgetExhausted);
+                    }
+                    fuel -= cost;
+                }
+            }};
+        }
         loop {
-            if fuel == 0 {
-                fault!(FaultKind::BudgetExhausted);
-            }
-            fuel -= 1;
             let op = ops[pc];
             pc += 1;
             match op {
@@ -486,9 +499,13 @@ impl Vm<'_> {
                     };
                     st[sp - 1] = k.wrap(r as i64) as u64;
                 }
-                Op::Jmp(t) => pc = t as usize,
+                Op::Jmp(t) => {
+                    charge!(t);
+                    pc = t as usize;
+                }
                 Op::Jz(t) => {
                     if pop!() == 0 {
+                        charge!(t);
                         pc = t as usize;
                     }
                 }
