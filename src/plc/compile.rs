@@ -1033,8 +1033,7 @@ impl<'u> Compiler<'u> {
         let edges: Vec<(usize, usize)> = self.calls.iter().copied().collect();
         fn visit(v: usize, edges: &[(usize, usize)], state: &mut [u8]) -> Option<usize> {
             state[v] = 1;
-            for &(a, b) in edges.iter().filter(|e| e.0 == v) {
-                let _ = a;
+            for &(_, b) in edges.iter().filter(|e| e.0 == v) {
                 if state[b] == 1 {
                     return Some(b);
                 }
@@ -1744,9 +1743,10 @@ impl<'u> Compiler<'u> {
             (Some(l), None) | (None, Some(l)) => {
                 let other = if lit_class(a).is_some() { b } else { a };
                 let t = self.peek(other);
-                if lit_fits(l, t) {
-                    Some(t)
-                } else if t == Ty::Time || t == Ty::Bool || matches!(t, Ty::Enum(_)) {
+                // A literal next to a TIME, BOOL or enumeration keeps that type, so the
+                // mismatch is reported against the variable's type.
+                let keeps = t == Ty::Time || t == Ty::Bool || matches!(t, Ty::Enum(_));
+                if lit_fits(l, t) || keeps {
                     Some(t)
                 } else {
                     common(default(l), t)
