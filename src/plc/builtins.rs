@@ -271,7 +271,9 @@ pub(crate) fn convert(c: &mut Compiler, from: Ty, to: Ty, trunc: bool, span: Spa
     match (from, to) {
         (a, b) if a == b => {}
         (Ty::Void, _) | (_, Ty::Void) => {}
-        (Ty::Int(_) | Ty::Bool | Ty::Enum(_), Ty::Int(k)) => {
+        // 0 and 1 fit every integer type.
+        (Ty::Bool, Ty::Int(_)) => {}
+        (Ty::Int(_) | Ty::Enum(_), Ty::Int(k)) => {
             c.emit(Op::Wrap(k), span);
         }
         (Ty::Int(_), Ty::Bool) => {

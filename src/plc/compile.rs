@@ -366,6 +366,11 @@ impl<'u> Compiler<'u> {
                 );
             }
         }
+        {
+            let mut entries: Vec<&mut u32> = programs.iter_mut().map(|(e, _)| e).collect();
+            entries.extend(self.entries.values_mut());
+            super::peephole::optimize(&mut self.ops, &mut self.spans, &mut entries);
+        }
         let stack = super::stack::max_depth(&self.ops, self.entries.values().copied());
         let depth = unit.pous.len() + 2;
         Some(Program::new(

@@ -5,7 +5,8 @@
 //! - [`lexer`], [`expr`], [`types`]: tokens, expressions and their typing rules. They know
 //!   nothing of POUs, so other front ends (issue 12's scripted programs) can reuse them.
 //! - [`ast`], [`parser`]: PROGRAM / FUNCTION_BLOCK / FUNCTION, declarations, statements.
-//! - [`compile`] (with `builtins`, `stack`): layout, type checking, code generation.
+//! - [`compile`] (with `builtins`, `peephole`, `stack`): layout, type checking, code
+//!   generation, fusion of instruction pairs, stack sizing.
 //! - [`vm`], [`stdfb`]: the interpreter and the standard function blocks.
 //! - [`program`], [`value`]: the loaded program, its variable table and its scan.
 
@@ -16,6 +17,7 @@ pub mod diag;
 pub mod expr;
 pub mod lexer;
 pub mod parser;
+mod peephole;
 pub mod program;
 mod stack;
 pub mod stdfb;

@@ -20,7 +20,8 @@ fn effect(op: Op) -> (usize, usize) {
         | MinMaxF(_) | Shift(..) => (2, 1),
         Sel => (3, 1),
         Mux(n) => (n as usize + 1, 1),
-        Call { .. } | Std { .. } | Jmp(_) | Ret => (0, 0),
+        Call { .. } | Std { .. } | Jmp(_) | Ret | MovL(..) | SetL(..) => (0, 0),
+        BinL(..) | BinC(..) => (1, 1),
     }
 }
 

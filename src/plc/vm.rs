@@ -78,6 +78,74 @@ pub enum Shift {
     Ror,
 }
 
+/// Binary operations that fuse with their right operand (see `peephole`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Bin {
+    /// Integer add.
+    Add(IntKind),
+    /// Integer subtract.
+    Sub(IntKind),
+    /// Integer multiply.
+    Mul(IntKind),
+    /// Signed comparison.
+    CmpI(Cmp),
+    /// Unsigned comparison.
+    CmpU(Cmp),
+    /// Float comparison.
+    CmpF(Cmp),
+    /// Bitwise AND.
+    And,
+    /// Bitwise OR.
+    Or,
+    /// Bitwise XOR.
+    Xor,
+    /// Float add.
+    FAdd(bool),
+    /// Float subtract.
+    FSub(bool),
+    /// Float multiply.
+    FMul(bool),
+    /// Signed min/max.
+    MinMaxI(bool),
+    /// Float min/max.
+    MinMaxF(bool),
+}
+
+impl Bin {
+    /// `a op b`, exactly as the unfused instruction computes it.
+    #[inline(always)]
+    pub fn apply(self, a: u64, b: u64) -> u64 {
+        match self {
+            Bin::Add(k) => k.wrap((a as i64).wrapping_add(b as i64)) as u64,
+            Bin::Sub(k) => k.wrap((a as i64).wrapping_sub(b as i64)) as u64,
+            Bin::Mul(k) => k.wrap((a as i64).wrapping_mul(b as i64)) as u64,
+            Bin::CmpI(c) => c.test(a as i64, b as i64) as u64,
+            Bin::CmpU(c) => c.test(a, b) as u64,
+            Bin::CmpF(c) => c.test(f(a), f(b)) as u64,
+            Bin::And => a & b,
+            Bin::Or => a | b,
+            Bin::Xor => a ^ b,
+            Bin::FAdd(s) => fb(f(a) + f(b), s),
+            Bin::FSub(s) => fb(f(a) - f(b), s),
+            Bin::FMul(s) => fb(f(a) * f(b), s),
+            Bin::MinMaxI(max) => {
+                if ((a as i64) < (b as i64)) != max {
+                    a
+                } else {
+                    b
+                }
+            }
+            Bin::MinMaxF(max) => {
+                if (f(a) < f(b)) != max {
+                    a
+                } else {
+                    b
+                }
+            }
+        }
+    }
+}
+
 /// Why a scan stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FaultKind {
@@ -250,6 +318,14 @@ pub enum Op {
     StdInd(StdFb),
     /// Return from user code.
     Ret,
+    /// Fused `LoadL(o)` + binary operation: the right operand is `mem[base + o]`.
+    BinL(Bin, u32),
+    /// Fused `Push(c)` + binary operation.
+    BinC(Bin, u64),
+    /// Fused `LoadL(src)` + `StoreL(dst)`.
+    MovL(u32, u32),
+    /// Fused `Push(c)` + `StoreL(dst)`.
+    SetL(u32, u64),
 }
 
 /// The machine state of one scan, borrowed from the program's preallocated storage.
@@ -341,6 +417,10 @@ impl Vm<'_> {
             pc += 1;
             match op {
                 Op::Push(v) => push!(v),
+                Op::BinL(b, o) => st[sp - 1] = b.apply(st[sp - 1], mem[base + o as usize]),
+                Op::BinC(b, c) => st[sp - 1] = b.apply(st[sp - 1], c),
+                Op::MovL(s, d) => mem[base + d as usize] = mem[base + s as usize],
+                Op::SetL(d, c) => mem[base + d as usize] = c,
                 Op::LoadL(o) => push!(mem[base + o as usize]),
                 Op::LoadG(a) => push!(mem[a as usize]),
                 Op::StoreL(o) => mem[base + o as usize] = pop!(),
