@@ -568,7 +568,12 @@ impl<'u> Compiler<'u> {
                 let mut dims = Vec::new();
                 for (lo, hi) in ranges {
                     match (self.const_eval(lo), self.const_eval(hi)) {
-                        (Some(CVal::Int(l)), Some(CVal::Int(h))) if h >= l && h - l < 1 << 24 => {
+                        (Some(CVal::Int(l)), Some(CVal::Int(h)))
+                            if h >= l
+                                && h - l < 1 << 24
+                                && l >= i32::MIN as i128
+                                && h <= i32::MAX as i128 =>
+                        {
                             dims.push((l as i64, (h - l + 1) as u32))
                         }
                         _ => {

@@ -162,6 +162,10 @@ impl Parser {
         }
         t
     }
+    /// Index of the current token (to check that error recovery made progress).
+    pub fn pos(&self) -> usize {
+        self.pos
+    }
     /// At the end of input.
     pub fn at_eof(&self) -> bool {
         matches!(self.peek(), Tok::Eof)

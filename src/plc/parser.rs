@@ -44,6 +44,17 @@ impl Parser {
         matches!(self.peek(), Tok::Kw(k) if set.contains(k))
     }
 
+    /// After a failed parse that started at token `start`: skips to just after the next
+    /// `;`, or to a keyword of `stop` (not consumed). Always consumes at least one token when
+    /// the failed parse consumed none and there is no stop keyword to return to (so every
+    /// loop calling it terminates).
+    fn recover_from(&mut self, start: usize, stop: &[&str]) {
+        self.recover(stop);
+        if self.pos() == start && !self.at_eof() && !self.at_kw_in(BLOCK_END) {
+            self.bump();
+        }
+    }
+
     /// Skips to just after the next `;`, or to a keyword of `stop` (not consumed).
     fn recover(&mut self, stop: &[&str]) {
         while !self.at_eof() && !self.at_kw_in(stop) && !self.at_kw_in(TOP_LEVEL) {
@@ -140,9 +151,10 @@ impl Parser {
         }
         let mut decls = Vec::new();
         while !self.is_kw("END_VAR") && !self.at_eof() && !self.at_kw_in(TOP_LEVEL) {
+            let start = self.pos();
             match self.var_decl() {
                 Some(d) => decls.push(d),
-                None => self.recover(&["END_VAR"]),
+                None => self.recover_from(start, &["END_VAR"]),
             }
         }
         self.expect_kw("END_VAR");
@@ -279,9 +291,10 @@ impl Parser {
     fn types(&mut self, out: &mut Vec<TypeDecl>) {
         self.bump();
         while !self.is_kw("END_TYPE") && !self.at_eof() && !self.at_kw_in(TOP_LEVEL) {
+            let start = self.pos();
             match self.type_decl() {
                 Some(t) => out.push(t),
-                None => self.recover(&["END_TYPE", "END_STRUCT"]),
+                None => self.recover_from(start, &["END_TYPE", "END_STRUCT"]),
             }
             if self.eat_kw("END_STRUCT") {
                 self.eat_p(";");
@@ -295,10 +308,15 @@ impl Parser {
         self.expect_p(":");
         if self.eat_kw("STRUCT") {
             let mut fields = Vec::new();
-            while !self.is_kw("END_STRUCT") && !self.at_eof() && !self.is_kw("END_TYPE") {
+            while !self.is_kw("END_STRUCT")
+                && !self.at_eof()
+                && !self.is_kw("END_TYPE")
+                && !self.at_kw_in(TOP_LEVEL)
+            {
+                let start = self.pos();
                 match self.var_decl() {
                     Some(d) => fields.push(d),
-                    None => self.recover(&["END_STRUCT", "END_TYPE"]),
+                    None => self.recover_from(start, &["END_STRUCT", "END_TYPE"]),
                 }
             }
             self.expect_kw("END_STRUCT");
@@ -342,9 +360,10 @@ impl Parser {
             if self.eat_p(";") {
                 continue;
             }
+            let start = self.pos();
             match self.stmt() {
                 Some(s) => out.push(s),
-                None => self.recover(BLOCK_END),
+                None => self.recover_from(start, BLOCK_END),
             }
         }
         out
@@ -492,7 +511,7 @@ impl Parser {
     fn case_body(&mut self) -> Vec<Stmt> {
         let mut out = Vec::new();
         loop {
-            if self.at_eof() || self.is_kw("END_CASE") || self.is_kw("ELSE") {
+            if self.at_eof() || self.at_kw_in(BLOCK_END) || self.at_kw_in(TOP_LEVEL) {
                 return out;
             }
             if self.eat_p(";") {
@@ -501,9 +520,10 @@ impl Parser {
             if self.at_case_label() {
                 return out;
             }
+            let start = self.pos();
             match self.stmt() {
                 Some(s) => out.push(s),
-                None => self.recover(&["END_CASE", "ELSE"]),
+                None => self.recover_from(start, &["END_CASE", "ELSE"]),
             }
         }
     }

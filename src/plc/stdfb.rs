@@ -134,7 +134,7 @@ impl StdFb {
                     if !b(c[5]) {
                         c[4] = now as u64;
                     }
-                    let et = (now - c[4] as i64).min(pt).max(0);
+                    let et = now.wrapping_sub(c[4] as i64).min(pt).max(0);
                     c[3] = et as u64;
                     c[2] = (et >= pt) as u64;
                 }
@@ -150,7 +150,7 @@ impl StdFb {
                         c[4] = now as u64;
                     }
                     if b(c[2]) {
-                        let et = (now - c[4] as i64).min(pt).max(0);
+                        let et = now.wrapping_sub(c[4] as i64).min(pt).max(0);
                         c[3] = et as u64;
                         c[2] = (et < pt) as u64;
                     }
@@ -164,7 +164,7 @@ impl StdFb {
                     c[2] = 1;
                 }
                 if b(c[2]) {
-                    let et = (now - c[4] as i64).min(pt).max(0);
+                    let et = now.wrapping_sub(c[4] as i64).min(pt).max(0);
                     c[3] = et as u64;
                     c[2] = (et < pt) as u64;
                 } else if !inp {

@@ -442,7 +442,7 @@ impl Vm<'_> {
                     mem.copy_within(src..src + n as usize, dst);
                 }
                 Op::Index { lo, len, stride } => {
-                    let i = pop!() as i64 - lo as i64;
+                    let i = (pop!() as i64).wrapping_sub(lo as i64);
                     if i < 0 || i >= len as i64 {
                         pc -= 1;
                         fault!(FaultKind::IndexOutOfRange);
