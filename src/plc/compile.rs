@@ -2228,25 +2228,21 @@ impl<'u> Compiler<'u> {
                 );
             }
         }
-        match (&comp.kind, inst) {
-            (CompKind::Std(fb), Some(p)) => {
-                let (at, rel) = match p {
-                    Place::L(o) => (o, true),
-                    Place::G(a) => (a, false),
-                    Place::Dyn(_) => unreachable!("static instance"),
-                };
+        // A static instance: offset from the base, or absolute (`inst` is never `Dyn`: a
+        // dynamic instance is `None` and goes through the temporary).
+        let static_at = inst.map(|p| match p {
+            Place::L(o) => (o, true),
+            Place::G(a) | Place::Dyn(a) => (a, false),
+        });
+        match (&comp.kind, static_at) {
+            (CompKind::Std(fb), Some((at, rel))) => {
                 self.emit(Op::Std { fb: *fb, at, rel }, span);
             }
             (CompKind::Std(fb), None) => {
                 self.emit(Op::LoadG(tmp), span);
                 self.emit(Op::StdInd(*fb), span);
             }
-            (CompKind::Fb(pou), Some(p)) => {
-                let (at, rel) = match p {
-                    Place::L(o) => (o, true),
-                    Place::G(a) => (a, false),
-                    Place::Dyn(_) => unreachable!("static instance"),
-                };
+            (CompKind::Fb(pou), Some((at, rel))) => {
                 let i = self.emit(Op::Call { entry: 0, at, rel }, span);
                 self.patches.push((i, *pou));
             }

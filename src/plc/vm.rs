@@ -412,6 +412,18 @@ impl Vm<'_> {
                 }
             }};
         }
+        macro_rules! call {
+            ($entry:expr, $nb:expr) => {{
+                if depth == self.frames.len() {
+                    pc -= 1;
+                    fault!(FaultKind::CallDepth);
+                }
+                self.frames[depth] = (pc as u32, base as u32);
+                depth += 1;
+                base = $nb;
+                pc = $entry as usize;
+            }};
+        }
         loop {
             let op = ops[pc];
             pc += 1;
@@ -596,25 +608,11 @@ impl Vm<'_> {
                 }
                 Op::Call { entry, at, rel } => {
                     let nb = if rel { base + at as usize } else { at as usize };
-                    if depth == self.frames.len() {
-                        pc -= 1;
-                        fault!(FaultKind::CallDepth);
-                    }
-                    self.frames[depth] = (pc as u32, base as u32);
-                    depth += 1;
-                    base = nb;
-                    pc = entry as usize;
+                    call!(entry, nb);
                 }
                 Op::CallInd(entry) => {
                     let nb = pop!() as usize;
-                    if depth == self.frames.len() {
-                        pc -= 1;
-                        fault!(FaultKind::CallDepth);
-                    }
-                    self.frames[depth] = (pc as u32, base as u32);
-                    depth += 1;
-                    base = nb;
-                    pc = entry as usize;
+                    call!(entry, nb);
                 }
                 Op::Std { fb, at, rel } => {
                     let a = if rel { base + at as usize } else { at as usize };
