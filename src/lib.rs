@@ -9,6 +9,7 @@
 //! - [`machine`]: deployment of a machine from its configuration: tasks, threads, safety.
 //! - [`config`]: the TOML machine description, validated with errors that name the key.
 //! - [`motion`]: lookahead planner, kinematics and the realtime interpolator.
+//! - [`plc`]: IEC 61131-3 Structured Text: compiler and allocation-free scan.
 //! - [`gcode`]: RS274/NGC (LinuxCNC dialect) front end: text in, canonical commands out.
 //! - [`rt`]: the reusable realtime task model: activities, data objects, buffers, events,
 //!   commands, lifecycle, timing statistics. It knows nothing of machines.
@@ -28,4 +29,5 @@ pub mod machine;
 #[cfg(not(loom))]
 pub mod modbus;
 pub mod motion;
+pub mod plc;
 pub mod rt;

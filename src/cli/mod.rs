@@ -11,6 +11,7 @@ mod gcode;
 mod latency;
 mod modbus_sim;
 mod plan;
+mod plc;
 mod plot;
 mod run;
 mod serve;
@@ -51,6 +52,8 @@ pub enum Command {
     Canopen(canopen_tool::CanopenArgs),
     /// Simulate Modbus devices (TCP and RTU) from a device map, with fault injection.
     ModbusSim(modbus_sim::ModbusSimArgs),
+    /// PLC tools: compile-check or run a Structured Text program offline.
+    Plc(plc::PlcArgs),
 }
 
 /// Entry point of the binary.
@@ -68,6 +71,7 @@ pub fn main() -> ExitCode {
         Command::SimDrive(a) => sim_drive::run(a),
         Command::Canopen(a) => canopen_tool::run(a),
         Command::ModbusSim(a) => modbus_sim::run(a),
+        Command::Plc(a) => plc::run(a),
     };
     match result {
         Ok(code) => code,

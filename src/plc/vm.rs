@@ -1,0 +1,640 @@
+//! The bytecode and its interpreter: a stack machine over 64-bit cells. Memory is one flat
+//! array of cells laid out by the compiler; a POU's own variables are addressed relative to
+//! its base (the instance or frame), globals absolutely. Every loop iteration is charged
+//! against the scan's instruction budget, so a runaway loop ends in a fault at its line
+//! instead of an overrun.
+
+use super::stdfb::StdFb;
+use super::types::IntKind;
+
+/// Comparison operators.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cmp {
+    /// `=`
+    Eq,
+    /// `<>`
+    Ne,
+    /// `<`
+    Lt,
+    /// `<=`
+    Le,
+    /// `>`
+    Gt,
+    /// `>=`
+    Ge,
+}
+
+impl Cmp {
+    #[inline(always)]
+    fn test<T: PartialOrd>(self, a: T, b: T) -> bool {
+        match self {
+            Cmp::Eq => a == b,
+            Cmp::Ne => a != b,
+            Cmp::Lt => a < b,
+            Cmp::Le => a <= b,
+            Cmp::Gt => a > b,
+            Cmp::Ge => a >= b,
+        }
+    }
+}
+
+/// One-argument floating point functions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MathFn {
+    /// ABS
+    Abs,
+    /// SQRT
+    Sqrt,
+    /// LN
+    Ln,
+    /// LOG (base 10)
+    Log,
+    /// EXP
+    Exp,
+    /// SIN
+    Sin,
+    /// COS
+    Cos,
+    /// TAN
+    Tan,
+    /// ASIN
+    Asin,
+    /// ACOS
+    Acos,
+    /// ATAN
+    Atan,
+}
+
+/// Bit shifts and rotations on a bit string of a given width.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shift {
+    /// SHL
+    Shl,
+    /// SHR
+    Shr,
+    /// ROL
+    Rol,
+    /// ROR
+    Ror,
+}
+
+/// Binary operations that fuse with their right operand (see `peephole`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Bin {
+    /// Integer add.
+    Add(IntKind),
+    /// Integer subtract.
+    Sub(IntKind),
+    /// Integer multiply.
+    Mul(IntKind),
+    /// Signed comparison.
+    CmpI(Cmp),
+    /// Unsigned comparison.
+    CmpU(Cmp),
+    /// Float comparison.
+    CmpF(Cmp),
+    /// Bitwise AND.
+    And,
+    /// Bitwise OR.
+    Or,
+    /// Bitwise XOR.
+    Xor,
+    /// Float add.
+    FAdd(bool),
+    /// Float subtract.
+    FSub(bool),
+    /// Float multiply.
+    FMul(bool),
+    /// Signed min/max.
+    MinMaxI(bool),
+    /// Float min/max.
+    MinMaxF(bool),
+}
+
+impl Bin {
+    /// `a op b`, exactly as the unfused instruction computes it.
+    #[inline(always)]
+    pub fn apply(self, a: u64, b: u64) -> u64 {
+        match self {
+            Bin::Add(k) => k.wrap((a as i64).wrapping_add(b as i64)) as u64,
+            Bin::Sub(k) => k.wrap((a as i64).wrapping_sub(b as i64)) as u64,
+            Bin::Mul(k) => k.wrap((a as i64).wrapping_mul(b as i64)) as u64,
+            Bin::CmpI(c) => c.test(a as i64, b as i64) as u64,
+            Bin::CmpU(c) => c.test(a, b) as u64,
+            Bin::CmpF(c) => c.test(f(a), f(b)) as u64,
+            Bin::And => a & b,
+            Bin::Or => a | b,
+            Bin::Xor => a ^ b,
+            Bin::FAdd(s) => fb(f(a) + f(b), s),
+            Bin::FSub(s) => fb(f(a) - f(b), s),
+            Bin::FMul(s) => fb(f(a) * f(b), s),
+            Bin::MinMaxI(max) => {
+                if ((a as i64) < (b as i64)) != max {
+                    a
+                } else {
+                    b
+                }
+            }
+            Bin::MinMaxF(max) => {
+                if (f(a) < f(b)) != max {
+                    a
+                } else {
+                    b
+                }
+            }
+        }
+    }
+}
+
+/// Why a scan stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FaultKind {
+    /// Integer division or MOD by zero.
+    DivisionByZero,
+    /// An array index outside the declared bounds.
+    IndexOutOfRange,
+    /// MUX selector outside its inputs.
+    SelectorOutOfRange,
+    /// The per-scan instruction budget ran out (an endless or too long loop).
+    BudgetExhausted,
+    /// Calls nested deeper than the call stack (cannot happen without recursion, which the
+    /// compiler refuses; kept so a compiler bug faults instead of crashing).
+    CallDepth,
+}
+
+impl std::fmt::Display for FaultKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            FaultKind::DivisionByZero => "division by zero",
+            FaultKind::IndexOutOfRange => "array index out of range",
+            FaultKind::SelectorOutOfRange => "MUX selector out of range",
+            FaultKind::BudgetExhausted => "instruction budget exhausted",
+            FaultKind::CallDepth => "call stack exhausted",
+        })
+    }
+}
+
+/// An instruction. Cells hold BOOL as 0/1, integers sign- or zero-extended, TIME in ns and
+/// REAL/LREAL as `f64` bits (REAL values rounded to single precision).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Op {
+    /// Push a constant cell.
+    Push(u64),
+    /// Push `mem[base + o]`.
+    LoadL(u32),
+    /// Push `mem[a]`.
+    LoadG(u32),
+    /// Pop into `mem[base + o]`.
+    StoreL(u32),
+    /// Pop into `mem[a]`.
+    StoreG(u32),
+    /// Push the address `base + o`.
+    AddrL(u32),
+    /// Push the address `a`.
+    AddrG(u32),
+    /// Pop an address, push `mem[addr + k]`.
+    LoadInd(u32),
+    /// Pop a value and an address, store at `addr + k`.
+    StoreInd(u32),
+    /// Pop a source and a destination address, copy `n` cells.
+    Copy(u32),
+    /// Pop an index and an address; push `addr + (index - lo) * stride`, fault outside
+    /// `lo .. lo + len`.
+    Index {
+        /// Lower bound.
+        lo: i32,
+        /// Number of elements.
+        len: u32,
+        /// Cells per element.
+        stride: u32,
+    },
+    /// Discard the top.
+    Pop,
+    /// Duplicate the top.
+    Dup,
+    /// Replace the top with its bit `n`.
+    GetBit(u8),
+    /// Pop a BOOL into bit `n` of `mem[base + o]`.
+    SetBitL(u32, u8),
+    /// Pop a BOOL into bit `n` of `mem[a]`.
+    SetBitG(u32, u8),
+    /// Pop a BOOL and an address; set bit `n` of `mem[addr + k]`.
+    SetBitInd(u32, u8),
+    /// Integer add, wrapped to the kind.
+    Add(IntKind),
+    /// Integer subtract.
+    Sub(IntKind),
+    /// Integer multiply.
+    Mul(IntKind),
+    /// Integer divide (truncating; faults on zero).
+    Div(IntKind),
+    /// Integer remainder (sign of the dividend; faults on zero).
+    Mod(IntKind),
+    /// Integer negate.
+    Neg(IntKind),
+    /// Signed (or BOOL/TIME/enum) comparison.
+    CmpI(Cmp),
+    /// Unsigned 64-bit comparison (ULINT, LWORD).
+    CmpU(Cmp),
+    /// Floating comparison.
+    CmpF(Cmp),
+    /// Bitwise AND (BOOL and bit strings).
+    And,
+    /// Bitwise OR.
+    Or,
+    /// Bitwise XOR.
+    Xor,
+    /// Bitwise NOT within the kind's width (BOOL uses `Byte`-like width 1 via `NotB`).
+    NotW(IntKind),
+    /// Boolean NOT.
+    NotB,
+    /// Float add; `true` rounds to single precision.
+    FAdd(bool),
+    /// Float subtract.
+    FSub(bool),
+    /// Float multiply.
+    FMul(bool),
+    /// Float divide (IEEE: x/0 is ±inf).
+    FDiv(bool),
+    /// Float power.
+    FPow(bool),
+    /// Float negate.
+    FNeg,
+    /// Float function.
+    Math(MathFn, bool),
+    /// Wrap an integer to a kind (narrowing or sign change).
+    Wrap(IntKind),
+    /// Signed integer to float.
+    IToF(bool),
+    /// Unsigned 64-bit integer to float.
+    UToF(bool),
+    /// Float to integer, rounded half away from zero, saturated at 64 bits, wrapped.
+    FToI(IntKind),
+    /// Float to integer, truncated toward zero.
+    FTrunc(IntKind),
+    /// Round an LREAL to REAL.
+    FSingle,
+    /// Integer absolute value, wrapped.
+    AbsI(IntKind),
+    /// Pop b, a; push min (or max when `true`), signed.
+    MinMaxI(bool),
+    /// Unsigned min/max.
+    MinMaxU(bool),
+    /// Float min/max.
+    MinMaxF(bool),
+    /// Pop in1, in0, g; push `g ? in1 : in0`.
+    Sel,
+    /// Pop `n` inputs and a selector k; push input k, fault if out of range.
+    Mux(u32),
+    /// Pop n, x; shift or rotate x by n within the kind's width.
+    Shift(Shift, IntKind),
+    /// Jump.
+    Jmp(u32),
+    /// Pop; jump if zero.
+    Jz(u32),
+    /// Pop; jump if not zero.
+    Jnz(u32),
+    /// Call user code at `entry` with base `base + o` (`rel`) or `o`.
+    Call {
+        /// First instruction.
+        entry: u32,
+        /// Offset or address of the callee's base.
+        at: u32,
+        /// `at` is relative to the caller's base.
+        rel: bool,
+    },
+    /// Pop a base address and call user code at the entry.
+    CallInd(u32),
+    /// Run a standard block on the instance at `base + o` (`rel`) or `o`.
+    Std {
+        /// Which block.
+        fb: StdFb,
+        /// Offset or address of the instance.
+        at: u32,
+        /// `at` is relative to the caller's base.
+        rel: bool,
+    },
+    /// Pop an instance address and run a standard block on it.
+    StdInd(StdFb),
+    /// Return from user code.
+    Ret,
+    /// Fused `LoadL(o)` + binary operation: the right operand is `mem[base + o]`.
+    BinL(Bin, u32),
+    /// Fused `Push(c)` + binary operation.
+    BinC(Bin, u64),
+    /// Fused `LoadL(src)` + `StoreL(dst)`.
+    MovL(u32, u32),
+    /// Fused `Push(c)` + `StoreL(dst)`.
+    SetL(u32, u64),
+}
+
+/// The machine state of one scan, borrowed from the program's preallocated storage.
+pub struct Vm<'a> {
+    /// Code.
+    pub ops: &'a [Op],
+    /// Memory cells.
+    pub mem: &'a mut [u64],
+    /// Operand stack.
+    pub stack: &'a mut [u64],
+    /// Return stack: (return pc, caller base).
+    pub frames: &'a mut [(u32, u32)],
+    /// Scan time stamp (ns).
+    pub now: i64,
+    /// Budget left this scan: each loop iteration costs its length in instructions (a
+    /// cheap, deterministic bound; straight-line code and calls are bounded by the code).
+    pub fuel: u64,
+}
+
+#[inline(always)]
+fn f(v: u64) -> f64 {
+    f64::from_bits(v)
+}
+#[inline(always)]
+fn fb(v: f64, single: bool) -> u64 {
+    if single {
+        (v as f32 as f64).to_bits()
+    } else {
+        v.to_bits()
+    }
+}
+
+impl Vm<'_> {
+    /// Runs the code at `entry` with base `base` until its `Ret`. On a fault returns the
+    /// kind and the pc of the faulting instruction.
+    pub fn run(&mut self, entry: u32, base: u32) -> Result<(), (FaultKind, u32)> {
+        let ops = self.ops;
+        let mut pc = entry as usize;
+        let mut base = base as usize;
+        let mut sp = 0usize;
+        let mut depth = 0usize;
+        let mut fuel = self.fuel;
+        let st = &mut *self.stack;
+        let mem = &mut *self.mem;
+        macro_rules! pop {
+            () => {{
+                sp -= 1;
+                st[sp]
+            }};
+        }
+        macro_rules! push {
+            ($v:expr) => {{
+                let v = $v;
+                st[sp] = v;
+                sp += 1;
+            }};
+        }
+        macro_rules! bin {
+            (|$a:ident, $b:ident| $e:expr) => {{
+                let $b = st[sp - 1];
+                let $a = st[sp - 2];
+                sp -= 1;
+                st[sp - 1] = $e;
+            }};
+        }
+        macro_rules! fault {
+            ($k:expr) => {{
+                self.fuel = fuel;
+                return Err(($k, pc as u32));
+            }};
+        }
+        // Loops are charged at their backward jump with the instructions of one iteration,
+        // so straight-line code costs nothing extra and a fault names the loop's line.
+        macro_rules! charge {
+            ($t:expr) => {{
+                let t = $t as usize;
+                if t < pc {
+                    let cost = (pc - t) as u64;
+                    if fuel < cost {
+                        pc -= 1;
+                        fault!(FaultKind::BudgetExhausted);
+                    }
+                    fuel -= cost;
+                }
+            }};
+        }
+        macro_rules! call {
+            ($entry:expr, $nb:expr) => {{
+                if depth == self.frames.len() {
+                    pc -= 1;
+                    fault!(FaultKind::CallDepth);
+                }
+                self.frames[depth] = (pc as u32, base as u32);
+                depth += 1;
+                base = $nb;
+                pc = $entry as usize;
+            }};
+        }
+        loop {
+            let op = ops[pc];
+            pc += 1;
+            match op {
+                Op::Push(v) => push!(v),
+                Op::BinL(b, o) => st[sp - 1] = b.apply(st[sp - 1], mem[base + o as usize]),
+                Op::BinC(b, c) => st[sp - 1] = b.apply(st[sp - 1], c),
+                Op::MovL(s, d) => mem[base + d as usize] = mem[base + s as usize],
+                Op::SetL(d, c) => mem[base + d as usize] = c,
+                Op::LoadL(o) => push!(mem[base + o as usize]),
+                Op::LoadG(a) => push!(mem[a as usize]),
+                Op::StoreL(o) => mem[base + o as usize] = pop!(),
+                Op::StoreG(a) => mem[a as usize] = pop!(),
+                Op::AddrL(o) => push!((base + o as usize) as u64),
+                Op::AddrG(a) => push!(a as u64),
+                Op::LoadInd(k) => {
+                    let a = st[sp - 1] as usize + k as usize;
+                    st[sp - 1] = mem[a];
+                }
+                Op::StoreInd(k) => {
+                    let v = pop!();
+                    let a = pop!() as usize + k as usize;
+                    mem[a] = v;
+                }
+                Op::Copy(n) => {
+                    let src = pop!() as usize;
+                    let dst = pop!() as usize;
+                    mem.copy_within(src..src + n as usize, dst);
+                }
+                Op::Index { lo, len, stride } => {
+                    let i = (pop!() as i64).wrapping_sub(lo as i64);
+                    if i < 0 || i >= len as i64 {
+                        pc -= 1;
+                        fault!(FaultKind::IndexOutOfRange);
+                    }
+                    st[sp - 1] += i as u64 * stride as u64;
+                }
+                Op::Pop => sp -= 1,
+                Op::Dup => push!(st[sp - 1]),
+                Op::GetBit(n) => st[sp - 1] = (st[sp - 1] >> n) & 1,
+                Op::SetBitL(o, n) => {
+                    let v = pop!();
+                    let c = &mut mem[base + o as usize];
+                    *c = (*c & !(1 << n)) | ((v & 1) << n);
+                }
+                Op::SetBitG(a, n) => {
+                    let v = pop!();
+                    let c = &mut mem[a as usize];
+                    *c = (*c & !(1 << n)) | ((v & 1) << n);
+                }
+                Op::SetBitInd(k, n) => {
+                    let v = pop!();
+                    let a = pop!() as usize + k as usize;
+                    let c = &mut mem[a];
+                    *c = (*c & !(1 << n)) | ((v & 1) << n);
+                }
+                Op::Add(k) => bin!(|a, b| k.wrap((a as i64).wrapping_add(b as i64)) as u64),
+                Op::Sub(k) => bin!(|a, b| k.wrap((a as i64).wrapping_sub(b as i64)) as u64),
+                Op::Mul(k) => bin!(|a, b| k.wrap((a as i64).wrapping_mul(b as i64)) as u64),
+                Op::Div(k) | Op::Mod(k) => {
+                    let (a, b) = (st[sp - 2], st[sp - 1]);
+                    if b == 0 {
+                        pc -= 1;
+                        fault!(FaultKind::DivisionByZero);
+                    }
+                    let div = matches!(op, Op::Div(_));
+                    let r = if k.bits() == 64 && !k.signed() {
+                        if div {
+                            a / b
+                        } else {
+                            a % b
+                        }
+                    } else if div {
+                        (a as i64).wrapping_div(b as i64) as u64
+                    } else {
+                        (a as i64).wrapping_rem(b as i64) as u64
+                    };
+                    sp -= 1;
+                    st[sp - 1] = k.wrap(r as i64) as u64;
+                }
+                Op::Neg(k) => st[sp - 1] = k.wrap((st[sp - 1] as i64).wrapping_neg()) as u64,
+                Op::CmpI(c) => bin!(|a, b| c.test(a as i64, b as i64) as u64),
+                Op::CmpU(c) => bin!(|a, b| c.test(a, b) as u64),
+                Op::CmpF(c) => bin!(|a, b| c.test(f(a), f(b)) as u64),
+                Op::And => bin!(|a, b| a & b),
+                Op::Or => bin!(|a, b| a | b),
+                Op::Xor => bin!(|a, b| a ^ b),
+                Op::NotW(k) => st[sp - 1] = k.wrap(!(st[sp - 1] as i64)) as u64,
+                Op::NotB => st[sp - 1] ^= 1,
+                Op::FAdd(s) => bin!(|a, b| fb(f(a) + f(b), s)),
+                Op::FSub(s) => bin!(|a, b| fb(f(a) - f(b), s)),
+                Op::FMul(s) => bin!(|a, b| fb(f(a) * f(b), s)),
+                Op::FDiv(s) => bin!(|a, b| fb(f(a) / f(b), s)),
+                Op::FPow(s) => bin!(|a, b| fb(f(a).powf(f(b)), s)),
+                Op::FNeg => st[sp - 1] = (-f(st[sp - 1])).to_bits(),
+                Op::Math(m, s) => {
+                    let x = f(st[sp - 1]);
+                    let y = match m {
+                        MathFn::Abs => x.abs(),
+                        MathFn::Sqrt => x.sqrt(),
+                        MathFn::Ln => x.ln(),
+                        MathFn::Log => x.log10(),
+                        MathFn::Exp => x.exp(),
+                        MathFn::Sin => x.sin(),
+                        MathFn::Cos => x.cos(),
+                        MathFn::Tan => x.tan(),
+                        MathFn::Asin => x.asin(),
+                        MathFn::Acos => x.acos(),
+                        MathFn::Atan => x.atan(),
+                    };
+                    st[sp - 1] = fb(y, s);
+                }
+                Op::Wrap(k) => st[sp - 1] = k.wrap(st[sp - 1] as i64) as u64,
+                Op::IToF(s) => st[sp - 1] = fb(st[sp - 1] as i64 as f64, s),
+                Op::UToF(s) => st[sp - 1] = fb(st[sp - 1] as f64, s),
+                Op::FToI(k) => st[sp - 1] = k.wrap(f(st[sp - 1]).round() as i64) as u64,
+                Op::FTrunc(k) => st[sp - 1] = k.wrap(f(st[sp - 1]).trunc() as i64) as u64,
+                Op::FSingle => st[sp - 1] = fb(f(st[sp - 1]), true),
+                Op::AbsI(k) => st[sp - 1] = k.wrap((st[sp - 1] as i64).wrapping_abs()) as u64,
+                Op::MinMaxI(max) => {
+                    bin!(|a, b| if ((a as i64) < (b as i64)) != max {
+                        a
+                    } else {
+                        b
+                    })
+                }
+                Op::MinMaxU(max) => bin!(|a, b| if (a < b) != max { a } else { b }),
+                Op::MinMaxF(max) => bin!(|a, b| if (f(a) < f(b)) != max { a } else { b }),
+                Op::Sel => {
+                    let in1 = pop!();
+                    let in0 = pop!();
+                    st[sp - 1] = if st[sp - 1] != 0 { in1 } else { in0 };
+                }
+                Op::Mux(n) => {
+                    let k = st[sp - 1 - n as usize] as i64;
+                    if k < 0 || k >= n as i64 {
+                        pc -= 1;
+                        fault!(FaultKind::SelectorOutOfRange);
+                    }
+                    let v = st[sp - n as usize + k as usize];
+                    sp -= n as usize;
+                    st[sp - 1] = v;
+                }
+                Op::Shift(s, k) => {
+                    let n = pop!() as u32;
+                    let w = k.bits();
+                    let x = st[sp - 1] & (u64::MAX >> (64 - w));
+                    let r = match s {
+                        Shift::Shl if n >= w => 0,
+                        Shift::Shr if n >= w => 0,
+                        Shift::Shl => x << n,
+                        Shift::Shr => x >> n,
+                        Shift::Rol | Shift::Ror => {
+                            let n = if s == Shift::Rol {
+                                n % w
+                            } else {
+                                (w - n % w) % w
+                            };
+                            if n == 0 {
+                                x
+                            } else {
+                                (x << n) | (x >> (w - n))
+                            }
+                        }
+                    };
+                    st[sp - 1] = k.wrap(r as i64) as u64;
+                }
+                Op::Jmp(t) => {
+                    charge!(t);
+                    pc = t as usize;
+                }
+                Op::Jz(t) => {
+                    if pop!() == 0 {
+                        charge!(t);
+                        pc = t as usize;
+                    }
+                }
+                Op::Jnz(t) => {
+                    if pop!() != 0 {
+                        pc = t as usize;
+                    }
+                }
+                Op::Call { entry, at, rel } => {
+                    let nb = if rel { base + at as usize } else { at as usize };
+                    call!(entry, nb);
+                }
+                Op::CallInd(entry) => {
+                    let nb = pop!() as usize;
+                    call!(entry, nb);
+                }
+                Op::Std { fb, at, rel } => {
+                    let a = if rel { base + at as usize } else { at as usize };
+                    let n = fb.members().len();
+                    fb.exec(&mut mem[a..a + n], self.now);
+                }
+                Op::StdInd(fb) => {
+                    let a = pop!() as usize;
+                    let n = fb.members().len();
+                    fb.exec(&mut mem[a..a + n], self.now);
+                }
+                Op::Ret => {
+                    if depth == 0 {
+                        self.fuel = fuel;
+                        return Ok(());
+                    }
+                    depth -= 1;
+                    let (rpc, rb) = self.frames[depth];
+                    pc = rpc as usize;
+                    base = rb as usize;
+                }
+            }
+        }
+    }
+}
