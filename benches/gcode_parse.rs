@@ -15,7 +15,7 @@ fn program(lines: usize) -> String {
     let (mut x, mut y) = (0.0f64, 50.0f64);
     while i < lines {
         let t = i as f64;
-        if i % 5000 == 0 {
+        if i.is_multiple_of(5000) {
             s.push_str("G98 G81 X10 Y10 Z-3 R1 F200\nX20\nX30\nG80\nG1 Z-1 F1500\n");
             i += 5;
             continue;

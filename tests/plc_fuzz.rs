@@ -71,7 +71,7 @@ fn mutate(src: &str, rng: &mut Rng) -> String {
     let mut out: Vec<char> = chars.clone();
     for _ in 0..1 + rng.next() % 3 {
         let at = rng.next() % (out.len() + 1);
-        if rng.next() % 2 == 0 && at < out.len() {
+        if rng.next().is_multiple_of(2) && at < out.len() {
             let len = 1 + rng.next() % 12;
             out.drain(at..(at + len).min(out.len()));
         } else {

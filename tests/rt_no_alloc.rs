@@ -147,7 +147,7 @@ impl Task for Full {
         if let Some(o) = &mut self.output {
             o.set(self.x);
         }
-        if ctx.cycle % 2 == 0 {
+        if ctx.cycle.is_multiple_of(2) {
             if let Some(e) = &mut self.ev {
                 e.emit(self.x);
             }

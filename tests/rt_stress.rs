@@ -47,7 +47,7 @@ fn one_writer_many_readers_never_torn_never_backwards() {
         i += 1;
         w.set(Block([i; 8]));
         // A late reader registering mid-stream sees a recent, whole value.
-        if i % 50_000 == 0 {
+        if i.is_multiple_of(50_000) {
             let mut r = obj.reader().unwrap();
             let (st, v) = r.read();
             assert_eq!(st, FlowStatus::NewData);

@@ -165,7 +165,7 @@ fn encode(value: &str, ty: ValueType) -> anyhow::Result<Vec<u8>> {
         ValueType::Str => value.as_bytes().to_vec(),
         ValueType::Hex => {
             let h: String = value.chars().filter(|c| !c.is_whitespace()).collect();
-            if h.len() % 2 != 0 {
+            if !h.len().is_multiple_of(2) {
                 bail!("{value:?}: an odd number of hex digits");
             }
             (0..h.len())

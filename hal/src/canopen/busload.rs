@@ -179,9 +179,9 @@ struct Bitrate(u32);
 impl fmt::Display for Bitrate {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let b = self.0;
-        if b >= 1_000_000 && b % 1_000_000 == 0 {
+        if b >= 1_000_000 && b.is_multiple_of(1_000_000) {
             write!(f, "{} Mbit/s", b / 1_000_000)
-        } else if b >= 1000 && b % 1000 == 0 {
+        } else if b >= 1000 && b.is_multiple_of(1000) {
             write!(f, "{} kbit/s", b / 1000)
         } else {
             write!(f, "{b} bit/s")
@@ -194,7 +194,7 @@ struct Rate(u32);
 impl fmt::Display for Rate {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let r = self.0;
-        if r >= 1000 && r % 1000 == 0 {
+        if r >= 1000 && r.is_multiple_of(1000) {
             write!(f, "{} kHz", r / 1000)
         } else {
             write!(f, "{r} Hz")

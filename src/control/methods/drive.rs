@@ -73,7 +73,7 @@ fn hex(data: &[u8]) -> String {
 
 fn unhex(s: &str) -> Result<Vec<u8>, ControlError> {
     let bad = || ControlError::params(format!("data {s:?}: not an even number of hex digits"));
-    if s.len() % 2 != 0 {
+    if !s.len().is_multiple_of(2) {
         return Err(bad());
     }
     (0..s.len())

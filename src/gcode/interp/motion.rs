@@ -575,7 +575,7 @@ impl Interp<'_> {
 }
 
 fn fmt_g(m: u16) -> String {
-    if m % 10 == 0 {
+    if m.is_multiple_of(10) {
         format!("{}", m / 10)
     } else {
         format!("{}.{}", m / 10, m % 10)

@@ -245,7 +245,7 @@ impl DriveSlave {
             let p = self.core.tpdo[k];
             let due = match p.transmission {
                 0 => true,
-                n @ 1..=240 => self.sync_count % u32::from(n) == 0,
+                n @ 1..=240 => self.sync_count.is_multiple_of(u32::from(n)),
                 _ => false,
             };
             if p.valid() && due {
