@@ -296,19 +296,9 @@ pub fn fold_from(
                 };
                 let tol_mm = cfg.arc_chord_tolerance_mm.min(st.blend_tolerance_mm(cfg));
                 let pts = arc.chord_points(tol_mm / st.scale());
-                // Total arc length for inverse time: the whole arc takes 60/F.
-                let mut total_mm = 0.0;
-                let mut prev = st.pos_mm;
                 let machine: Vec<[f64; NUM_AXES]> = pts.iter().map(|p| st.to_machine(p)).collect();
-                for m in &machine {
-                    total_mm += Move {
-                        start_mm: prev,
-                        end_mm: *m,
-                        ..blank()
-                    }
-                    .feed_length_mm();
-                    prev = *m;
-                }
+                // Total arc length for inverse time: the whole arc takes 60/F.
+                let total_mm = polyline_feed_length_mm(st.pos_mm, &machine);
                 st.arc_id += 1;
                 let feed = st.feed_mm_s(total_mm, false, line)?;
                 for m in machine {
@@ -341,17 +331,7 @@ pub fn fold_from(
                         st.to_machine(&e)
                     })
                     .collect();
-                let mut total_mm = 0.0;
-                let mut prev = st.pos_mm;
-                for m in &machine {
-                    total_mm += Move {
-                        start_mm: prev,
-                        end_mm: *m,
-                        ..blank()
-                    }
-                    .feed_length_mm();
-                    prev = *m;
-                }
+                let total_mm = polyline_feed_length_mm(st.pos_mm, &machine);
                 st.arc_id += 1;
                 let feed = match inverse_time {
                     // G93: the whole curve takes 1/F minutes.
@@ -480,6 +460,22 @@ fn blank() -> Move {
 /// Appends a straight move from the current position to `end` (skipping zero-length ones).
 /// `arc_feed_mm_s` > 0 gives the feed of an arc chord (computed over the whole arc).
 #[allow(clippy::too_many_arguments)]
+/// Feed length of the chords from `start` through `points` (what inverse time divides by).
+fn polyline_feed_length_mm(start: [f64; NUM_AXES], points: &[[f64; NUM_AXES]]) -> f64 {
+    let mut prev = start;
+    let mut total = 0.0;
+    for m in points {
+        total += Move {
+            start_mm: prev,
+            end_mm: *m,
+            ..blank()
+        }
+        .feed_length_mm();
+        prev = *m;
+    }
+    total
+}
+
 fn push_line(
     out: &mut Folded,
     st: &FoldState,
