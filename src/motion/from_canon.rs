@@ -459,7 +459,6 @@ fn blank() -> Move {
 
 /// Appends a straight move from the current position to `end` (skipping zero-length ones).
 /// `arc_feed_mm_s` > 0 gives the feed of an arc chord (computed over the whole arc).
-#[allow(clippy::too_many_arguments)]
 /// Feed length of the chords from `start` through `points` (what inverse time divides by).
 fn polyline_feed_length_mm(start: [f64; NUM_AXES], points: &[[f64; NUM_AXES]]) -> f64 {
     let mut prev = start;
@@ -476,6 +475,7 @@ fn polyline_feed_length_mm(start: [f64; NUM_AXES], points: &[[f64; NUM_AXES]]) -
     total
 }
 
+#[allow(clippy::too_many_arguments)]
 fn push_line(
     out: &mut Folded,
     st: &FoldState,
