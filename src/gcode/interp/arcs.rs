@@ -63,18 +63,7 @@ impl Interp<'_> {
         if r.is_some() && ijk {
             return Err(self.err(col, "Mixed radius-ijk format for arc"));
         }
-        match self.s.feed_mode {
-            FeedMode::InverseTime => {
-                if !b.has(b'f') {
-                    return Err(self.err(col, "F word missing with inverse time arc move"));
-                }
-            }
-            _ => {
-                if self.s.feed_rate == 0.0 {
-                    return Err(self.err(col, "Cannot make arc with zero feed rate"));
-                }
-            }
-        }
+        self.require_arc_feed(b, col)?;
         let (a1, a2, _) = plane_axes(plane);
         let (words, forbidden, msg_missing, msg_forbidden) = match plane {
             Plane::Xz => (
@@ -280,6 +269,21 @@ fn find_turn(x1: f64, y1: f64, cx: f64, cy: f64, turn: i32, x2: f64, y2: f64) ->
             alpha += 2.0 * PI;
         }
         (beta - alpha) + f64::from(turn + 1) * 2.0 * PI
+    }
+}
+
+impl Interp<'_> {
+    /// rs274's feed checks of an arc (and of a G5/G5.1 spline, which it checks as an arc):
+    /// an F word on the line in G93, a feed rate otherwise.
+    pub(super) fn require_arc_feed(&self, b: &Block, col: u32) -> Result<(), GcodeError> {
+        if self.s.feed_mode == FeedMode::InverseTime {
+            if !b.has(b'f') {
+                return Err(self.err(col, "F word missing with inverse time arc move"));
+            }
+        } else if self.s.feed_rate == 0.0 {
+            return Err(self.err(col, "Cannot make arc with zero feed rate"));
+        }
+        Ok(())
     }
 }
 

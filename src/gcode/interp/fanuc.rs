@@ -77,12 +77,7 @@ impl Interp<'_> {
                 "Parameter settings on an M98 line are not supported: set them on a line before",
             ));
         }
-        let mut b = Block::default();
-        for w in &line.words[1..] {
-            self.loc.col = w.col;
-            let v = expr::eval(&w.value, &*self).map_err(|m| self.err(w.col, m))?;
-            b.add(w.letter, v, w.col).map_err(|(c, m)| self.err(c, m))?;
-        }
+        let mut b = self.block_of(&line.words[1..])?;
         let word = |b: &Block, c: u8| -> Result<Option<i64>, GcodeError> {
             match b.get(c) {
                 None => Ok(None),

@@ -489,6 +489,18 @@ impl<'a> Interp<'a> {
         r
     }
 
+    /// Evaluates `words` into a block of grouped codes and values (the words of an `M98`
+    /// line after the `M98` go through this too).
+    pub(super) fn block_of(&mut self, words: &[parser::Word]) -> Result<Block, GcodeError> {
+        let mut b = Block::default();
+        for w in words {
+            self.loc.col = w.col;
+            let v = expr::eval(&w.value, &*self).map_err(|m| self.err(w.col, m))?;
+            b.add(w.letter, v, w.col).map_err(|(c, m)| self.err(c, m))?;
+        }
+        Ok(b)
+    }
+
     fn exec_line(&mut self, line: &Line) -> Result<(), GcodeError> {
         if line.words.is_empty() && line.assigns.is_empty() && line.comments.is_empty() {
             return Ok(());
@@ -496,12 +508,7 @@ impl<'a> Interp<'a> {
         if self.fanuc_line(line)? {
             return Ok(());
         }
-        let mut b = Block::default();
-        for w in &line.words {
-            self.loc.col = w.col;
-            let v = expr::eval(&w.value, &*self).map_err(|m| self.err(w.col, m))?;
-            b.add(w.letter, v, w.col).map_err(|(c, m)| self.err(c, m))?;
-        }
+        let b = self.block_of(&line.words)?;
         let mut sets: Vec<(Result<usize, Box<str>>, f64)> = Vec::with_capacity(line.assigns.len());
         for a in &line.assigns {
             let t = match &a.target {

@@ -130,13 +130,7 @@ impl Interp<'_> {
         if !b.has(b'x') && !b.has(b'y') {
             return Err(self.err(col, "All axes missing with motion code"));
         }
-        let inverse = self.s.feed_mode == FeedMode::InverseTime;
-        if inverse && !b.has(b'f') {
-            return Err(self.err(col, "F word missing with inverse time arc move"));
-        }
-        if !inverse && self.s.feed_rate == 0.0 {
-            return Err(self.err(col, "Cannot make arc with zero feed rate"));
-        }
+        self.require_arc_feed(b, col)?;
         let (i, j) = (b.get(b'i'), b.get(b'j'));
         let end = self.find_ends(b);
         let start = [self.s.pos[0], self.s.pos[1]];
