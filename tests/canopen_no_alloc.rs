@@ -7,7 +7,7 @@
 //! stop over the controlword). Start-up (SDO, allowed to allocate) runs before.
 #![allow(clippy::unwrap_used)]
 
-use hytask::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
+use hytask::gcode::{SourceLoc, NUM_AXES};
 use hytask::machine::runtime::{build, Built};
 use hytask::machine::servo::machine_task::MachineCmd;
 use hytask::machine::servo::{ports, AxisFeedback, QueueItem};
@@ -82,17 +82,7 @@ fn a_servo_cycle_with_canopen_axes_allocates_nothing() {
         line: 1,
         col: 1,
     };
-    let canon = [
-        Canon {
-            loc: loc.clone(),
-            cmd: CanonCmd::SetFeedRate(3000.0),
-        },
-        Canon {
-            loc,
-            cmd: CanonCmd::StraightFeed(end),
-        },
-    ];
-    let plan = hytask::motion::plan_from(&canon, &motion_cfg, start).unwrap();
+    let plan = hytask::motion::plan_straight_feed(start, end, 3000.0, loc, &motion_cfg).unwrap();
     for &item in &plan.items {
         queue.try_push(QueueItem { job: 1, item }).unwrap();
     }

@@ -333,17 +333,7 @@ fn a_soft_limit_trip_and_its_stop_allocate_nothing() {
         line: 1,
         col: 1,
     };
-    let canon = [
-        Canon {
-            loc: loc.clone(),
-            cmd: CanonCmd::SetFeedRate(600.0),
-        },
-        Canon {
-            loc,
-            cmd: CanonCmd::StraightFeed(end),
-        },
-    ];
-    let plan = hytask::motion::plan_from(&canon, &motion_cfg, start).unwrap();
+    let plan = hytask::motion::plan_straight_feed(start, end, 600.0, loc, &motion_cfg).unwrap();
     for &item in &plan.items {
         queue.try_push(QueueItem { job: 1, item }).unwrap();
     }

@@ -27,7 +27,7 @@ use super::servo::monitor_task::MonitorTask;
 use super::servo::status::StatusSnapshot;
 use super::servo::{ports, FaultEvent, JobEvent, MachineSnapshot, ModeEvent, QueueItem, Setpoints};
 use crate::config::{ConfigError, IoKind, MachineConfig};
-use crate::gcode::{Canon, CanonCmd, InterpOptions, SourceLoc, NUM_AXES};
+use crate::gcode::{InterpOptions, SourceLoc, NUM_AXES};
 use crate::motion::{self, MotionConfig, AXIS_NAMES};
 use crate::rt::deploy::Runtime;
 use crate::rt::prelude::{
@@ -1132,22 +1132,12 @@ impl MachineApi for Machine {
             line: 1,
             col: 1,
         };
-        let canon = [
-            Canon {
-                loc: loc.clone(),
-                cmd: CanonCmd::SetFeedRate(speed * 60.0),
-            },
-            Canon {
-                loc,
-                cmd: CanonCmd::StraightFeed(end),
-            },
-        ];
-        let plan = motion::plan_from(&canon, &self.motion_cfg, start)
+        let plan = motion::plan_straight_feed(start, end, speed * 60.0, loc, &self.motion_cfg)
             .map_err(|e| ApiError::Rejected(format!("jog: {e}")))?;
         let job = Arc::new(PreparedJob {
             name: "jog".into(),
             total_lines: 1,
-            commands: canon.len(),
+            commands: 2, // SetFeedRate + StraightFeed
             plan,
             probing: None,
             replay: None,

@@ -131,6 +131,28 @@ pub fn plan_from(
     plan_continue(canon, cfg, start_mm, from_canon::FoldState::new(cfg))
 }
 
+/// Plans one straight feed move from `start_mm` to `end_mm` at `feed_mm_min`, reported as
+/// coming from `loc`: what a jog is, and what tests queue by hand.
+pub fn plan_straight_feed(
+    start_mm: [f64; NUM_AXES],
+    end_mm: [f64; NUM_AXES],
+    feed_mm_min: f64,
+    loc: crate::gcode::SourceLoc,
+    cfg: &MotionConfig,
+) -> Result<Plan, PlanError> {
+    let canon = [
+        Canon {
+            loc: loc.clone(),
+            cmd: crate::gcode::CanonCmd::SetFeedRate(feed_mm_min),
+        },
+        Canon {
+            loc,
+            cmd: crate::gcode::CanonCmd::StraightFeed(end_mm),
+        },
+    ];
+    plan_from(&canon, cfg, start_mm)
+}
+
 /// Plans the next piece of a program interpreted in pieces (probing): like [`plan_from`],
 /// with the units, offsets and modes the previous piece ended with ([`Plan::end_state`]).
 pub fn plan_continue(

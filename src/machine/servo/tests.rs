@@ -131,17 +131,8 @@ impl Rig {
             line: 7,
             col: 1,
         };
-        let canon = [
-            Canon {
-                loc: loc.clone(),
-                cmd: CanonCmd::SetFeedRate(feed_mm_min),
-            },
-            Canon {
-                loc,
-                cmd: CanonCmd::StraightFeed(end),
-            },
-        ];
-        let plan = motion::plan_from(&canon, &self.motion_cfg, start).expect("plan");
+        let plan = motion::plan_straight_feed(start, end, feed_mm_min, loc, &self.motion_cfg)
+            .expect("plan");
         for &item in &plan.items {
             self.queue
                 .try_push(QueueItem { job, item })
