@@ -121,6 +121,10 @@ pub struct Machine {
     link_events: Mutex<Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>>,
 }
 
+mod events;
+pub use events::describe_trip;
+use events::{apply_progress, bridge_loop, internal_operation, Receivers};
+
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
@@ -136,59 +140,6 @@ fn sdo_error(e: crate::machine::servo::can_setup::SdoError) -> ApiError {
         }
         crate::machine::servo::can_setup::SdoError::Transfer(m) => ApiError::Failed(m),
     }
-}
-
-/// Words an operator can act on, for each trip.
-pub fn describe_trip(trip: &Trip, line: u32) -> String {
-    let at = if line > 0 {
-        format!(" (line {line})")
-    } else {
-        String::new()
-    };
-    match *trip {
-        Trip::Estop => format!("e-stop{at}"),
-        Trip::DriveFault { axis, code } => {
-            format!("axis {}: drive fault 0x{code:04X}{at}", axis_letter(axis))
-        }
-        Trip::FollowingError { axis, error, limit } => format!(
-            "axis {}: following error {error:.4} exceeds the limit {limit}{at}",
-            axis_letter(axis)
-        ),
-        Trip::SoftLimit { axis, position } => format!(
-            "axis {}: commanded position {position:.4} outside the soft limits{at}",
-            axis_letter(axis)
-        ),
-        Trip::LimitSwitch { axis } => format!("axis {}: limit switch hit{at}", axis_letter(axis)),
-        Trip::CommunicationLost { axis } if axis == usize::MAX => {
-            format!("I/O: communication lost, e-stop state unknown{at}")
-        }
-        Trip::CommunicationLost { axis } => {
-            format!("axis {}: drive communication lost{at}", axis_letter(axis))
-        }
-        Trip::SpindleNotAtSpeed => format!("spindle did not reach speed{at}"),
-        Trip::HomingFailed { axis } => format!("axis {}: homing failed", axis_letter(axis)),
-        Trip::Fieldbus { axis, fault } => format!("axis {}: {fault}{at}", axis_letter(axis)),
-        Trip::OverrunStorm { consecutive } => {
-            format!("servo thread overran its period {consecutive} times in a row{at}")
-        }
-    }
-}
-
-fn trip_json(trip: &Trip, line: u32) -> Value {
-    let (axis, value) = match *trip {
-        Trip::DriveFault { axis, code } => (Some(axis), Some(f64::from(code))),
-        Trip::Fieldbus { axis, fault } => (Some(axis), Some(f64::from(fault.code))),
-        Trip::FollowingError { axis, error, .. } => (Some(axis), Some(error)),
-        Trip::SoftLimit { axis, position } => (Some(axis), Some(position)),
-        _ => (trip.axis(), None),
-    };
-    json!({
-        "message": describe_trip(trip, line),
-        "kind": format!("{trip:?}").split([' ', '{']).next().unwrap_or(""),
-        "axis": axis.filter(|&a| a < NUM_AXES).map(|a| axis_letter(a).to_string()),
-        "value": value,
-        "line": line,
-    })
 }
 
 /// The machine's tasks, added to a deployment that is not configured yet, with the handles
@@ -774,168 +725,6 @@ impl Machine {
             topic: topic.into(),
             data,
         });
-    }
-}
-
-/// Forwards realtime events to subscribers, keeps the job book, publishes progress.
-/// The realtime side's event receivers, drained by the bridge thread and by `status`.
-struct Receivers {
-    mode: EventReceiver<ModeEvent>,
-    job: EventReceiver<JobEvent>,
-    fault: EventReceiver<FaultEvent>,
-}
-
-impl Machine {
-    /// Applies and forwards every pending realtime event. Called by the bridge every few
-    /// milliseconds, and by `status` after it read the snapshot: the machine task emits a
-    /// job's end in the same cycle as the mode change, so a status never shows the new mode
-    /// with the old job state.
-    fn pump_events(&self) {
-        let mut guard = lock(&self.receivers);
-        let Some(rx) = guard.as_mut() else {
-            return;
-        };
-        while let Some(e) = rx.mode.pop() {
-            let mode = serde_json::to_value(e.mode).unwrap_or(Value::Null);
-            tracing::info!("mode: {mode}");
-            self.publish("mode", json!({ "mode": mode }));
-        }
-        while let Some(f) = rx.fault.pop() {
-            let msg = describe_trip(&f.trip, f.line);
-            tracing::error!("fault: {msg}");
-            let mut book = lock(&self.book);
-            if book.faults.len() == FAULT_HISTORY {
-                book.faults.pop_front();
-            }
-            book.faults.push_back(msg);
-            drop(book);
-            self.publish("fault", trip_json(&f.trip, f.line));
-        }
-        while let Some(e) = rx.job.pop() {
-            handle_job_event(self, e);
-        }
-        drop(guard);
-        if let Some(links) = lock(&self.link_events).as_ref() {
-            while let Ok(e) = links.try_recv() {
-                self.publish("io", e.to_json());
-            }
-        }
-    }
-}
-
-fn bridge_loop(machine: std::sync::Weak<Machine>, stop: Arc<AtomicBool>) {
-    let mut last_progress = Instant::now();
-    while !stop.load(Ordering::Acquire) {
-        std::thread::sleep(Duration::from_millis(5));
-        let Some(m) = machine.upgrade() else {
-            return;
-        };
-        m.pump_events();
-        if last_progress.elapsed() >= Duration::from_millis(100) {
-            last_progress = Instant::now();
-            let running = lock(&m.book).active.is_some();
-            if running {
-                update_progress(&m);
-                let status = lock(&m.book).status.clone();
-                m.publish(
-                    "progress",
-                    serde_json::to_value(status).unwrap_or(Value::Null),
-                );
-            }
-        }
-    }
-}
-
-fn update_progress(m: &Machine) {
-    let sp = m.snapshot().setpoints;
-    let mut book = lock(&m.book);
-    let JobBook { active, status, .. } = &mut *book;
-    if let Some(a) = active {
-        apply_progress(status, a, &sp);
-    }
-}
-
-/// Job progress from the setpoints of one servo cycle: `status` applies the cycle it shows
-/// to its own copy, so its position and its progress never come from different cycles.
-fn apply_progress(status: &mut JobStatus, a: &ActiveJob, sp: &Setpoints) {
-    if sp.job != a.id || sp.tracking {
-        return;
-    }
-    let planned = a.job.plan.duration_s.max(1e-9);
-    status.line = sp.line;
-    status.progress = (sp.planned_time_done_s / planned).clamp(0.0, 1.0);
-    status.elapsed_s = a.started.elapsed().as_secs_f64();
-    status.distance_to_go_mm = status.distance_mm * (1.0 - status.progress);
-}
-
-/// Operations `call` refuses, with what to use instead. `machine.run` and
-/// `machine.continue` name a job by id and count the queue items its feeder pushed: called
-/// by hand they start a "job" nothing feeds, which holds the machine in `running` with a
-/// stale job status until an abort.
-fn internal_operation(task: &str, operation: &str) -> Option<&'static str> {
-    match (task, operation) {
-        ("machine", "run") => Some("job.run, mdi or jog"),
-        ("machine", "continue") => Some("job.run (a probing job continues by itself)"),
-        _ => None,
-    }
-}
-
-fn handle_job_event(m: &Machine, e: JobEvent) {
-    let mut book = lock(&m.book);
-    let (state, reason, end) = match e {
-        JobEvent::Started => ("running", None, false),
-        JobEvent::Held { line } => {
-            book.status.line = line;
-            ("holding", None, false)
-        }
-        JobEvent::Resumed => ("running", None, false),
-        JobEvent::Finished { line } => {
-            book.status.line = line;
-            ("done", None, true)
-        }
-        JobEvent::Aborted { line } => match book.active.as_ref().and_then(|a| a.error.clone()) {
-            Some(error) => ("failed", Some(error), true),
-            None => ("aborted", Some(format!("aborted at line {line}")), true),
-        },
-        JobEvent::Error { line, error } => ("failed", Some(format!("line {line}: {error}")), true),
-        JobEvent::Failed { line, trip } => ("failed", Some(describe_trip(&trip, line)), true),
-        JobEvent::Message { id, line } => {
-            let text = book
-                .active
-                .as_ref()
-                .and_then(|a| lock(&a.messages).get(id as usize).cloned())
-                .unwrap_or_default();
-            drop(book);
-            tracing::info!("message (line {line}): {text}");
-            m.publish("message", json!({"text": text, "line": line}));
-            return;
-        }
-    };
-    let manual = book.active.as_ref().is_some_and(|a| a.manual);
-    book.status.state = state.into();
-    if reason.is_some() {
-        book.status.reason = reason;
-    }
-    let mut finished = None;
-    if end {
-        if let Some(mut a) = book.active.take() {
-            a.cancel.store(true, Ordering::Release);
-            book.status.elapsed_s = a.started.elapsed().as_secs_f64();
-            if state == "done" {
-                book.status.progress = 1.0;
-                book.status.distance_to_go_mm = 0.0;
-            }
-            finished = a.feeder.take();
-        }
-    }
-    let status = book.status.clone();
-    drop(book);
-    if let Some(f) = finished {
-        let _ = f.join();
-    }
-    if !manual {
-        tracing::info!("job {}: {}", status.name, status.state);
-        m.publish("job", serde_json::to_value(status).unwrap_or(Value::Null));
     }
 }
 
