@@ -368,6 +368,19 @@ pub fn fold_from(
             }
             CanonCmd::StartSpindle(d) => out.steps.push(aux(AuxKind::SpindleStart(*d))),
             CanonCmd::StopSpindle => out.steps.push(aux(AuxKind::SpindleStop)),
+            // M19: the simulated spindle has no angular position loop; orienting stops it
+            // (the interpreter counts it as stopped too), and there is nothing to wait for.
+            CanonCmd::OrientSpindle { .. } => out.steps.push(aux(AuxKind::SpindleStop)),
+            CanonCmd::WaitOrientComplete(_) => {}
+            // Feed locked to the spindle position is not executed yet: refused, never run
+            // as an ordinary feed that would cut a wrong thread.
+            CanonCmd::StartSpeedFeedSync { .. } | CanonCmd::RigidTap { .. } => {
+                return Err(PlanError::Unsupported {
+                    line,
+                    what: "spindle-synchronised motion (G33, G33.1, G76) is interpreted but not executed by this planner".into(),
+                })
+            }
+            CanonCmd::StopSpeedFeedSync => {}
             CanonCmd::MistOn => out.steps.push(aux(AuxKind::Mist(true))),
             CanonCmd::MistOff => out.steps.push(aux(AuxKind::Mist(false))),
             CanonCmd::FloodOn => out.steps.push(aux(AuxKind::Flood(true))),
