@@ -322,10 +322,6 @@ fn cutter_compensation_is_refused_clearly() {
 fn unsupported_g_codes_say_their_name() {
     for (line, name) in [
         (
-            "G76 Z-1 P1 I-0.1 J0.1 K0.2",
-            "G76 (threading cycle) is not supported",
-        ),
-        (
             "G87 X1 Z-1 R1 I1 J1 K1",
             "G87 (back boring cycle) is not supported",
         ),

@@ -16,6 +16,7 @@ mod motion;
 mod ocode;
 mod splines;
 mod state;
+mod thread_cycle;
 mod threading;
 mod unsupported;
 

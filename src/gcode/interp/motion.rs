@@ -74,6 +74,7 @@ impl Interp<'_> {
             52 => self.nurbs_point(b),
             330 => self.spindle_synced_feed(b),
             331 => self.rigid_tap(b),
+            760 => self.threading_cycle(b),
             53 => self.nurbs_end(b),
             382..=385 => self.probe(m, b),
             800 => {
