@@ -48,6 +48,10 @@ pub struct FoldState {
     spindle_rpm: f64,
     pos_mm: [f64; NUM_AXES],
     arc_id: u32,
+    /// Pitch (program units per revolution) while feeds are spindle-synchronised.
+    sync_pitch: Option<f64>,
+    /// G96: S is a surface speed.
+    css: bool,
 }
 
 impl Default for FoldState {
@@ -65,6 +69,8 @@ impl Default for FoldState {
             spindle_rpm: 0.0,
             pos_mm: [0.0; NUM_AXES],
             arc_id: 0,
+            sync_pitch: None,
+            css: false,
         }
     }
 }
@@ -255,7 +261,6 @@ pub fn fold_from(
             | CanonCmd::PalletShuttle
             | CanonCmd::OnReset
             | CanonCmd::SetFeedReference
-            | CanonCmd::SetSpindleMode { .. }
             | CanonCmd::Probe { .. }
             | CanonCmd::SetToolTableEntry { .. }
             | CanonCmd::Finish => {}
@@ -263,6 +268,25 @@ pub fn fold_from(
             CanonCmd::SetFeedMode(m) => st.feed_mode = *m,
             CanonCmd::SetMotionControl(m) => st.control = *m,
             CanonCmd::SetNaivecamTolerance(q) => st.naivecam_tol = q.max(0.0),
+            CanonCmd::SetSpindleMode { css_max_rpm } => st.css = *css_max_rpm > 0.0,
+            CanonCmd::StraightFeed(p) if st.sync_pitch.is_some() => {
+                check_finite(p, line)?;
+                let end = st.to_machine(p);
+                let pitch = st.sync_pitch.unwrap_or(0.0);
+                let feed = super::spindle_sync::feed_mm_s(
+                    pitch,
+                    st.scale(),
+                    st.spindle_rpm,
+                    st.css,
+                    line,
+                )?;
+                // From rest to rest: the whole move is at pitch per revolution.
+                let saved = st.control;
+                st.control = MotionControl::ExactStop;
+                push_line(&mut out, &st, cfg, end, false, 0, feed, line)?;
+                st.control = saved;
+                st.pos_mm = end;
+            }
             CanonCmd::StraightTraverse(p) | CanonCmd::StraightFeed(p) => {
                 check_finite(p, line)?;
                 let end = st.to_machine(p);
@@ -372,15 +396,18 @@ pub fn fold_from(
             // (the interpreter counts it as stopped too), and there is nothing to wait for.
             CanonCmd::OrientSpindle { .. } => out.steps.push(aux(AuxKind::SpindleStop)),
             CanonCmd::WaitOrientComplete(_) => {}
-            // Feed locked to the spindle position is not executed yet: refused, never run
-            // as an ordinary feed that would cut a wrong thread.
-            CanonCmd::StartSpeedFeedSync { .. } | CanonCmd::RigidTap { .. } => {
+            // Feeds locked to the spindle (G33, G76): see spindle_sync.
+            CanonCmd::StartSpeedFeedSync { pitch } => st.sync_pitch = Some(*pitch),
+            CanonCmd::StopSpeedFeedSync => st.sync_pitch = None,
+            // Rigid tapping reverses the spindle at the bottom and follows it back out:
+            // refused, never run as plain feeds that would strip the thread.
+            CanonCmd::RigidTap { .. } => {
                 return Err(PlanError::Unsupported {
                     line,
-                    what: "spindle-synchronised motion (G33, G33.1, G76) is interpreted but not executed by this planner".into(),
+                    what: "rigid tapping (G33.1) is interpreted but not executed by this planner"
+                        .into(),
                 })
             }
-            CanonCmd::StopSpeedFeedSync => {}
             CanonCmd::MistOn => out.steps.push(aux(AuxKind::Mist(true))),
             CanonCmd::MistOff => out.steps.push(aux(AuxKind::Mist(false))),
             CanonCmd::FloodOn => out.steps.push(aux(AuxKind::Flood(true))),
