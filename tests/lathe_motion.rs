@@ -7,7 +7,7 @@ mod motion_util;
 
 use hytask::gcode::{self, InterpOptions};
 use hytask::motion::trace::{self, Trace};
-use hytask::motion::{plan, MotionConfig, Plan, PlanError};
+use hytask::motion::{plan, AuxItem, AuxKind, Item, MotionConfig, Plan, PlanError};
 use motion_util::*;
 
 fn plan_text(text: &str) -> Result<(MotionConfig, Plan), PlanError> {
@@ -103,4 +103,52 @@ fn what_the_planner_cannot_lock_to_the_spindle_is_refused() {
     assert!(e.contains("line 3") && e.contains("G96"), "{e}");
     let e = refused("G21 G18\nM3 S100\nG33 Z-5 K0\nM2\n");
     assert!(e.contains("line 3") && e.contains("pitch"), "{e}");
+}
+
+/// The spindle speeds the plan commands, in order.
+fn spindle_speeds(p: &Plan) -> Vec<f64> {
+    p.items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Aux(AuxItem {
+                kind: AuxKind::SpindleSpeed { rpm },
+                ..
+            }) => Some(*rpm),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn g96_spindle_speed_follows_the_x_radius_up_to_the_d_limit() {
+    // 100 m/min: 318.3 rpm at X50, 1591.5 at X10, capped at D3000 at X0; G97 back to S500.
+    let text = "G21 G18 G90\nG0 X50 Z1\nG96 S100 D3000 M3\nG1 X10 F200\nG1 X0\nG0 X50\n\
+                G97 S500\nG0 X10\nM2\n";
+    let (_, p) = plan_text(text).unwrap();
+    let rpm = |r: f64| 100_000.0 / (2.0 * std::f64::consts::PI * r);
+    let want = [rpm(50.0), rpm(10.0), 3000.0, rpm(50.0), 500.0];
+    let got = spindle_speeds(&p);
+    assert_eq!(got.len(), want.len(), "{got:?}");
+    for (g, w) in got.iter().zip(want) {
+        assert!((g - w).abs() < 1e-9, "{got:?}");
+    }
+    // G95 under G96 feeds per revolution of the spindle at the radius of the move.
+    let text = "G21 G18 G90\nG0 X50 Z0\nG96 S100 D3000 M3\nG95 F0.2\nG1 X10 Z-1\nM2\n";
+    let (cfg, p) = plan_text(text).unwrap();
+    let tr = run(&p, &cfg);
+    let idx: Vec<usize> = (1..tr.lines.len()).filter(|&i| tr.lines[i] == 5).collect();
+    let top = idx
+        .iter()
+        .map(|&i| {
+            let d: f64 = (0..3)
+                .map(|a| (tr.poses_mm[i][a] - tr.poses_mm[i - 1][a]).powi(2))
+                .sum();
+            d.sqrt() / tr.dt_s
+        })
+        .fold(0.0, f64::max);
+    let want = 0.2 * rpm(10.0) / 60.0;
+    assert!(
+        (top - want).abs() < 1e-6 * want,
+        "G95 path speed {top} mm/s, want {want}"
+    );
 }

@@ -52,6 +52,10 @@ pub struct FoldState {
     sync_pitch: Option<f64>,
     /// G96: S is a surface speed.
     css: bool,
+    /// G96 D limit, rpm.
+    css_max_rpm: f64,
+    /// G96 S: surface speed per minute (m or ft).
+    surface: f64,
 }
 
 impl Default for FoldState {
@@ -71,6 +75,8 @@ impl Default for FoldState {
             arc_id: 0,
             sync_pitch: None,
             css: false,
+            css_max_rpm: 0.0,
+            surface: 0.0,
         }
     }
 }
@@ -268,7 +274,10 @@ pub fn fold_from(
             CanonCmd::SetFeedMode(m) => st.feed_mode = *m,
             CanonCmd::SetMotionControl(m) => st.control = *m,
             CanonCmd::SetNaivecamTolerance(q) => st.naivecam_tol = q.max(0.0),
-            CanonCmd::SetSpindleMode { css_max_rpm } => st.css = *css_max_rpm > 0.0,
+            CanonCmd::SetSpindleMode { css_max_rpm } => {
+                st.css = *css_max_rpm > 0.0;
+                st.css_max_rpm = *css_max_rpm;
+            }
             CanonCmd::StraightFeed(p) if st.sync_pitch.is_some() => {
                 check_finite(p, line)?;
                 let end = st.to_machine(p);
@@ -289,6 +298,9 @@ pub fn fold_from(
             }
             CanonCmd::StraightTraverse(p) | CanonCmd::StraightFeed(p) => {
                 check_finite(p, line)?;
+                if st.css {
+                    css_speed(&mut out, &mut st, p[0], line);
+                }
                 let end = st.to_machine(p);
                 let rapid = matches!(c.cmd, CanonCmd::StraightTraverse(_));
                 push_line(&mut out, &st, cfg, end, rapid, 0, 0.0, line)?;
@@ -305,6 +317,9 @@ pub fn fold_from(
                 end,
             } => {
                 check_finite(end, line)?;
+                if st.css {
+                    css_speed(&mut out, &mut st, end[0], line);
+                }
                 let (i1, i2, ia) = super::arcs::plane_axes(*plane);
                 let mut e = *end;
                 e[i1] = *first_end;
@@ -381,6 +396,11 @@ pub fn fold_from(
                     });
                 }
                 out.steps.push(Step::Dwell { seconds: *s, line });
+            }
+            CanonCmd::SetSpindleSpeed(s) if st.css => {
+                st.surface = *s;
+                let x = st.to_program(&st.pos_mm)[0];
+                css_speed(&mut out, &mut st, x, line);
             }
             CanonCmd::SetSpindleSpeed(rpm) => {
                 st.spindle_rpm = if *rpm > 0.0 {
@@ -481,6 +501,18 @@ pub fn fold_from(
     out.end_mm = st.pos_mm;
     out.state = st;
     Ok(out)
+}
+
+/// G96: sets the spindle speed for program X `x` (a new speed item only when it changes).
+fn css_speed(out: &mut Folded, st: &mut FoldState, x: f64, line: u32) {
+    let rpm = super::css::rpm(st.surface, x, st.units, st.css_max_rpm);
+    if rpm != st.spindle_rpm {
+        st.spindle_rpm = rpm;
+        out.steps.push(Step::Aux(AuxItem {
+            kind: AuxKind::SpindleSpeed { rpm },
+            line,
+        }));
+    }
 }
 
 fn blank() -> Move {
