@@ -31,11 +31,6 @@ const ALLOWED: &[(&str, Allowed, &str)] = &[
         "cutter radius compensation (G41/G42) is refused with a clear error until implemented",
     ),
     (
-        "err_g33_1",
-        Allowed::HytaskRejects,
-        "G33.1 rigid tapping is refused by name until implemented",
-    ),
-    (
         "ocode_do_after_break",
         Allowed::Rs274Bug,
         "rs274 runs a do/while loop only once after a while loop left by break",

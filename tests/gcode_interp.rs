@@ -321,20 +321,10 @@ fn cutter_compensation_is_refused_clearly() {
 #[test]
 fn unsupported_g_codes_say_their_name() {
     for (line, name) in [
-        ("G33.1 Z-1 K0.1", "G33.1 (rigid tapping) is not supported"),
-        (
-            "G33 Z-1 K0.1",
-            "G33 (spindle-synchronised motion) is not supported",
-        ),
-        (
-            "G76 Z-1 P1 I-0.1 J0.1 K0.2",
-            "G76 (threading cycle) is not supported",
-        ),
         (
             "G87 X1 Z-1 R1 I1 J1 K1",
             "G87 (back boring cycle) is not supported",
         ),
-        ("G7", "G7 (lathe diameter mode) is not supported"),
         (
             "G42 D1",
             "G41/G42 (cutter radius compensation) is not supported",

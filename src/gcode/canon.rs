@@ -355,6 +355,33 @@ pub enum CanonCmd {
         /// Lathe orientation.
         orientation: i32,
     },
+    /// `ORIENT_SPINDLE(0, angle, mode)` (M19 R… P…): stop the spindle at `angle` degrees;
+    /// `mode` 0 turns either way, 1 clockwise, 2 counter-clockwise.
+    OrientSpindle {
+        /// Degrees, 0..=360.
+        angle: f64,
+        /// 0, 1 or 2 (M19 P).
+        mode: u8,
+    },
+    /// `SPINDLE.0.WAIT_ORIENT_COMPLETE(timeout)` (M19 Q): wait up to `timeout` seconds for
+    /// the orientation to finish.
+    WaitOrientComplete(f64),
+    /// `START_SPEED_FEED_SYNC(pitch, 0)`: the following feed moves advance `pitch` program
+    /// units along their path per spindle revolution, locked to the spindle's position
+    /// (G33, G33.1, G76), until [`CanonCmd::StopSpeedFeedSync`].
+    StartSpeedFeedSync {
+        /// Program units per revolution (G33/G33.1 K, G76 P).
+        pitch: f64,
+    },
+    /// `STOP_SPEED_FEED_SYNCH()`: the end of a spindle-synchronised stretch.
+    StopSpeedFeedSync,
+    /// `RIGID_TAP(x, y, z)` (G33.1): feed to `end` locked to the spindle, reverse the
+    /// spindle, and come back to the start on the same helix; the position after it is the
+    /// start.
+    RigidTap {
+        /// Bottom of the tap, program frame (only X Y Z move).
+        end: Pose,
+    },
     /// `FINISH()`: the program ended at its closing `%` rather than with M2/M30.
     Finish,
     /// M100–M199 user command with its P and Q words.

@@ -307,6 +307,29 @@ pub fn push_call(out: &mut Vec<u8>, cmd: &CanonCmd) -> bool {
             push_f4(out, *css_max_rpm);
             out.push(b')');
         }
+        CanonCmd::OrientSpindle { angle, mode } => {
+            push_str(out, "ORIENT_SPINDLE(0, ");
+            push_f4(out, *angle);
+            let _ = write!(out, ", {mode})");
+        }
+        CanonCmd::WaitOrientComplete(t) => {
+            push_str(out, "SPINDLE.0.WAIT_ORIENT_COMPLETE(");
+            push_f4(out, *t);
+            out.push(b')');
+        }
+        CanonCmd::StartSpeedFeedSync { pitch } => {
+            let _ = write!(out, "START_SPEED_FEED_SYNC({pitch:.6},0)");
+        }
+        CanonCmd::StopSpeedFeedSync => push_str(out, "STOP_SPEED_FEED_SYNCH()"),
+        CanonCmd::RigidTap { end } => {
+            push_str(out, "RIGID_TAP(");
+            push_f4(out, end[0]);
+            push_str(out, ", ");
+            push_f4(out, end[1]);
+            push_str(out, ", ");
+            push_f4(out, end[2]);
+            out.push(b')');
+        }
         CanonCmd::Probe { on } => push_str(
             out,
             if *on {

@@ -48,6 +48,14 @@ pub struct FoldState {
     spindle_rpm: f64,
     pos_mm: [f64; NUM_AXES],
     arc_id: u32,
+    /// Pitch (program units per revolution) while feeds are spindle-synchronised.
+    sync_pitch: Option<f64>,
+    /// G96: S is a surface speed.
+    css: bool,
+    /// G96 D limit, rpm.
+    css_max_rpm: f64,
+    /// G96 S: surface speed per minute (m or ft).
+    surface: f64,
 }
 
 impl Default for FoldState {
@@ -65,6 +73,10 @@ impl Default for FoldState {
             spindle_rpm: 0.0,
             pos_mm: [0.0; NUM_AXES],
             arc_id: 0,
+            sync_pitch: None,
+            css: false,
+            css_max_rpm: 0.0,
+            surface: 0.0,
         }
     }
 }
@@ -255,7 +267,6 @@ pub fn fold_from(
             | CanonCmd::PalletShuttle
             | CanonCmd::OnReset
             | CanonCmd::SetFeedReference
-            | CanonCmd::SetSpindleMode { .. }
             | CanonCmd::Probe { .. }
             | CanonCmd::SetToolTableEntry { .. }
             | CanonCmd::Finish => {}
@@ -263,8 +274,33 @@ pub fn fold_from(
             CanonCmd::SetFeedMode(m) => st.feed_mode = *m,
             CanonCmd::SetMotionControl(m) => st.control = *m,
             CanonCmd::SetNaivecamTolerance(q) => st.naivecam_tol = q.max(0.0),
+            CanonCmd::SetSpindleMode { css_max_rpm } => {
+                st.css = *css_max_rpm > 0.0;
+                st.css_max_rpm = *css_max_rpm;
+            }
+            CanonCmd::StraightFeed(p) if st.sync_pitch.is_some() => {
+                check_finite(p, line)?;
+                let end = st.to_machine(p);
+                let pitch = st.sync_pitch.unwrap_or(0.0);
+                let feed = super::spindle_sync::feed_mm_s(
+                    pitch,
+                    st.scale(),
+                    st.spindle_rpm,
+                    st.css,
+                    line,
+                )?;
+                // From rest to rest: the whole move is at pitch per revolution.
+                let saved = st.control;
+                st.control = MotionControl::ExactStop;
+                push_line(&mut out, &st, cfg, end, false, 0, feed, line)?;
+                st.control = saved;
+                st.pos_mm = end;
+            }
             CanonCmd::StraightTraverse(p) | CanonCmd::StraightFeed(p) => {
                 check_finite(p, line)?;
+                if st.css {
+                    css_speed(&mut out, &mut st, p[0], line);
+                }
                 let end = st.to_machine(p);
                 let rapid = matches!(c.cmd, CanonCmd::StraightTraverse(_));
                 push_line(&mut out, &st, cfg, end, rapid, 0, 0.0, line)?;
@@ -281,6 +317,9 @@ pub fn fold_from(
                 end,
             } => {
                 check_finite(end, line)?;
+                if st.css {
+                    css_speed(&mut out, &mut st, end[0], line);
+                }
                 let (i1, i2, ia) = super::arcs::plane_axes(*plane);
                 let mut e = *end;
                 e[i1] = *first_end;
@@ -358,6 +397,11 @@ pub fn fold_from(
                 }
                 out.steps.push(Step::Dwell { seconds: *s, line });
             }
+            CanonCmd::SetSpindleSpeed(s) if st.css => {
+                st.surface = *s;
+                let x = st.to_program(&st.pos_mm)[0];
+                css_speed(&mut out, &mut st, x, line);
+            }
             CanonCmd::SetSpindleSpeed(rpm) => {
                 st.spindle_rpm = if *rpm > 0.0 {
                     *rpm
@@ -368,6 +412,22 @@ pub fn fold_from(
             }
             CanonCmd::StartSpindle(d) => out.steps.push(aux(AuxKind::SpindleStart(*d))),
             CanonCmd::StopSpindle => out.steps.push(aux(AuxKind::SpindleStop)),
+            // M19: the simulated spindle has no angular position loop; orienting stops it
+            // (the interpreter counts it as stopped too), and there is nothing to wait for.
+            CanonCmd::OrientSpindle { .. } => out.steps.push(aux(AuxKind::SpindleStop)),
+            CanonCmd::WaitOrientComplete(_) => {}
+            // Feeds locked to the spindle (G33, G76): see spindle_sync.
+            CanonCmd::StartSpeedFeedSync { pitch } => st.sync_pitch = Some(*pitch),
+            CanonCmd::StopSpeedFeedSync => st.sync_pitch = None,
+            // Rigid tapping reverses the spindle at the bottom and follows it back out:
+            // refused, never run as plain feeds that would strip the thread.
+            CanonCmd::RigidTap { .. } => {
+                return Err(PlanError::Unsupported {
+                    line,
+                    what: "rigid tapping (G33.1) is interpreted but not executed by this planner"
+                        .into(),
+                })
+            }
             CanonCmd::MistOn => out.steps.push(aux(AuxKind::Mist(true))),
             CanonCmd::MistOff => out.steps.push(aux(AuxKind::Mist(false))),
             CanonCmd::FloodOn => out.steps.push(aux(AuxKind::Flood(true))),
@@ -441,6 +501,18 @@ pub fn fold_from(
     out.end_mm = st.pos_mm;
     out.state = st;
     Ok(out)
+}
+
+/// G96: sets the spindle speed for program X `x` (a new speed item only when it changes).
+fn css_speed(out: &mut Folded, st: &mut FoldState, x: f64, line: u32) {
+    let rpm = super::css::rpm(st.surface, x, st.units, st.css_max_rpm);
+    if rpm != st.spindle_rpm {
+        st.spindle_rpm = rpm;
+        out.steps.push(Step::Aux(AuxItem {
+            kind: AuxKind::SpindleSpeed { rpm },
+            line,
+        }));
+    }
 }
 
 fn blank() -> Move {

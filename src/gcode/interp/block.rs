@@ -99,6 +99,11 @@ impl Interp<'_> {
             self.loc.col = col;
             self.set_units(g)?;
         }
+        // 15a. lathe diameter/radius mode
+        if let Some((g, col)) = b.g[15] {
+            self.loc.col = col;
+            self.lathe_mode(g)?;
+        }
         // 16. cutter compensation
         if let Some((g, col)) = b.g[7] {
             self.loc.col = col;
@@ -280,6 +285,12 @@ impl Interp<'_> {
         let g5 = g1 == Some(50);
         let g10 = g0 == Some(100);
         let user_m = b.m[10].is_some();
+        super::threading::check_sync_words(b, motion).map_err(|(c, m)| self.err(c, m))?;
+        // Lathe words: G33/G33.1 K (and G33.1 I), M19 R P Q.
+        let synced = matches!(motion, 330 | 331) && (g1.is_some() || axis);
+        let tap = motion == 331 && (g1.is_some() || axis);
+        let m19 = b.mcode(7) == Some(19);
+        let g76 = motion == 760 && (g1.is_some() || axis);
         if !b"ijkredhpql".iter().any(|&c| b.has(c)) {
             return Ok(());
         }
@@ -292,43 +303,48 @@ impl Interp<'_> {
             || matches!(motion, 820 | 840 | 860 | 880 | 890) && (cycle || axis)
             || matches!(b.mcode(9), Some(50..=53))
             || matches!(b.mcode(5), Some(62..=66))
-            || user_m;
+            || user_m
+            || m19
+            || g76;
         let q_ok = g10
             || g5
             || b.gcode(13) == Some(640)
             || matches!(motion, 730 | 830) && (cycle || axis)
             || matches!(b.mcode(5), Some(66..=68))
             || b.mcode(6) == Some(61)
-            || user_m;
+            || user_m
+            || m19
+            || g76;
         let l_ok = matches!(motion, 52 | 53)
             || g10
             || cycle
             || (matches!(motion, 730 | 810..=890) && axis)
-            || b.mcode(5) == Some(66);
+            || b.mcode(5) == Some(66)
+            || g76;
         let checks: [(u8, bool, &str); 10] = [
             (
                 b'i',
-                arc || spline || g10 || motion == 870,
+                arc || spline || g10 || motion == 870 || tap || g76,
                 "I word with no G2, G3, G5, G5.1, G10, G33.1, G76, or G87 to use it",
             ),
             (
                 b'j',
-                arc || spline || g10 || motion == 870,
+                arc || spline || g10 || motion == 870 || g76,
                 "J word with no G2, G3, G5, G5.1, G10, G76 or G87 to use it",
             ),
             (
                 b'k',
-                arc || g10 || motion == 870,
+                arc || g10 || motion == 870 || synced || g76,
                 "K word with no G2, G3, G33, G33.1, G76, or G87 to use it",
             ),
             (
                 b'r',
-                arc || g10 || cycle || ((810..=890).contains(&motion) && b.has_axis()),
+                arc || g10 || cycle || ((810..=890).contains(&motion) && b.has_axis()) || m19 || g76,
                 "R word with no G code that uses it",
             ),
             (
                 b'e',
-                matches!(b.mcode(5), Some(66..=68)),
+                matches!(b.mcode(5), Some(66..=68)) || g76,
                 "E word with no G70, G76, M66, M67 or M68 to use it",
             ),
             (
@@ -338,7 +354,7 @@ impl Interp<'_> {
             ),
             (
                 b'h',
-                matches!(b.gcode(8), Some(430 | 432)) || g10,
+                matches!(b.gcode(8), Some(430 | 432)) || g10 || g76,
                 "H word with no G43 or G43.2 to use it",
             ),
             (b'p', p_ok, "P word with no G2 G3 G4 G10 G64 G5 G5.2 G76 G82 G86 G88 G89 or M50 M51 M52 M53 M62 M63 M64 M65 M66 M98 or user M code to use it"),
@@ -461,7 +477,8 @@ impl Interp<'_> {
                 return Err(self.err(self.loc.col, "S word missing with G96"));
             }
             self.s.css = true;
-            self.s.css_max = b.get(b'd').unwrap_or(0.0);
+            // Without D the speed is unlimited (rs274 hands canon 1e30).
+            self.s.css_max = b.get(b'd').map_or(1e30, f64::abs);
         } else {
             self.s.css = false;
             self.s.css_max = 0.0;

@@ -109,6 +109,7 @@ impl Interp<'_> {
                     self.s.spindle = -1;
                     self.emit(CanonCmd::StartSpindle(SpindleDir::CounterClockwise))?;
                 }
+                19 => self.orient_spindle(b)?,
                 _ => {
                     self.s.spindle = 0;
                     self.emit(CanonCmd::StopSpindle)?;

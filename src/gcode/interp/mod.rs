@@ -10,11 +10,14 @@ mod block;
 mod cycles;
 mod fanuc;
 mod frame;
+mod lathe;
 mod mcodes;
 mod motion;
 mod ocode;
 mod splines;
 mod state;
+mod thread_cycle;
+mod threading;
 mod unsupported;
 
 use super::canon::{Canon, CanonCmd, SourceLoc};
@@ -508,7 +511,8 @@ impl<'a> Interp<'a> {
         if self.fanuc_line(line)? {
             return Ok(());
         }
-        let b = self.block_of(&line.words)?;
+        let mut b = self.block_of(&line.words)?;
+        self.diameter_words(&mut b);
         let mut sets: Vec<(Result<usize, Box<str>>, f64)> = Vec::with_capacity(line.assigns.len());
         for a in &line.assigns {
             let t = match &a.target {

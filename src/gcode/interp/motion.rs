@@ -72,6 +72,9 @@ impl Interp<'_> {
             20 | 30 => self.arc(m, b),
             50 | 51 => self.spline(m, b),
             52 => self.nurbs_point(b),
+            330 => self.spindle_synced_feed(b),
+            331 => self.rigid_tap(b),
+            760 => self.threading_cycle(b),
             53 => self.nurbs_end(b),
             382..=385 => self.probe(m, b),
             800 => {

@@ -60,6 +60,8 @@ pub(crate) struct Settings {
     pub css_max: f64,
     /// G96 active.
     pub css: bool,
+    /// G7 (X words are diameters) rather than G8.
+    pub diameter_mode: bool,
     /// M7.
     pub mist: bool,
     /// M8.
@@ -131,6 +133,7 @@ impl Settings {
             spindle: 0,
             css_max: 0.0,
             css: false,
+            diameter_mode: false,
             mist: false,
             flood: false,
             feed_override: true,
@@ -200,8 +203,8 @@ pub(crate) fn predefined(it: &Interp<'_>, name: &str) -> Option<f64> {
         "_spindle_rpm_mode" => b(!s.css),
         "_spindle_css_mode" => b(s.css),
         "_ijk_absolute_mode" => b(s.ijk_absolute),
-        "_lathe_diameter_mode" => 0.0,
-        "_lathe_radius_mode" => 1.0,
+        "_lathe_diameter_mode" => b(s.diameter_mode),
+        "_lathe_radius_mode" => b(!s.diameter_mode),
         "_spindle_on" => b(s.spindle != 0),
         "_spindle_cw" => b(s.spindle >= 0),
         "_mist" => b(s.mist),
