@@ -206,7 +206,7 @@ fn a_wrong_unit_id_is_an_exception_from_the_gateway_not_a_value() {
 }
 
 #[test]
-fn rtu_crc_errors_and_silent_units_are_timeouts_or_protocol_errors() {
+fn rtu_crc_errors_wrong_units_short_answers_and_silence_are_reported() {
     let dir = tempfile::tempdir().unwrap();
     let Some((_socat, a, b)) = pty_pair(dir.path()) else {
         return;
@@ -230,6 +230,14 @@ fn rtu_crc_errors_and_silent_units_are_timeouts_or_protocol_errors() {
             FaultKind::Timeout | FaultKind::Protocol(_) | FaultKind::Disconnected(_)
         )
     });
+    // An answer from another unit (valid CRC) and a well-formed answer with fewer items.
+    inject(&mut sim, &img, &ev, "garble unit", "garble none", |f| {
+        matches!(f, FaultKind::Timeout | FaultKind::Protocol(_))
+    });
+    let e = inject(&mut sim, &img, &ev, "garble count", "garble none", |f| {
+        matches!(f, FaultKind::Protocol(_))
+    });
+    assert!(e.message().contains("short response"), "{}", e.message());
     inject(&mut sim, &img, &ev, "exception 2", "exception 0", |f| {
         *f == FaultKind::Exception(2)
     });
