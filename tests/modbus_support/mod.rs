@@ -209,3 +209,51 @@ pub fn wait_link_event(rx: &Receiver<LinkEvent>, pred: impl Fn(&LinkEvent) -> bo
     }
     panic!("no matching link event; saw {seen:#?}");
 }
+
+/// `config/sim-modbus.toml` with the panel at `addr` and fast homing (the axes start near
+/// their home switches), written into `dir`.
+pub fn machine_config(dir: &Path, addr: &str) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut text = std::fs::read_to_string(root.join("config/sim-modbus.toml")).unwrap();
+    let fast = |t: String, from: &str, to: &str, n: usize| {
+        assert_eq!(
+            t.matches(from).count(),
+            n,
+            "sim-modbus.toml changed: {from}"
+        );
+        t.replace(from, to)
+    };
+    text = fast(
+        text,
+        "address = \"127.0.0.1:15020\"",
+        &format!("address = \"{addr}\""),
+        1,
+    );
+    text = fast(
+        text,
+        "initial_position = 150.0",
+        "initial_position = 298.0",
+        2,
+    );
+    text = fast(
+        text,
+        "initial_position = -50.0",
+        "initial_position = -2.0",
+        1,
+    );
+    text = fast(
+        text,
+        "velocity = 20.0, latch_velocity = 2.0",
+        "velocity = 40.0, latch_velocity = 5.0",
+        2,
+    );
+    text = fast(
+        text,
+        "velocity = 10.0, latch_velocity = 1.0",
+        "velocity = 20.0, latch_velocity = 5.0",
+        1,
+    );
+    let path = dir.join("machine.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
