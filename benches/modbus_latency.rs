@@ -20,12 +20,11 @@ mod modbus_support;
 mod support;
 
 use hytask::control::client::Client;
-use hytask::modbus::sim::{serve_tcp, Sim};
+use hytask::modbus::sim::Sim;
 use serde_json::{json, Value};
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::sync::mpsc::channel;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use support::{ok, ready, wait_status, Daemon};
@@ -36,26 +35,6 @@ const GUARD: Duration = Duration::from_secs(60);
 fn pct(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     v[((v.len() as f64 - 1.0) * p).round() as usize]
-}
-
-/// The simulator engine serving the Modbus devices of `config` on a free port.
-fn start_sim(config: &Path) -> (Sim, String) {
-    let cfg = hytask::config::load(config).unwrap();
-    let sim = Sim::from_io(&cfg.io, 256).unwrap();
-    let (tx, rx) = channel();
-    let s = sim.clone();
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .unwrap();
-        rt.block_on(async move {
-            let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-            tx.send(l.local_addr().unwrap().to_string()).unwrap();
-            serve_tcp(s, l).await.unwrap();
-        });
-    });
-    (sim, rx.recv().unwrap())
 }
 
 /// A pause of 1 to 11 ms, different for every sample: desynchronises a change from the
@@ -116,7 +95,9 @@ fn main() {
         3
     };
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-modbus.toml");
-    let (sim, addr) = start_sim(&shipped);
+    // The simulator engine serving the Modbus devices of the shipped file on a free port.
+    let sim = Sim::from_io(&hytask::config::load(&shipped).unwrap().io, 256).unwrap();
+    let (addr, _) = modbus_support::serve_sim(&sim);
     let dir = tempfile::tempdir().unwrap();
     let config = modbus_support::machine_config(dir.path(), &addr);
     let mut daemon = Daemon::start(&config);

@@ -17,11 +17,15 @@
 //! section.
 #![allow(clippy::unwrap_used)]
 
+#[path = "../tests/modbus_support/mod.rs"]
+mod modbus_support;
+
 use hytask::modbus::link::Link;
-use hytask::modbus::sim::{serve_tcp, Sim};
+use hytask::modbus::sim::Sim;
 use hytask::modbus::stats::{quantile_us, window, TxStats};
 use hytask::modbus::{Endpoint, LinkConfig, UnitConfig};
 use hytask_hal::modbus::{plan_reads, PointSpec, Quality, ReadBlock, Table};
+use modbus_support::{serve_sim, tid};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::channel;
 use std::sync::Arc;
@@ -55,38 +59,12 @@ fn spawn(name: &str, f: impl FnOnce() + Send + 'static) -> JoinHandle<()> {
         .unwrap()
 }
 
-/// The calling thread's kernel id.
-fn tid() -> i32 {
-    // SAFETY: gettid has no preconditions.
-    unsafe { libc::gettid() }
-}
-
 /// Time thread `tid` of this process spent on a CPU and waiting for one, in ns
 /// (`/proc/self/task/TID/schedstat`).
 fn sched_ns(tid: i32) -> (u64, u64) {
     let s = std::fs::read_to_string(format!("/proc/self/task/{tid}/schedstat")).unwrap_or_default();
     let mut f = s.split_whitespace().map(|x| x.parse().unwrap_or(0));
     (f.next().unwrap_or(0), f.next().unwrap_or(0))
-}
-
-fn start_sim(io: &hytask::config::IoConfig) -> (Sim, String, i32) {
-    let sim = Sim::from_io(std::slice::from_ref(io), 256).unwrap();
-    let (tx, rx) = channel();
-    let s = sim.clone();
-    spawn("sim", move || {
-        let id = tid();
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .unwrap();
-        rt.block_on(async move {
-            let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-            tx.send((l.local_addr().unwrap().to_string(), id)).unwrap();
-            serve_tcp(s, l).await.unwrap();
-        });
-    });
-    let (addr, id) = rx.recv().unwrap();
-    (sim, addr, id)
 }
 
 fn current_thread() -> tokio::runtime::Runtime {
@@ -405,7 +383,8 @@ fn latency(io: &hytask::config::IoConfig, sim: &Sim, addr: &str, bench: bool) {
 
 fn main() {
     let io: hytask::config::IoConfig = toml::from_str(MAP).unwrap();
-    let (sim, addr, sim_tid) = start_sim(&io);
+    let sim = Sim::from_io(std::slice::from_ref(&io), 256).unwrap();
+    let (addr, sim_tid) = serve_sim(&sim);
     // `cargo test --all-targets` runs this main without `--bench`: a short smoke run then.
     let bench = std::env::args().any(|a| a == "--bench");
     let u = hytask::modbus::unit(&io, "io[0]", "-").unwrap();

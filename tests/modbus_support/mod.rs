@@ -257,3 +257,33 @@ pub fn machine_config(dir: &Path, addr: &str) -> PathBuf {
     std::fs::write(&path, text).unwrap();
     path
 }
+
+/// The calling thread's kernel id (for `/proc/self/task/TID`).
+pub fn tid() -> i32 {
+    // SAFETY: gettid has no preconditions.
+    unsafe { libc::gettid() }
+}
+
+/// Serves `sim` over Modbus TCP on a free loopback port from its own thread ("sim") with a
+/// current-thread runtime, as `hytask modbus-sim` runs it; returns the address and the
+/// thread's kernel id.
+pub fn serve_sim(sim: &hytask::modbus::sim::Sim) -> (String, i32) {
+    let (tx, rx) = channel();
+    let s = sim.clone();
+    std::thread::Builder::new()
+        .name("sim".into())
+        .spawn(move || {
+            let id = tid();
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .unwrap();
+            rt.block_on(async move {
+                let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+                tx.send((l.local_addr().unwrap().to_string(), id)).unwrap();
+                hytask::modbus::sim::serve_tcp(s, l).await.unwrap();
+            });
+        })
+        .unwrap();
+    rx.recv().unwrap()
+}
