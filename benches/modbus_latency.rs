@@ -60,14 +60,26 @@ fn drain_log(daemon: &mut Daemon) -> Arc<Mutex<VecDeque<String>>> {
     tail
 }
 
-fn wait_until(what: &str, log: &Mutex<VecDeque<String>>, c: &mut Client, pred: impl Fn() -> bool) {
+fn wait_until(
+    what: &str,
+    log: &Mutex<VecDeque<String>>,
+    c: &mut Client,
+    sim: &Sim,
+    pred: impl Fn() -> bool,
+) {
     let t0 = Instant::now();
     while !pred() {
         if t0.elapsed() > GUARD {
             let status = c.call("status", Value::Null);
+            let tail = Vec::from(log.lock().unwrap().clone()).join("\n");
+            // Is the poller still polling?
+            let r0 = sim.lock().requests;
+            std::thread::sleep(Duration::from_millis(200));
+            let polls = sim.lock().requests - r0;
+            let coils = sim.lock().values();
             panic!(
-                "timed out waiting for {what}; status {status:?}; daemon log:\n{}",
-                Vec::from(log.lock().unwrap().clone()).join("\n")
+                "timed out waiting for {what}; {polls} requests at the simulator in 200 ms; \
+                 simulator points {coils:?}; status {status:?}; daemon log:\n{tail}"
             );
         }
         std::thread::sleep(Duration::from_micros(200));
@@ -118,7 +130,7 @@ fn main() {
             json!({ "line": if on { "M8" } else { "M9" } }),
         );
         let level = f64::from(u8::from(on));
-        wait_until("the coolant coil", &log, &mut c, || {
+        wait_until("the coolant coil", &log, &mut c, &sim, || {
             let s = sim.lock();
             s.get("coolant_flood").unwrap() == level
                 && s.changed_at("coolant_flood").unwrap() != before
