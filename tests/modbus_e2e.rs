@@ -15,7 +15,7 @@
 mod modbus_support;
 mod support;
 
-use modbus_support::{listen_addr, Proc, GUARD};
+use modbus_support::{listen_addr, machine_config, Proc, GUARD};
 use serde_json::{json, Value};
 use std::path::Path;
 use support::{err, ok, ready, wait_event, wait_status, Daemon};
@@ -37,53 +37,6 @@ fn start_sim(config: &Path, listen: &str) -> (Proc, String) {
     let p = Proc::spawn(cmd);
     let l = p.expect("listening", |l| l.starts_with("listening tcp "));
     (p, listen_addr(&l))
-}
-
-/// `config/sim-modbus.toml` with the panel at `addr` and the test fixture's fast homing.
-fn machine_config(dir: &Path, addr: &str) -> std::path::PathBuf {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut text = std::fs::read_to_string(root.join("config/sim-modbus.toml")).unwrap();
-    let fast = |t: String, from: &str, to: &str, n: usize| {
-        assert_eq!(
-            t.matches(from).count(),
-            n,
-            "sim-modbus.toml changed: {from}"
-        );
-        t.replace(from, to)
-    };
-    text = fast(
-        text,
-        "address = \"127.0.0.1:15020\"",
-        &format!("address = \"{addr}\""),
-        1,
-    );
-    text = fast(
-        text,
-        "initial_position = 150.0",
-        "initial_position = 298.0",
-        2,
-    );
-    text = fast(
-        text,
-        "initial_position = -50.0",
-        "initial_position = -2.0",
-        1,
-    );
-    text = fast(
-        text,
-        "velocity = 20.0, latch_velocity = 2.0",
-        "velocity = 40.0, latch_velocity = 5.0",
-        2,
-    );
-    text = fast(
-        text,
-        "velocity = 10.0, latch_velocity = 1.0",
-        "velocity = 20.0, latch_velocity = 5.0",
-        1,
-    );
-    let path = dir.join("machine.toml");
-    std::fs::write(&path, text).unwrap();
-    path
 }
 
 fn mode(s: &Value) -> &str {

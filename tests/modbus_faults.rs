@@ -105,9 +105,14 @@ fn exceptions_timeouts_and_garbled_answers_are_reported_distinctly_and_recover()
     inject(&mut sim, &img, &ev, "drop on", "drop off", |f| {
         *f == FaultKind::Timeout
     });
-    inject(&mut sim, &img, &ev, "delay 1000", "delay 0", |f| {
+    let slow = inject(&mut sim, &img, &ev, "delay 1000", "delay 0", |f| {
         *f == FaultKind::Timeout
     });
+    assert!(
+        slow.message().contains("timeout; points bad: a, b"),
+        "{}",
+        slow.message()
+    );
     // An answer for another unit, and a cut answer: protocol errors or timeouts (a cut frame
     // is waited for until the timeout), never a good value.
     inject(&mut sim, &img, &ev, "garble unit", "garble none", |f| {
@@ -128,6 +133,66 @@ fn exceptions_timeouts_and_garbled_answers_are_reported_distinctly_and_recover()
     sim.expect_line("out lamp 1");
 }
 
+/// Well-formed frames whose content does not fit the request: fewer items than asked for
+/// (bits and registers), another function code. `tokio-modbus` does not check the item
+/// count (a `debug_assert` in its readers): the poller must, and must not panic.
+#[test]
+fn answers_with_fewer_items_or_another_function_are_protocol_errors() {
+    let (mut sim, addr) = tcp_sim();
+    let u = unit(
+        r#"
+        name = "panel"
+        backend = "modbus_tcp"
+        address = "127.0.0.1:1"
+        digital_inputs = [{ name = "a" }, { name = "b" }]
+        analog_inputs = [{ name = "load", type = "u16" }]
+        "#,
+    );
+    let img = u.image.clone();
+    let ev = run_link("garbled-content", Endpoint::Tcp(addr), vec![u]);
+    let load_good = || img.ai[0].sample().quality == Quality::Good;
+    wait_until("first poll", || all_good(&img) && load_good());
+    for (garble, says) in [("count", "short response"), ("function", "")] {
+        let e = inject(
+            &mut sim,
+            &img,
+            &ev,
+            &format!("garble {garble}"),
+            "garble none",
+            |f| matches!(f, FaultKind::Protocol(_)),
+        );
+        assert!(e.message().contains(says), "{garble}: {}", e.message());
+        wait_until("the register good again", load_good);
+    }
+}
+
+/// A write answered with an echo that does not match the request (`tokio-modbus`'s writers
+/// `debug_assert` the echo): a protocol error naming the output, then recovery.
+#[test]
+fn a_write_echoing_another_address_is_a_protocol_error() {
+    let (mut sim, addr) = tcp_sim();
+    let u = panel(1);
+    let img = u.image.clone();
+    let ev = run_link("bad-echo", Endpoint::Tcp(addr), vec![u]);
+    wait_until("healthy", || all_good(&img));
+    sim.send("garble echo");
+    img.dout[0].command(1.0);
+    let e = wait_link_event(&ev, |e| e.fault.is_some());
+    assert!(
+        matches!(e.fault, Some(FaultKind::Protocol(_))),
+        "{}",
+        e.message()
+    );
+    assert!(e.message().contains("echoes"), "{}", e.message());
+    assert!(e.points.contains(&"lamp".to_string()), "{:?}", e.points);
+    sim.send("garble none");
+    wait_link_event(&ev, |e| e.fault.is_none());
+    wait_until("the lamp written", || {
+        img.dout[0].quality() == Quality::Good
+    });
+    sim.expect_line("out lamp 1");
+}
+
 #[test]
 fn a_wrong_unit_id_is_an_exception_from_the_gateway_not_a_value() {
     let (_sim, addr) = tcp_sim();
@@ -141,7 +206,7 @@ fn a_wrong_unit_id_is_an_exception_from_the_gateway_not_a_value() {
 }
 
 #[test]
-fn rtu_crc_errors_and_silent_units_are_timeouts_or_protocol_errors() {
+fn rtu_crc_errors_wrong_units_short_answers_and_silence_are_reported() {
     let dir = tempfile::tempdir().unwrap();
     let Some((_socat, a, b)) = pty_pair(dir.path()) else {
         return;
@@ -165,6 +230,14 @@ fn rtu_crc_errors_and_silent_units_are_timeouts_or_protocol_errors() {
             FaultKind::Timeout | FaultKind::Protocol(_) | FaultKind::Disconnected(_)
         )
     });
+    // An answer from another unit (valid CRC) and a well-formed answer with fewer items.
+    inject(&mut sim, &img, &ev, "garble unit", "garble none", |f| {
+        matches!(f, FaultKind::Timeout | FaultKind::Protocol(_))
+    });
+    let e = inject(&mut sim, &img, &ev, "garble count", "garble none", |f| {
+        matches!(f, FaultKind::Protocol(_))
+    });
+    assert!(e.message().contains("short response"), "{}", e.message());
     inject(&mut sim, &img, &ev, "exception 2", "exception 0", |f| {
         *f == FaultKind::Exception(2)
     });

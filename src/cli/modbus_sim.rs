@@ -14,7 +14,10 @@
 //! delay MS                answer every request after MS ms
 //! drop on|off             stop/resume answering (clients time out)
 //! exception CODE          answer every request with exception CODE (0: off)
-//! garble none|crc|short|unit   corrupt answers (RTU CRC, cut frame, wrong unit id)
+//! garble none|crc|short|unit|count|function|echo
+//!                         corrupt answers (RTU CRC, cut frame, wrong unit id, one item
+//!                         fewer than asked for, another function code, a write's
+//!                         answer echoing another address)
 //! close                   close every TCP connection now
 //! quit                    exit
 //! ```
@@ -130,7 +133,10 @@ pub fn command(sim: &Sim, line: &str) -> anyhow::Result<Option<String>> {
                 "crc" => Garble::Crc,
                 "short" => Garble::Short,
                 "unit" => Garble::Unit,
-                _ => bail!("garble none|crc|short|unit"),
+                "count" => Garble::Count,
+                "function" => Garble::Function,
+                "echo" => Garble::Echo,
+                _ => bail!("garble none|crc|short|unit|count|function|echo"),
             };
             format!("ok garble {g}")
         }

@@ -10,6 +10,7 @@
 //! [`LinkEvent`].
 
 use super::event::LinkEvent;
+pub use super::stats::TxStats;
 use hytask_hal::modbus::{
     plan_reads, Backoff, DataType, FaultKind, Image, InputCell, OutputCell, PointSpec, ReadBlock,
     Table,
@@ -18,8 +19,9 @@ use std::sync::mpsc::Sender;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::time::timeout as within;
-use tokio_modbus::client::{Client, Context, Reader, Writer};
+use tokio_modbus::client::{Client, Context};
 use tokio_modbus::slave::{Slave, SlaveContext};
+use tokio_modbus::{Request, Response};
 
 /// Where a link goes.
 #[derive(Debug, Clone, PartialEq)]
@@ -132,56 +134,6 @@ fn tx<T>(r: Result<tokio_modbus::Result<T>, tokio::time::error::Elapsed>) -> Res
             reconnect: false,
         }),
         Ok(Ok(Ok(v))) => Ok(v),
-    }
-}
-
-/// Round-trip statistics of a link's transactions: a count and a histogram of 10 µs bins
-/// up to 20 ms (atomics: read by anyone, never blocking the poller).
-#[derive(Debug)]
-pub struct TxStats {
-    bins: Box<[std::sync::atomic::AtomicU64]>,
-}
-
-/// Width of a [`TxStats`] bin.
-pub const TX_BIN_US: u64 = 10;
-
-impl Default for TxStats {
-    fn default() -> Self {
-        TxStats {
-            bins: (0..2000)
-                .map(|_| std::sync::atomic::AtomicU64::new(0))
-                .collect(),
-        }
-    }
-}
-
-impl TxStats {
-    fn record(&self, d: Duration) {
-        let i = usize::try_from(d.as_micros() / u128::from(TX_BIN_US)).unwrap_or(usize::MAX);
-        let last = self.bins.len() - 1;
-        self.bins[i.min(last)].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    }
-
-    /// Transactions recorded.
-    pub fn count(&self) -> u64 {
-        self.bins
-            .iter()
-            .map(|b| b.load(std::sync::atomic::Ordering::Relaxed))
-            .sum()
-    }
-
-    /// The `p` quantile (0..=1) of the round trip, in µs (upper edge of its bin).
-    pub fn quantile_us(&self, p: f64) -> u64 {
-        let n = self.count();
-        let want = ((n as f64) * p).ceil() as u64;
-        let mut seen = 0;
-        for (i, b) in self.bins.iter().enumerate() {
-            seen += b.load(std::sync::atomic::Ordering::Relaxed);
-            if seen >= want.max(1) {
-                return (i as u64 + 1) * TX_BIN_US;
-            }
-        }
-        self.bins.len() as u64 * TX_BIN_US
     }
 }
 
@@ -453,7 +405,7 @@ impl Link {
                 Ok(data) => {
                     for &(i, off) in &block.points {
                         let p = &u.cfg.inputs[i];
-                        let v = p.spec.decode(block.slice(&data, off));
+                        let v = data.decode(block, &p.spec, off);
                         Image::publish(u.input_cell(p), v, stamp);
                     }
                 }
@@ -568,36 +520,73 @@ impl Link {
     }
 }
 
+/// A read's answer as `tokio-modbus` returns it: registers, or bits for coils and discrete
+/// inputs (decoded point by point, not copied into registers first).
+enum Answer {
+    Words(Vec<u16>),
+    Bits(Vec<bool>),
+}
+
+impl Answer {
+    fn len(&self) -> usize {
+        match self {
+            Answer::Words(w) => w.len(),
+            Answer::Bits(b) => b.len(),
+        }
+    }
+
+    /// The value of point `spec` at `offset` in the block.
+    fn decode(&self, b: &ReadBlock, spec: &PointSpec, offset: u16) -> f64 {
+        match self {
+            Answer::Words(w) => spec.decode(b.slice(w, offset)),
+            Answer::Bits(bits) => {
+                let bit = bits.get(usize::from(offset)).copied().unwrap_or(false);
+                spec.decode(&[u16::from(bit)])
+            }
+        }
+    }
+}
+
+/// One read. Through `Client::call`, not the `Reader` helpers: those `debug_assert` that the
+/// answer has as many items as asked for, which is input from the device; the count is
+/// checked here and a short answer is a protocol error (reconnect), never a panic.
 async fn read_block(
     ctx: &mut Context,
     b: &ReadBlock,
     timeout: Duration,
-) -> Result<Vec<u16>, TxError> {
-    let bits = |v: Vec<bool>| v.into_iter().map(u16::from).collect::<Vec<u16>>();
+) -> Result<Answer, TxError> {
     let (a, n) = (b.start, b.count);
-    let data = match b.table {
-        Table::Coil => tx(within(timeout, ctx.read_coils(a, n)).await).map(bits)?,
-        Table::DiscreteInput => {
-            tx(within(timeout, ctx.read_discrete_inputs(a, n)).await).map(bits)?
-        }
-        Table::HoldingRegister => tx(within(timeout, ctx.read_holding_registers(a, n)).await)?,
-        Table::InputRegister => tx(within(timeout, ctx.read_input_registers(a, n)).await)?,
+    let request = match b.table {
+        Table::Coil => Request::ReadCoils(a, n),
+        Table::DiscreteInput => Request::ReadDiscreteInputs(a, n),
+        Table::HoldingRegister => Request::ReadHoldingRegisters(a, n),
+        Table::InputRegister => Request::ReadInputRegisters(a, n),
     };
-    if data.len() < usize::from(b.count) {
-        return Err(TxError {
-            fault: FaultKind::Protocol(format!(
-                "short response: {} of {} items at {} {}",
-                data.len(),
-                b.count,
-                b.table,
-                b.start
-            )),
-            reconnect: true,
-        });
+    let protocol = |m: String| TxError {
+        fault: FaultKind::Protocol(m),
+        reconnect: true,
+    };
+    let data = match tx(within(timeout, ctx.call(request)).await)? {
+        Response::ReadCoils(mut v) | Response::ReadDiscreteInputs(mut v) => {
+            v.truncate(usize::from(n)); // whole bytes: up to 7 padding bits
+            Answer::Bits(v)
+        }
+        Response::ReadHoldingRegisters(v) | Response::ReadInputRegisters(v) => Answer::Words(v),
+        other => return Err(protocol(format!("unexpected answer {other:?}"))),
+    };
+    if data.len() != usize::from(n) {
+        return Err(protocol(format!(
+            "short response: {} of {n} items at {} {a}",
+            data.len(),
+            b.table
+        )));
     }
     Ok(data)
 }
 
+/// One output write, through `Client::call` for the same reason as [`read_block`]: the
+/// `Writer` helpers `debug_assert` that the device echoes the request; here a wrong echo is
+/// a protocol error.
 async fn write(
     ctx: &mut Context,
     spec: &PointSpec,
@@ -606,14 +595,39 @@ async fn write(
 ) -> Result<(), TxError> {
     let (words, n) = spec.encode(value);
     let a = spec.address;
-    match (spec.table, spec.data_type) {
-        (Table::Coil, _) => tx(within(timeout, ctx.write_single_coil(a, value != 0.0)).await),
-        (_, DataType::Bit(b)) => {
-            let mask = 1u16 << b;
-            let fut = ctx.masked_write_register(a, !mask, words[0] & mask);
-            tx(within(timeout, fut).await)
+    let (request, echo) = match (spec.table, spec.data_type) {
+        (Table::Coil, _) => {
+            let on = value != 0.0;
+            (
+                Request::WriteSingleCoil(a, on),
+                Response::WriteSingleCoil(a, on),
+            )
         }
-        _ if n == 1 => tx(within(timeout, ctx.write_single_register(a, words[0])).await),
-        _ => tx(within(timeout, ctx.write_multiple_registers(a, &words[..n])).await),
+        (_, DataType::Bit(b)) => {
+            let (and, or) = (!(1u16 << b), words[0] & (1u16 << b));
+            (
+                Request::MaskWriteRegister(a, and, or),
+                Response::MaskWriteRegister(a, and, or),
+            )
+        }
+        _ if n == 1 => (
+            Request::WriteSingleRegister(a, words[0]),
+            Response::WriteSingleRegister(a, words[0]),
+        ),
+        _ => (
+            Request::WriteMultipleRegisters(a, std::borrow::Cow::Borrowed(&words[..n])),
+            Response::WriteMultipleRegisters(a, n as u16),
+        ),
+    };
+    let answer = tx(within(timeout, ctx.call(request)).await)?;
+    if answer != echo {
+        return Err(TxError {
+            fault: FaultKind::Protocol(format!(
+                "the answer to a write at {} {a} echoes {answer:?}",
+                spec.table
+            )),
+            reconnect: true,
+        });
     }
+    Ok(())
 }

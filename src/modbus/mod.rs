@@ -10,6 +10,7 @@
 pub mod event;
 pub mod link;
 pub mod sim;
+pub mod stats;
 
 pub use event::LinkEvent;
 pub use link::{Endpoint, InputPoint, LinkConfig, OutputPoint, UnitConfig};

@@ -42,6 +42,12 @@ pub enum Garble {
     Short,
     /// The answer carries another unit id.
     Unit,
+    /// A well-formed read answer with one item fewer than asked for (byte count adjusted).
+    Count,
+    /// A well-formed answer with another function code than the request's.
+    Function,
+    /// A write's answer echoes another address.
+    Echo,
 }
 
 /// Injected faults.
@@ -85,6 +91,8 @@ pub struct SimState {
     pub faults: Faults,
     /// Requests answered (for benchmarks and tests).
     pub requests: u64,
+    /// When a client's write last changed each point (by index in `points`; benchmarks).
+    changed: Vec<Option<Instant>>,
     follows: Vec<Follow>,
     toggles: Vec<Toggle>,
     /// Bumped by `close`: connections of an older generation are closed.
@@ -143,6 +151,7 @@ impl Sim {
         }
         Ok(Sim(Arc::new(Mutex::new(SimState {
             units,
+            changed: vec![None; points.len()],
             points,
             faults: Faults::default(),
             requests: 0,
@@ -203,6 +212,11 @@ impl SimState {
             .map(|k| t.get(p.spec.table, p.spec.address + k).unwrap_or(0))
             .collect();
         p.spec.decode(&raw)
+    }
+
+    /// When a client's write last changed the point `name` (`None`: never).
+    pub fn changed_at(&self, name: &str) -> Result<Option<Instant>, SimError> {
+        Ok(self.changed[self.find(name)?])
     }
 
     /// Every point with its value, in map order.
@@ -280,21 +294,59 @@ impl SimState {
         if let Some(code) = self.faults.exception {
             return Some(vec![fc | 0x80, code]);
         }
-        match self.units.get_mut(&unit) {
-            Some(t) => {
-                self.requests += 1;
-                Some(t.handle(pdu))
-            }
+        let Some(t) = self.units.get_mut(&unit) else {
             // A gateway's "target device failed to respond"; a serial unit stays silent.
-            None if !rtu => Some(vec![fc | 0x80, 11]),
-            None => None,
+            return (!rtu).then(|| vec![fc | 0x80, 11]);
+        };
+        self.requests += 1;
+        if !matches!(fc, 5 | 6 | 15 | 16 | 22 | 23) {
+            return Some(t.handle(pdu));
         }
+        let of_unit: Vec<usize> = (0..self.points.len())
+            .filter(|&i| self.points[i].unit == unit)
+            .collect();
+        let before: Vec<f64> = of_unit.iter().map(|&i| self.get_index(i)).collect();
+        let answer = self.units.get_mut(&unit).map(|t| t.handle(pdu));
+        let now = Instant::now();
+        for (&i, v) in of_unit.iter().zip(before) {
+            if self.get_index(i) != v {
+                self.changed[i] = Some(now);
+            }
+        }
+        answer
     }
+}
+
+/// Garbles of the PDU, before framing: the frame stays well formed.
+fn garble_pdu(mut pdu: Vec<u8>, g: Garble) -> Vec<u8> {
+    let fc = pdu.first().copied().unwrap_or(0);
+    match g {
+        Garble::Count if matches!(fc, 1..=4) && pdu.len() >= 2 => {
+            // Bits come 8 to a byte, registers 2 bytes each.
+            let cut = if fc <= 2 { 1 } else { 2 };
+            if pdu[1] >= cut {
+                pdu[1] -= cut;
+                pdu.truncate(pdu.len() - usize::from(cut));
+            }
+        }
+        Garble::Echo if matches!(fc, 5 | 6 | 15 | 16 | 22) && pdu.len() >= 3 => pdu[2] ^= 1,
+        Garble::Function => {
+            pdu[0] = match fc {
+                1 => 2,
+                2 => 1,
+                3 => 4,
+                4 => 3,
+                f => f.wrapping_add(0x10),
+            };
+        }
+        _ => {}
+    }
+    pdu
 }
 
 fn garble(mut frame: Vec<u8>, g: Garble, rtu: bool, unit_at: usize) -> Vec<u8> {
     match g {
-        Garble::None => {}
+        Garble::None | Garble::Count | Garble::Function | Garble::Echo => {}
         Garble::Crc if rtu => {
             if let Some(b) = frame.last_mut() {
                 *b ^= 0x5A;
@@ -367,6 +419,7 @@ async fn tcp_connection(sim: Sim, mut stream: tokio::net::TcpStream) -> std::io:
                 tokio::time::sleep(faults.delay).await;
             }
             if let Some(pdu) = answer {
+                let pdu = garble_pdu(pdu, faults.garble);
                 let frame = tcp_frame(req.transaction, req.unit, &pdu);
                 stream
                     .write_all(&garble(frame, faults.garble, false, 6))
@@ -418,6 +471,7 @@ where
                         tokio::time::sleep(faults.delay).await;
                     }
                     if let Some(pdu) = answer {
+                        let pdu = garble_pdu(pdu, faults.garble);
                         let frame = rtu_frame(unit, &pdu);
                         port.write_all(&garble(frame, faults.garble, true, 0))
                             .await?;

@@ -209,3 +209,81 @@ pub fn wait_link_event(rx: &Receiver<LinkEvent>, pred: impl Fn(&LinkEvent) -> bo
     }
     panic!("no matching link event; saw {seen:#?}");
 }
+
+/// `config/sim-modbus.toml` with the panel at `addr` and fast homing (the axes start near
+/// their home switches), written into `dir`.
+pub fn machine_config(dir: &Path, addr: &str) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut text = std::fs::read_to_string(root.join("config/sim-modbus.toml")).unwrap();
+    let fast = |t: String, from: &str, to: &str, n: usize| {
+        assert_eq!(
+            t.matches(from).count(),
+            n,
+            "sim-modbus.toml changed: {from}"
+        );
+        t.replace(from, to)
+    };
+    text = fast(
+        text,
+        "address = \"127.0.0.1:15020\"",
+        &format!("address = \"{addr}\""),
+        1,
+    );
+    text = fast(
+        text,
+        "initial_position = 150.0",
+        "initial_position = 298.0",
+        2,
+    );
+    text = fast(
+        text,
+        "initial_position = -50.0",
+        "initial_position = -2.0",
+        1,
+    );
+    text = fast(
+        text,
+        "velocity = 20.0, latch_velocity = 2.0",
+        "velocity = 40.0, latch_velocity = 5.0",
+        2,
+    );
+    text = fast(
+        text,
+        "velocity = 10.0, latch_velocity = 1.0",
+        "velocity = 20.0, latch_velocity = 5.0",
+        1,
+    );
+    let path = dir.join("machine.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// The calling thread's kernel id (for `/proc/self/task/TID`).
+pub fn tid() -> i32 {
+    // SAFETY: gettid has no preconditions.
+    unsafe { libc::gettid() }
+}
+
+/// Serves `sim` over Modbus TCP on a free loopback port from its own thread ("sim") with a
+/// current-thread runtime, as `hytask modbus-sim` runs it; returns the address and the
+/// thread's kernel id.
+pub fn serve_sim(sim: &hytask::modbus::sim::Sim) -> (String, i32) {
+    let (tx, rx) = channel();
+    let s = sim.clone();
+    std::thread::Builder::new()
+        .name("sim".into())
+        .spawn(move || {
+            let id = tid();
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .unwrap();
+            rt.block_on(async move {
+                let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+                tx.send((l.local_addr().unwrap().to_string(), id)).unwrap();
+                hytask::modbus::sim::serve_tcp(s, l).await.unwrap();
+            });
+        })
+        .unwrap();
+    rx.recv().unwrap()
+}
