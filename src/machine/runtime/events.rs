@@ -34,6 +34,7 @@ pub fn describe_trip(trip: &Trip, line: u32) -> String {
             format!("axis {}: drive communication lost{at}", axis_letter(axis))
         }
         Trip::SpindleNotAtSpeed => format!("spindle did not reach speed{at}"),
+        Trip::PlcFault => format!("PLC fault (see the plc.fault event){at}"),
         Trip::HomingFailed { axis } => format!("axis {}: homing failed", axis_letter(axis)),
         Trip::Fieldbus { axis, fault } => format!("axis {}: {fault}{at}", axis_letter(axis)),
         Trip::OverrunStorm { consecutive } => {
@@ -65,6 +66,8 @@ pub(super) struct Receivers {
     pub(super) mode: EventReceiver<ModeEvent>,
     pub(super) job: EventReceiver<JobEvent>,
     pub(super) fault: EventReceiver<FaultEvent>,
+    /// The PLC task's faults (`None` without `[plc]`).
+    pub(super) plc: Option<EventReceiver<crate::plc::task::PlcFault>>,
 }
 
 impl Machine {
@@ -92,6 +95,17 @@ impl Machine {
             book.faults.push_back(msg);
             drop(book);
             self.publish("fault", trip_json(&f.trip, f.line));
+        }
+        while let Some(f) = rx.plc.as_mut().and_then(EventReceiver::pop) {
+            let msg = format!("PLC: {f}");
+            tracing::error!("{msg}");
+            let mut book = lock(&self.book);
+            if book.faults.len() == FAULT_HISTORY {
+                book.faults.pop_front();
+            }
+            book.faults.push_back(msg.clone());
+            drop(book);
+            self.publish("plc", json!({ "fault": msg }));
         }
         while let Some(e) = rx.job.pop() {
             handle_job_event(self, e);
