@@ -20,7 +20,7 @@ fn root() -> &'static Path {
 }
 
 /// config/sim.toml with fast homing (as tests/fixtures/sim-fast.toml), on a simulated clock,
-/// with its PLC program by absolute path, and `edit` applied to the text.
+/// with its PLC program read from config/plc/mill.st by absolute path, and `edit` applied to the text.
 fn mill_config(dir: &Path, edit: impl Fn(String) -> String) -> PathBuf {
     let mut text = std::fs::read_to_string(root().join("config/sim.toml")).unwrap();
     for (from, to, n) in [
@@ -42,7 +42,7 @@ fn mill_config(dir: &Path, edit: impl Fn(String) -> String) -> PathBuf {
             2,
         ),
         (
-            "program = \"plc/mill.st\"",
+            "program = \"builtin:plc/mill.st\"",
             &format!(
                 "program = {:?}",
                 root().join("config/plc/mill.st").display().to_string()

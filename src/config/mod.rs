@@ -16,6 +16,8 @@
 //! [logging]       level
 //! [motion]        servo_thread, lookahead, g64_tolerance, rapid_override, max_feed_override
 //! [safety]        estop_input, overrun storm policy
+//! [plc]           program, thread, safety_relevant, timeouts, mcodes, instruction_budget,
+//!                 [plc.inputs] / [plc.outputs]: ST variable = machine signal (see `plc`)
 //! ```
 //!
 //! Loading has two stages. Deserialisation ([`parse`]) rejects malformed TOML, unknown keys,
@@ -115,11 +117,7 @@ pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
 /// the test suite, so an error here is a build defect; it is still returned, not panicked,
 /// so the daemon reports it like any other configuration error.
 pub fn builtin_sim() -> Result<MachineConfig, ConfigError> {
-    let mut config = parse(BUILTIN_SIM_TOML, "built-in sim")?;
-    if let Some(p) = &mut config.plc {
-        p.builtin_source = Some(BUILTIN_MILL_ST);
-    }
-    Ok(config)
+    parse(BUILTIN_SIM_TOML, "built-in sim")
 }
 
 /// Fails with [`ConfigError::Unavailable`] when the configuration names backends this build

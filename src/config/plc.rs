@@ -27,7 +27,9 @@ use std::path::PathBuf;
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlcConfig {
-    /// The program file (relative to the configuration file's directory).
+    /// The program file (relative to the configuration file's directory), or
+    /// `builtin:plc/mill.st` for the program compiled into the binary (the built-in mill's,
+    /// so that config/sim.toml works wherever it is copied).
     pub program: PathBuf,
     /// The `[[thread]]` the PLC scans on, one scan per period.
     #[serde(default = "default_thread")]
@@ -57,9 +59,6 @@ pub struct PlcConfig {
     /// Variable → signal, taken from the program after each scan.
     #[serde(default)]
     pub outputs: BTreeMap<String, String>,
-    /// The program's text when it is compiled into the binary (the built-in machine).
-    #[serde(skip)]
-    pub builtin_source: Option<&'static str>,
     /// The directory of the configuration file: relative paths are relative to it.
     #[serde(skip)]
     pub base_dir: Option<PathBuf>,

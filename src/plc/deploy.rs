@@ -23,6 +23,9 @@ pub struct PreparedPlc {
     pub stats: Arc<PlcStats>,
 }
 
+/// Prefix of `plc.program` naming a program compiled into the binary.
+pub const BUILTIN: &str = "builtin:";
+
 /// Consecutive scan overruns that trip the watchdog.
 pub const WATCHDOG_OVERRUNS: u32 = 10;
 
@@ -40,8 +43,14 @@ pub fn prepare(
         budget: plc.instruction_budget,
     };
     let name = plc.program.display().to_string();
-    let program = match plc.builtin_source {
-        Some(src) => compile(&name, src, opts).map_err(|e| format!("plc.program: {e}"))?,
+    let mut program = match name.strip_prefix(BUILTIN) {
+        Some("plc/mill.st") => compile("config/plc/mill.st", crate::config::BUILTIN_MILL_ST, opts)
+            .map_err(|e| format!("plc.program: {e}"))?,
+        Some(other) => {
+            return Err(format!(
+                "plc.program: no built-in program {other:?} (there is {BUILTIN}plc/mill.st)"
+            ))
+        }
         None => super::load_file(&plc.resolve_path(&plc.program), opts)
             .map_err(|e| format!("plc.program: {e}"))?,
     };
@@ -66,6 +75,13 @@ pub fn prepare(
         .axes
         .iter()
         .fold(0u32, |m, a| m | 1 << (a.name as u32));
+    // RETAIN values restored before the first scan; the writer starts with them.
+    let retain = match &plc.retain_file {
+        Some(f) => Some(
+            super::retain::start(&mut program, &plc.resolve_path(f)).map_err(|e| e.to_string())?,
+        ),
+        None => None,
+    };
     let task = PlcTask::new(
         program,
         bindings,
@@ -74,6 +90,10 @@ pub fn prepare(
             axes_mask,
         },
     );
+    let task = match retain {
+        Some(r) => task.with_retain(r),
+        None => task,
+    };
     let stats = task.stats();
     Ok(Some(PreparedPlc {
         task,

@@ -24,6 +24,7 @@ pub mod link;
 pub mod parser;
 mod peephole;
 pub mod program;
+pub mod retain;
 mod stack;
 pub mod stdfb;
 pub mod task;

@@ -132,6 +132,7 @@ pub struct PlcTask {
     overrun_streak: u32,
     watchdog: bool,
     reported: bool,
+    retain: Option<super::retain::Retain>,
 }
 
 impl PlcTask {
@@ -168,7 +169,14 @@ impl PlcTask {
             overrun_streak: 0,
             watchdog: false,
             reported: false,
+            retain: None,
         }
+    }
+
+    /// Publishes the RETAIN variables after every scan for the state-file writer.
+    pub fn with_retain(mut self, retain: super::retain::Retain) -> Self {
+        self.retain = Some(retain);
+        self
     }
 
     /// The statistics the task keeps.
@@ -319,6 +327,9 @@ impl Task for PlcTask {
         if let Err(f) = result {
             self.fault(PlcFault::Program(f));
         }
+        if let Some(r) = &self.retain {
+            r.shared.publish(&self.program, &r.ids);
+        }
         self.cmd.scans = self.cmd.scans.wrapping_add(1);
         if let Some(w) = &mut self.command_out {
             w.set(self.cmd);
@@ -335,5 +346,69 @@ impl Task for PlcTask {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plc::bind::Bindings;
+    use crate::plc::{compile, Options};
+
+    fn task() -> PlcTask {
+        let src = "PROGRAM P\nVAR_OUTPUT lamp : BOOL; hold : BOOL; END_VAR\nlamp := TRUE;\nhold := FALSE;\nEND_PROGRAM\n";
+        let p = compile("w.st", src, Options::default()).unwrap();
+        let lamp = p.var("lamp").unwrap();
+        let hold = p.var("hold").unwrap();
+        let b = Bindings {
+            inputs: Vec::new(),
+            outputs: vec![
+                (lamp, OutSignal::DigitalOutput(2), Value::Bool(false)),
+                (hold, OutSignal::FeedHold, Value::Bool(true)),
+            ],
+        };
+        PlcTask::new(
+            p,
+            b,
+            PlcSetup {
+                watchdog_overruns: 10,
+                axes_mask: 0,
+            },
+        )
+    }
+
+    fn step(t: &mut PlcTask, cycle: u64, period_ns: u64) {
+        let ctx = StepContext {
+            now_ns: cycle * 10_000_000,
+            period_ns,
+            cycle,
+        };
+        t.update(&ctx).unwrap();
+    }
+
+    /// Scans that keep overrunning the period trip the watchdog: the PLC goes into fault and
+    /// its outputs to their safe values (feed hold on, the lamp off). Scans within the period
+    /// never do.
+    #[test]
+    fn the_watchdog_trips_on_consecutive_overruns() {
+        let mut t = task();
+        for c in 0..50 {
+            step(&mut t, c, 1_000_000_000);
+        }
+        assert!(!t.cmd.fault);
+        assert_eq!(t.cmd.digital, 1 << 2);
+        assert!(!t.cmd.feed_hold);
+        // A period no scan can meet: every scan overruns.
+        for c in 50..59 {
+            step(&mut t, c, 1);
+            assert!(!t.cmd.fault, "not before 10 in a row");
+        }
+        step(&mut t, 59, 1);
+        assert!(t.cmd.fault);
+        assert!(t.stats().faulted.load(Ordering::Relaxed));
+        assert_eq!(t.stats().overruns.load(Ordering::Relaxed), 10);
+        step(&mut t, 60, 1_000_000_000);
+        assert_eq!(t.cmd.digital & (1 << 2), 0, "lamp at its safe value");
+        assert!(t.cmd.feed_hold, "feed hold at its safe value");
     }
 }
