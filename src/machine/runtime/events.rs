@@ -71,6 +71,15 @@ pub(super) struct Receivers {
 }
 
 impl Machine {
+    /// Keeps `msg` in the fault history (status `faults`), the oldest dropped when full.
+    fn remember_fault(&self, msg: String) {
+        let mut book = lock(&self.book);
+        if book.faults.len() == FAULT_HISTORY {
+            book.faults.pop_front();
+        }
+        book.faults.push_back(msg);
+    }
+
     /// Applies and forwards every pending realtime event. Called by the bridge every few
     /// milliseconds, and by `status` after it read the snapshot: the machine task emits a
     /// job's end in the same cycle as the mode change, so a status never shows the new mode
@@ -88,23 +97,13 @@ impl Machine {
         while let Some(f) = rx.fault.pop() {
             let msg = describe_trip(&f.trip, f.line);
             tracing::error!("fault: {msg}");
-            let mut book = lock(&self.book);
-            if book.faults.len() == FAULT_HISTORY {
-                book.faults.pop_front();
-            }
-            book.faults.push_back(msg);
-            drop(book);
+            self.remember_fault(msg);
             self.publish("fault", trip_json(&f.trip, f.line));
         }
         while let Some(f) = rx.plc.as_mut().and_then(EventReceiver::pop) {
             let msg = format!("PLC: {f}");
             tracing::error!("{msg}");
-            let mut book = lock(&self.book);
-            if book.faults.len() == FAULT_HISTORY {
-                book.faults.pop_front();
-            }
-            book.faults.push_back(msg.clone());
-            drop(book);
+            self.remember_fault(msg.clone());
             self.publish("plc", json!({ "fault": msg }));
         }
         while let Some(e) = rx.job.pop() {
