@@ -66,6 +66,7 @@ impl MachineApi for Double {
             outputs: Default::default(),
             probe: Default::default(),
             optional_stop: false,
+            plc: None,
         }
     }
     fn estop(&self) -> Result<(), ApiError> {

@@ -101,3 +101,117 @@ fn a_faulting_scan_does_not_allocate() {
     assert_eq!(faults, 999);
     assert_eq!(outs[0], Value::Bool(false), "outputs at their safe values");
 }
+
+/// The machine's servo cycle with the mill's PLC task beside it (config/sim.toml with its
+/// `[plc]`, on the stepped runtime): a job with coolant, an M6 handshake with the carousel
+/// and a feed move, a guard door opened mid-move (feed hold) and closed, an e-stop. Nothing
+/// allocates on either thread once running.
+#[test]
+fn the_servo_and_plc_cycle_allocates_nothing() {
+    use hytask::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
+    use hytask::machine::runtime::{build, Built};
+    use hytask::machine::servo::machine_task::MachineCmd;
+    use hytask::machine::servo::{ports, AxisFeedback, MachineSnapshot, QueueItem};
+    use hytask::rt::prelude::*;
+    use std::sync::Arc;
+
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut text = std::fs::read_to_string(root.join("config/sim.toml")).unwrap();
+    for (from, to) in [
+        ("initial_position = 150.0", "initial_position = 298.0"),
+        ("initial_position = -50.0", "initial_position = -2.0"),
+    ] {
+        text = text.replace(from, to);
+    }
+    let mut cfg = hytask::config::parse(&text, "sim.toml").unwrap();
+    cfg.plc.as_mut().unwrap().base_dir = Some(root.join("config"));
+    let Built {
+        mut app,
+        machine,
+        queue,
+        motion_cfg,
+        sim_io,
+        ..
+    } = build(&cfg).unwrap();
+    app.configure().unwrap();
+    let mut rt = app.start_stepped(SimClock::new(0)).unwrap();
+    let mut fb: DataReader<AxisFeedback> = rt.reader(&ports::feedback('X')).unwrap();
+    let mut snap: DataReader<MachineSnapshot> = rt.reader(ports::SNAPSHOT).unwrap();
+    for cmd in [
+        MachineCmd::EstopReset,
+        MachineCmd::On,
+        MachineCmd::Home { mask: 0 },
+    ] {
+        let h = machine.send(cmd).unwrap();
+        for _ in 0..40_000 {
+            rt.run_cycles(1);
+            if h.status() == CommandStatus::Done {
+                break;
+            }
+        }
+        assert_eq!(h.status(), CommandStatus::Done, "{cmd:?}");
+    }
+    let mut start = [0.0; NUM_AXES];
+    start[0] = fb.latest().unwrap().actual;
+    start[1] = start[0];
+    let mut end = start;
+    end[0] = 100.0;
+    let loc = SourceLoc {
+        file: Arc::from("t"),
+        line: 1,
+        col: 1,
+    };
+    let c = |cmd| Canon {
+        loc: loc.clone(),
+        cmd,
+    };
+    let canon = [
+        c(CanonCmd::FloodOn),
+        c(CanonCmd::StartChange),
+        c(CanonCmd::ChangeTool(4)),
+        c(CanonCmd::SetFeedRate(1200.0)),
+        c(CanonCmd::StraightFeed(end)),
+    ];
+    let plan = hytask::motion::plan_from(&canon, &motion_cfg, start).unwrap();
+    for &item in &plan.items {
+        queue.try_push(QueueItem { job: 1, item }).unwrap();
+    }
+    let _run = machine
+        .send(MachineCmd::Run {
+            job: 1,
+            items: plan.items.len() as u64,
+            manual: false,
+        })
+        .unwrap();
+    rt.run_cycles(50);
+    let io = sim_io[0].clone().unwrap();
+    let door = 3; // config/sim.toml: estop, probe, spindle_at_speed, door_open, estop_reset
+
+    let before = counting_alloc::so_far();
+    rt.run_cycles(1500); // the carousel turns 4 pockets (400 ms), then the move starts
+    let tool = snap.latest().unwrap().tool;
+    let moved = fb.latest().unwrap().actual;
+    io.set_digital_input(door, true).unwrap();
+    rt.run_cycles(1000);
+    let held = snap.latest().unwrap().mode;
+    io.set_digital_input(door, false).unwrap();
+    rt.run_cycles(100);
+    let resume = machine.send(MachineCmd::Resume).unwrap();
+    rt.run_cycles(500);
+    io.set_digital_input(0, true).unwrap();
+    rt.run_cycles(500);
+    let during = counting_alloc::so_far() - before;
+
+    assert_eq!(tool, 4, "the PLC finished the M6");
+    assert!(moved < start[0] - 1.0, "the machine moved after the M6");
+    assert_eq!(
+        held,
+        hytask::machine::api::Mode::Holding,
+        "the door held feed"
+    );
+    assert_eq!(resume.status(), CommandStatus::Done);
+    assert_eq!(
+        during, 0,
+        "{during} allocations in 3600 servo cycles with the PLC"
+    );
+}

@@ -16,6 +16,8 @@
 //! [logging]       level
 //! [motion]        servo_thread, lookahead, g64_tolerance, rapid_override, max_feed_override
 //! [safety]        estop_input, overrun storm policy
+//! [plc]           program, thread, safety_relevant, timeouts, mcodes, instruction_budget,
+//!                 [plc.inputs] / [plc.outputs]: ST variable = machine signal (see `plc`)
 //! ```
 //!
 //! Loading has two stages. Deserialisation ([`parse`]) rejects malformed TOML, unknown keys,
@@ -39,6 +41,7 @@ mod error;
 mod io;
 mod machine;
 pub mod modbus;
+mod plc;
 mod root;
 mod settings;
 mod spindle;
@@ -52,6 +55,7 @@ pub use drive::{
 pub use error::{ConfigError, Issue, Issues};
 pub use io::{AnalogPoint, DigitalPoint, IoBackend, IoConfig, IoKind, IoRef, TouchPlate};
 pub use machine::{Kinematics, KinematicsKind, MachineSection, ScaraConfig};
+pub use plc::PlcConfig;
 pub use root::MachineConfig;
 pub use settings::{
     default_socket_path, ControlConfig, FileMode, LogLevel, LoggingConfig, MotionConfig,
@@ -64,6 +68,8 @@ use std::path::Path;
 
 /// The text of `config/sim.toml`, compiled into the binary: the default machine.
 pub const BUILTIN_SIM_TOML: &str = include_str!("../../config/sim.toml");
+/// The text of `config/plc/mill.st`, the built-in machine's PLC program.
+pub const BUILTIN_MILL_ST: &str = include_str!("../../config/plc/mill.st");
 
 /// Parses and validates a machine description. `origin` names the text in messages (a
 /// path, or "built-in sim"). Relative paths inside are left as written.
@@ -89,7 +95,7 @@ pub fn parse(text: &str, origin: &str) -> Result<MachineConfig, ConfigError> {
 }
 
 /// Reads, parses and validates a machine file. A relative `tool_table.path` is made
-/// relative to the file's directory.
+/// relative to the file's directory (and `[plc]` paths are resolved against it).
 pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
     let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
         path: path.to_path_buf(),
@@ -100,6 +106,9 @@ pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
         if t.path.is_relative() {
             t.path = dir.join(&t.path);
         }
+    }
+    if let Some(p) = &mut config.plc {
+        p.base_dir = path.parent().map(Path::to_path_buf);
     }
     Ok(config)
 }

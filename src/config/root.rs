@@ -52,6 +52,9 @@ pub struct MachineConfig {
     pub motion: MotionConfig,
     /// `[safety]`: e-stop and overrun policy.
     pub safety: SafetyConfig,
+    /// `[plc]`: absent for a machine without a PLC program.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plc: Option<super::PlcConfig>,
 }
 
 impl MachineConfig {
@@ -129,6 +132,19 @@ impl MachineConfig {
             );
         }
         self.safety.validate(&mut issues);
+        if let Some(p) = &self.plc {
+            p.validate(&mut issues);
+            if self.thread(&p.thread).is_none() {
+                issues.push(
+                    "plc.thread",
+                    format!(
+                        "no [[thread]] named {:?} (threads: {})",
+                        p.thread,
+                        list(self.threads.iter().map(|t| t.name.as_str()))
+                    ),
+                );
+            }
+        }
         issues.into_vec()
     }
 

@@ -203,6 +203,24 @@ pub struct Status {
     /// Optional stop: M1 holds the job as M0 does (`job.optional_stop`; off at start).
     #[serde(default)]
     pub optional_stop: bool,
+    /// The PLC task's scan statistics (absent without `[plc]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plc: Option<PlcStatus>,
+}
+
+/// Scan statistics of the PLC task, in `status`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlcStatus {
+    /// Scans run.
+    pub scans: u64,
+    /// Median scan time, µs (upper bound of its power-of-two bucket).
+    pub p50_us: f64,
+    /// Longest scan, µs.
+    pub max_us: f64,
+    /// Scans longer than the PLC thread's period.
+    pub overruns: u64,
+    /// The PLC is in fault (outputs at their safe values).
+    pub fault: bool,
 }
 
 /// A fault to inject into a simulated machine (`sim.fault`).

@@ -391,6 +391,12 @@ pub fn motion_config(cfg: &MachineConfig) -> MotionConfig {
 pub fn interp_options(cfg: &MachineConfig) -> InterpOptions {
     InterpOptions {
         tool_table: cfg.tool_table.as_ref().map(|t| t.path.clone()),
+        // The user M codes the PLC handles (issue 11).
+        user_mcodes: cfg
+            .plc
+            .as_ref()
+            .map(|p| p.mcodes.clone())
+            .unwrap_or_default(),
         ..InterpOptions::default()
     }
 }

@@ -119,6 +119,8 @@ pub struct Machine {
     receivers: Mutex<Option<Receivers>>,
     /// Modbus link events, published as topic `io` by the bridge.
     link_events: Mutex<Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>>,
+    /// Scan statistics of the PLC task.
+    plc_stats: Option<Arc<crate::plc::task::PlcStats>>,
 }
 
 mod events;
@@ -172,6 +174,8 @@ pub struct Built {
     pub can_sim_buses: Vec<hytask_hal::sim::SimCanBus>,
     /// Modbus link events (`None` without Modbus devices).
     pub link_events: Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>,
+    /// Scan statistics of the PLC task (`None` without `[plc]`).
+    pub plc_stats: Option<Arc<crate::plc::task::PlcStats>>,
 }
 
 /// Builds the backends and adds the machine's tasks to a new deployment, in start order
@@ -265,6 +269,8 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         settle_timeout_cycles: (1.0 / period_s) as u32,
     };
 
+    let plc = crate::plc::deploy::prepare(config, &devs.io_map, period_s)
+        .map_err(DeployError::Invalid)?;
     let (queue_w, queue_r) = buffer::<QueueItem>(QUEUE_CAPACITY, FullPolicy::DropNewest);
     let mut app = Deployment::new();
     app.set_overrun_policy(OverrunPolicy {
@@ -298,11 +304,11 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
     }
     app.add_periodic("io", io_task, schedule)?;
     let estop_request = Arc::new(AtomicU32::new(0));
-    let machine = app.add_periodic(
-        "machine",
-        MachineTask::new(setup).with_estop_request(estop_request.clone()),
-        schedule,
-    )?;
+    let mut machine_task = MachineTask::new(setup).with_estop_request(estop_request.clone());
+    if let Some(p) = &plc {
+        machine_task = machine_task.with_plc(p.link);
+    }
+    let machine = app.add_periodic("machine", machine_task, schedule)?;
     app.add_periodic(
         "interpolator",
         InterpolatorTask::new(motion_cfg.clone(), axes.clone(), queue_r),
@@ -333,7 +339,13 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         app.add_periodic(&name, task, schedule)?;
     }
     app.add_periodic("monitor", MonitorTask::new(guards), schedule)?;
+    // The PLC on its own thread, after the servo tasks (the servo thread stays first).
+    let plc_stats = plc.as_ref().map(|p| p.stats.clone());
+    if let Some(p) = plc {
+        app.add_periodic("plc", p.task, p.schedule)?;
+    }
     Ok(Built {
+        plc_stats,
         app,
         machine,
         queue: queue_w,
@@ -376,6 +388,7 @@ impl Machine {
             can_sdo,
             can_sim_buses,
             link_events,
+            plc_stats,
         } = build(&config)?;
         let report = app.configure()?;
         for w in &report.warnings {
@@ -384,6 +397,13 @@ impl Machine {
         let mode_rx = app.event::<ModeEvent>("machine.mode")?.subscribe(256);
         let job_rx = app.event::<JobEvent>("machine.job")?.subscribe(1024);
         let fault_rx = app.event::<FaultEvent>("machine.fault")?.subscribe(256);
+        let plc_rx = match plc_stats {
+            Some(_) => Some(
+                app.event::<crate::plc::task::PlcFault>("plc.fault")?
+                    .subscribe(16),
+            ),
+            None => None,
+        };
         let readers = Readers {
             status: app.reader(ports::STATUS)?,
         };
@@ -428,8 +448,10 @@ impl Machine {
                 mode: mode_rx,
                 job: job_rx,
                 fault: fault_rx,
+                plc: plc_rx,
             })),
             link_events: Mutex::new(link_events),
+            plc_stats,
         });
         let weak = Arc::downgrade(&m);
         let stop = m.bridge_stop.clone();
@@ -842,6 +864,10 @@ impl MachineApi for Machine {
                     .collect(),
             },
             optional_stop: snap.optional_stop,
+            plc: self
+                .plc_stats
+                .as_deref()
+                .map(crate::plc::task::PlcStats::status),
         }
     }
 

@@ -65,6 +65,8 @@ pub enum Trip {
         /// Node, cause and error code.
         fault: hytask_hal::canopen::axis::LinkFault,
     },
+    /// The PLC (safety relevant) went into fault; its `plc.fault` event says where.
+    PlcFault,
     /// The servo thread overran its period too many times in a row.
     OverrunStorm {
         /// Consecutive overruns seen.
@@ -102,7 +104,9 @@ impl Trip {
             | Trip::CommunicationLost { axis }
             | Trip::HomingFailed { axis }
             | Trip::Fieldbus { axis, .. } => Some(axis),
-            Trip::Estop | Trip::OverrunStorm { .. } | Trip::SpindleNotAtSpeed => None,
+            Trip::Estop | Trip::OverrunStorm { .. } | Trip::SpindleNotAtSpeed | Trip::PlcFault => {
+                None
+            }
         }
     }
 }

@@ -9,18 +9,25 @@
 //!   generation, fusion of instruction pairs, stack sizing.
 //! - [`vm`], [`stdfb`]: the interpreter and the standard function blocks.
 //! - [`program`], [`value`]: the loaded program, its variable table and its scan.
+//! - [`bind`], [`link`], [`task`]: the PLC in the machine: bindings of variables to the
+//!   machine's signals, the data exchanged with the machine task, the realtime scan task.
 
 pub mod ast;
+pub mod bind;
 mod builtins;
 pub mod compile;
+pub mod deploy;
 pub mod diag;
 pub mod expr;
 pub mod lexer;
+pub mod link;
 pub mod parser;
 mod peephole;
 pub mod program;
+pub mod retain;
 mod stack;
 pub mod stdfb;
+pub mod task;
 pub mod types;
 pub mod value;
 pub mod vm;

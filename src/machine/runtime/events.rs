@@ -34,6 +34,7 @@ pub fn describe_trip(trip: &Trip, line: u32) -> String {
             format!("axis {}: drive communication lost{at}", axis_letter(axis))
         }
         Trip::SpindleNotAtSpeed => format!("spindle did not reach speed{at}"),
+        Trip::PlcFault => format!("PLC fault (see the plc.fault event){at}"),
         Trip::HomingFailed { axis } => format!("axis {}: homing failed", axis_letter(axis)),
         Trip::Fieldbus { axis, fault } => format!("axis {}: {fault}{at}", axis_letter(axis)),
         Trip::OverrunStorm { consecutive } => {
@@ -65,9 +66,20 @@ pub(super) struct Receivers {
     pub(super) mode: EventReceiver<ModeEvent>,
     pub(super) job: EventReceiver<JobEvent>,
     pub(super) fault: EventReceiver<FaultEvent>,
+    /// The PLC task's faults (`None` without `[plc]`).
+    pub(super) plc: Option<EventReceiver<crate::plc::task::PlcFault>>,
 }
 
 impl Machine {
+    /// Keeps `msg` in the fault history (status `faults`), the oldest dropped when full.
+    fn remember_fault(&self, msg: String) {
+        let mut book = lock(&self.book);
+        if book.faults.len() == FAULT_HISTORY {
+            book.faults.pop_front();
+        }
+        book.faults.push_back(msg);
+    }
+
     /// Applies and forwards every pending realtime event. Called by the bridge every few
     /// milliseconds, and by `status` after it read the snapshot: the machine task emits a
     /// job's end in the same cycle as the mode change, so a status never shows the new mode
@@ -85,13 +97,14 @@ impl Machine {
         while let Some(f) = rx.fault.pop() {
             let msg = describe_trip(&f.trip, f.line);
             tracing::error!("fault: {msg}");
-            let mut book = lock(&self.book);
-            if book.faults.len() == FAULT_HISTORY {
-                book.faults.pop_front();
-            }
-            book.faults.push_back(msg);
-            drop(book);
+            self.remember_fault(msg);
             self.publish("fault", trip_json(&f.trip, f.line));
+        }
+        while let Some(f) = rx.plc.as_mut().and_then(EventReceiver::pop) {
+            let msg = format!("PLC: {f}");
+            tracing::error!("{msg}");
+            self.remember_fault(msg.clone());
+            self.publish("plc", json!({ "fault": msg }));
         }
         while let Some(e) = rx.job.pop() {
             handle_job_event(self, e);

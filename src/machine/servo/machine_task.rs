@@ -14,6 +14,7 @@
 //! thread's overrun event; both are handled at this task's safe point (deferred handlers,
 //! step 6), so a fault found in cycle n starts the controlled stop in cycle n + 1.
 
+use super::plc_link::{PlcLink, PlcLinkSetup};
 use super::{
     ports, AxisFeedback, DriveControl, FaultEvent, Inputs, JobError, JobEvent, MachineSnapshot,
     ModeEvent, MonitorSnapshot, MotionControl, Outputs, Setpoints,
@@ -24,6 +25,7 @@ use crate::machine::api::Mode;
 use crate::machine::mode::{Fact, ModeMachine, Request};
 use crate::machine::safety::Trip;
 use crate::motion::{AuxKind, InterpState};
+use crate::plc::link::RequestKind;
 use crate::rt::prelude::*;
 
 /// The machine's operations.
@@ -339,6 +341,13 @@ enum Barrier {
     ProgramStop,
     /// The end of a probe move: held until the next piece of the program is queued.
     Probe,
+    /// M6 or M100–M199 handled by the PLC: held until it answers request `seq`.
+    Plc {
+        seq: u32,
+        mcode: u32,
+        tool: u32,
+        deadline: u64,
+    },
 }
 
 /// What the current motion is, and how it should end.
@@ -401,6 +410,8 @@ pub struct MachineTask {
     /// command queue, so that an e-stop is taken even when every command slot is busy.
     estop_request: Option<std::sync::Arc<std::sync::atomic::AtomicU32>>,
     estop_seen: u32,
+    /// The PLC, when `[plc]` is configured.
+    plc: Option<PlcLink>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -455,6 +466,7 @@ impl MachineTask {
             step_skip: 0,
             estop_request: None,
             estop_seen: 0,
+            plc: None,
             setup,
         }
     }
@@ -641,6 +653,14 @@ impl MachineTask {
             AuxKind::Flood(on) => self.coolant(self.setup.flood_output, self.setup.mist_output, on),
             AuxKind::Mist(on) => self.coolant(self.setup.mist_output, self.setup.flood_output, on),
             AuxKind::SelectTool(_) | AuxKind::StartToolChange => {}
+            AuxKind::ChangeTool(t) if self.plc.as_ref().is_some_and(|p| p.setup.handles_m6) => {
+                done = !self.plc_request(RequestKind::ToolChange, 6, t, 0.0, 0.0);
+            }
+            AuxKind::UserMcode { code, p, q }
+                if self.plc.as_ref().is_some_and(|p| p.setup.handles_mcodes) =>
+            {
+                done = !self.plc_request(RequestKind::UserMcode, code, 0, p, q);
+            }
             AuxKind::ChangeTool(t) | AuxKind::ChangeToolNumber(t) => self.snap.tool = t,
             AuxKind::DigitalOutput { index, on, .. } => self.outputs.set_do(index as usize, on),
             AuxKind::AnalogOutput { index, value, .. } => {
@@ -745,6 +765,10 @@ impl MachineTask {
     fn poll_barrier(&mut self) {
         let met = match self.barrier {
             Barrier::None | Barrier::ProgramStop | Barrier::Probe => false,
+            Barrier::Plc { .. } => {
+                self.poll_plc_barrier();
+                return;
+            }
             Barrier::SpindleAtSpeed { since } => {
                 let at = self
                     .setup
@@ -948,8 +972,17 @@ impl MachineTask {
                 });
             }
         }
+        let outputs = match &mut self.plc {
+            Some(p) => {
+                if !matches!(self.barrier, Barrier::Plc { .. }) {
+                    p.withdraw();
+                }
+                p.publish(self.outputs, self.current == Motion::None)
+            }
+            None => self.outputs,
+        };
         if let Some(w) = &mut self.outputs_out {
-            w.set(self.outputs);
+            w.set(outputs);
         }
         if let Some(w) = &mut self.drive_out {
             w.set(self.drive);
@@ -985,6 +1018,9 @@ impl Task for MachineTask {
         self.mode_ev = Some(ctx.event("mode"));
         self.fault_ev = Some(ctx.event("fault"));
         self.job_ev = Some(ctx.event("job"));
+        if let Some(p) = &mut self.plc {
+            p.configure(ctx);
+        }
         Ok(())
     }
 
@@ -1027,6 +1063,7 @@ impl Task for MachineTask {
                 self.enter_estop(Trip::Estop);
             }
         }
+        self.poll_plc();
         self.motion.probe_input = self.setup.probe_input.is_some_and(|i| self.inputs.di(i));
         if self.mode.mode() == Mode::Estop {
             // The quick stop is requested until the drives are off.
@@ -1067,6 +1104,9 @@ impl Task for MachineTask {
                     .map_err(reject)?;
                 self.drive.quick_stop = false;
                 self.drive.fault_reset_seq = self.drive.fault_reset_seq.wrapping_add(1);
+                if let Some(p) = &mut self.plc {
+                    p.estop_reset();
+                }
             }
             MachineCmd::On => {
                 self.mode.request(Request::On, homed).map_err(reject)?;
@@ -1101,6 +1141,9 @@ impl Task for MachineTask {
             }
             MachineCmd::Run { job, items, manual } => {
                 let req = if manual { Request::Jog } else { Request::Run };
+                if !manual {
+                    self.refuse_if_plc_inhibits()?;
+                }
                 // Jogging is allowed before homing (that is how a machine is brought home by
                 // hand); soft limits apply only to homed axes, checked by the planner.
                 self.mode.request(req, homed || manual).map_err(reject)?;
@@ -1134,6 +1177,7 @@ impl Task for MachineTask {
                 self.step_from = Some(if at_stop { 0 } else { self.setpoints.line });
             }
             MachineCmd::Resume => {
+                self.refuse_if_plc_inhibits()?;
                 self.resume_job(homed)?;
                 self.step_from = None;
             }
@@ -1301,5 +1345,99 @@ impl Task for MachineTask {
             );
         }
         self.publish();
+    }
+}
+
+/// The PLC's part of the machine task (the link itself is in `plc_link`).
+impl MachineTask {
+    /// Links the machine task to a PLC task (`[plc]`): M6 and M100–M199 wait for it as
+    /// configured, its feed hold, start inhibit, e-stop and fault act on the machine.
+    pub fn with_plc(mut self, setup: PlcLinkSetup) -> Self {
+        self.plc = Some(PlcLink::new(setup));
+        self
+    }
+
+    /// Posts a request to the PLC and holds the interpolator at a barrier until it answers.
+    /// Returns false when there is no PLC to ask.
+    fn plc_request(&mut self, kind: RequestKind, mcode: u32, tool: u32, p: f64, q: f64) -> bool {
+        let Some(link) = &mut self.plc else {
+            return false;
+        };
+        let seq = link.post(kind, tool, mcode, p, q);
+        let timeout = if kind == RequestKind::ToolChange {
+            link.setup.tool_change_timeout_cycles
+        } else {
+            link.setup.mcode_timeout_cycles
+        };
+        self.barrier = Barrier::Plc {
+            seq,
+            mcode,
+            tool,
+            deadline: self.cycle + timeout,
+        };
+        true
+    }
+
+    /// Releases the PLC barrier when the PLC answered; a timeout ends the job with its line.
+    fn poll_plc_barrier(&mut self) {
+        let Barrier::Plc {
+            seq,
+            mcode,
+            tool,
+            deadline,
+        } = self.barrier
+        else {
+            return;
+        };
+        let Some(link) = &mut self.plc else {
+            return;
+        };
+        if link.done(seq) {
+            link.withdraw();
+            if mcode == 6 {
+                self.snap.tool = tool;
+            }
+            self.barrier = Barrier::None;
+            self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
+        } else if self.cycle >= deadline {
+            link.withdraw();
+            self.barrier = Barrier::None;
+            let line = self.setpoints.line;
+            self.job_error(JobError::PlcTimeout { mcode }, line);
+        }
+    }
+
+    /// Acts on what the PLC asks: e-stop on its rising e-stop output, a controlled stop on
+    /// its fault (when safety relevant), a feed hold while it holds feed.
+    fn poll_plc(&mut self) {
+        let Some(link) = &mut self.plc else {
+            return;
+        };
+        let d = link.read();
+        if d.estop && self.mode.mode() != Mode::Estop {
+            self.enter_estop(Trip::Estop);
+        }
+        if d.fault {
+            let line = self.setpoints.line;
+            self.on_trip(Trip::PlcFault, line);
+        }
+        if d.feed_hold
+            && self.mode.mode() == Mode::Running
+            && self.mode.request(Request::Pause, true).is_ok()
+        {
+            self.motion.hold = true;
+            let line = self.setpoints.line;
+            self.emit_job(JobEvent::Held { line });
+        }
+    }
+
+    /// Cycle start and resume are refused while the PLC inhibits them (e.g. guard door).
+    fn refuse_if_plc_inhibits(&self) -> Result<(), RejectReason> {
+        match &self.plc {
+            Some(p) if p.start_inhibited() => Err(RejectReason::Other(
+                "the PLC inhibits cycle start (machine.start_inhibit)",
+            )),
+            _ => Ok(()),
+        }
     }
 }

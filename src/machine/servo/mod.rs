@@ -34,6 +34,7 @@ pub mod machine_task;
 pub mod monitor_task;
 #[cfg(test)]
 mod output_tests;
+pub mod plc_link;
 #[cfg(test)]
 mod probe_tests;
 #[cfg(test)]
@@ -416,6 +417,11 @@ pub enum JobError {
     ProbeNoContact(ProbeKind),
     /// The program probes but the machine has no probe input (`motion.probe_input`).
     NoProbeInput,
+    /// The PLC did not finish M6 (`mcode` 6) or an M100–M199 within its timeout.
+    PlcTimeout {
+        /// The M code.
+        mcode: u32,
+    },
 }
 
 impl std::fmt::Display for JobError {
@@ -432,6 +438,13 @@ impl std::fmt::Display for JobError {
                 "{} move finished without {} the probe",
                 k.gcode(),
                 if k.toward() { "tripping" } else { "releasing" }
+            ),
+            JobError::PlcTimeout { mcode: 6 } => f.write_str(
+                "M6: the PLC did not finish the tool change within plc.tool_change_timeout_s",
+            ),
+            JobError::PlcTimeout { mcode } => write!(
+                f,
+                "M{mcode}: the PLC did not finish it within plc.mcode_timeout_s"
             ),
             JobError::NoProbeInput => {
                 f.write_str("the program probes (G38.x) but the machine has no probe input: set motion.probe_input")

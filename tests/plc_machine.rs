@@ -1,0 +1,350 @@
+//! The PLC in the machine, end to end (issue 11, sections 2 and 3): the built-in mill's PLC
+//! program (config/plc/mill.st) driven through simulated inputs and G-code jobs on a daemon
+//! with a simulated clock, and the bindings refused at deployment.
+
+#![allow(clippy::unwrap_used)]
+
+mod support;
+
+use hytask::config::{self, MachineConfig};
+use hytask::control::client::Client;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+use support::*;
+
+const HANG: Duration = Duration::from_secs(120);
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// config/sim.toml with fast homing (as tests/fixtures/sim-fast.toml), on a simulated clock,
+/// with its PLC program read from config/plc/mill.st by absolute path, and `edit` applied to the text.
+fn mill_config(dir: &Path, edit: impl Fn(String) -> String) -> PathBuf {
+    let mut text = std::fs::read_to_string(root().join("config/sim.toml")).unwrap();
+    for (from, to, n) in [
+        ("initial_position = 150.0", "initial_position = 298.0", 2),
+        ("initial_position = -50.0", "initial_position = -2.0", 1),
+        (
+            "velocity = 20.0, latch_velocity = 2.0",
+            "velocity = 40.0, latch_velocity = 5.0",
+            2,
+        ),
+        (
+            "velocity = 10.0, latch_velocity = 1.0",
+            "velocity = 20.0, latch_velocity = 5.0",
+            1,
+        ),
+        (
+            "[[thread]]\n",
+            &format!("[[thread]]\nclock = \"simulated\"\nsim_speed = {SIM_SPEED}\n"),
+            2,
+        ),
+        (
+            "program = \"builtin:plc/mill.st\"",
+            &format!(
+                "program = {:?}",
+                root().join("config/plc/mill.st").display().to_string()
+            ),
+            1,
+        ),
+    ] {
+        assert_eq!(
+            text.matches(from).count(),
+            n,
+            "config/sim.toml changed: {from}"
+        );
+        text = text.replace(from, to);
+    }
+    // Tools 1-12 in pockets 1-12 of the carousel; tool 40 in a pocket it does not have.
+    let table: String = (1..=12)
+        .chain([40])
+        .map(|t| format!("T{t} P{t} Z0 D0\n"))
+        .collect();
+    std::fs::write(dir.join("tools.tbl"), table).unwrap();
+    text = text.replace("[plc]\n", "[tool_table]\npath = \"tools.tbl\"\n\n[plc]\n");
+    let path = dir.join("mill.toml");
+    std::fs::write(&path, edit(text)).unwrap();
+    path
+}
+
+fn start(edit: impl Fn(String) -> String) -> (Daemon, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    let d = Daemon::start(&mill_config(dir.path(), edit));
+    (d, dir)
+}
+
+fn input(c: &mut Client, name: &str, on: bool) {
+    ok(c, "sim.input", json!({"name": name, "value": u8::from(on)}));
+}
+
+fn output(s: &Value, name: &str) -> f64 {
+    s["outputs"][name]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no output {name}: {s}"))
+}
+
+/// M6 waits for the PLC's carousel: the motor turns while the job stands at the M6, and the
+/// job goes on once the PLC reports the change done.
+#[test]
+fn m6_waits_for_the_plc_carousel() {
+    let (d, _dir) = start(|t| t);
+    let mut c = d.client();
+    ready(&mut c);
+    run_text(&mut c, "G21 G90\nT11 M6\nG0 X100\nM2\n", "m6.ngc");
+    let s = wait_status(&mut c, "carousel turning", HANG, |s| {
+        output(s, "carousel_motor") == 1.0
+    });
+    assert_eq!(s["job"]["state"], json!("running"), "{s}");
+    assert_eq!(s["job"]["line"], json!(2), "the job waits at the M6: {s}");
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("done"), "{s}");
+    assert_eq!(output(&s, "carousel_motor"), 0.0);
+    assert!(
+        (axis(&s, "X")["actual"].as_f64().unwrap() - 100.0).abs() < 0.01,
+        "{s}"
+    );
+    let plc = &s["plc"];
+    assert!(
+        plc["scans"].as_u64().unwrap() > 0,
+        "scan statistics in status: {s}"
+    );
+    assert_eq!(plc["fault"], json!(false));
+}
+
+/// A tool the carousel cannot find: the M6 times out and the job is aborted with its line.
+#[test]
+fn m6_timeout_aborts_the_job_naming_its_line() {
+    let (d, _dir) = start(|t| {
+        t.replace(
+            "tool_change_timeout_s = 30.0",
+            "tool_change_timeout_s = 1.0",
+        )
+    });
+    let mut c = d.client();
+    ready(&mut c);
+    run_text(
+        &mut c,
+        "G21 G90\nG0 X50\nT40 M6\nG0 X100\nM2\n",
+        "m6-timeout.ngc",
+    );
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("failed"), "{s}");
+    let reason = s["job"]["reason"].as_str().unwrap_or_default();
+    assert!(
+        reason.contains("line 3") && reason.contains("M6"),
+        "{reason}"
+    );
+    assert!(
+        (axis(&s, "X")["actual"].as_f64().unwrap() - 50.0).abs() < 0.01,
+        "{s}"
+    );
+    assert_eq!(
+        s["mode"],
+        json!("idle"),
+        "a program error, not a machine fault: {s}"
+    );
+}
+
+/// The guard door: open, cycle start is refused; opened mid-job, feed holds; resume is
+/// refused until it is closed again, then the job finishes.
+#[test]
+fn guard_door_holds_feed_and_refuses_start() {
+    let (d, _dir) = start(|t| t);
+    let mut c = d.client();
+    ready(&mut c);
+    input(&mut c, "door_open", true);
+    wait_status(&mut c, "start inhibited", HANG, |s| {
+        s["inputs"]["door_open"] == json!(1.0)
+    });
+    // The PLC scans every 10 ms of simulated time: give it a few scans to see the door.
+    std::thread::sleep(Duration::from_millis(200));
+    ok(
+        &mut c,
+        "job.load",
+        json!({"text": "G21 G90\nG1 X20 F600\nM2\n", "name": "door.ngc"}),
+    );
+    let (_, msg) = err(&mut c, "job.run", Value::Null);
+    assert!(msg.contains("start_inhibit"), "{msg}");
+    input(&mut c, "door_open", false);
+    std::thread::sleep(Duration::from_millis(200));
+    run_text(&mut c, "G21 G90\nG1 X20 F120\nM2\n", "door.ngc");
+    wait_status(&mut c, "moving", HANG, |s| {
+        s["mode"] == json!("running") && axis(s, "X")["actual"].as_f64().unwrap() < 290.0
+    });
+    input(&mut c, "door_open", true);
+    let s = wait_status(&mut c, "feed hold", HANG, |s| s["mode"] == json!("holding"));
+    assert_eq!(s["job"]["state"], json!("holding"), "{s}");
+    let s = wait_status(&mut c, "at rest", HANG, |s| at_rest(s, 1e-6));
+    let held_at = axis(&s, "X")["actual"].as_f64().unwrap();
+    assert!(held_at > 25.0, "stopped on the path before the end: {s}");
+    let (_, msg) = err(&mut c, "job.resume", Value::Null);
+    assert!(msg.contains("start_inhibit"), "{msg}");
+    input(&mut c, "door_open", false);
+    std::thread::sleep(Duration::from_millis(200));
+    ok(&mut c, "job.resume", Value::Null);
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("done"), "{s}");
+}
+
+/// M8 runs the coolant pump through the PLC; M100 pulses the way-oil pump and completes when
+/// the PLC says so.
+#[test]
+fn coolant_pump_and_m100_lubrication_pulse() {
+    let (d, _dir) = start(|t| t);
+    let mut c = d.client();
+    ready(&mut c);
+    // A move first: a dwell before any move dwells at the origin (lookahead last_pose).
+    run_text(
+        &mut c,
+        "G21 G90\nG0 X100\nM8\nM100\nG4 P5\nM9\nM2\n",
+        "lube.ngc",
+    );
+    let s = wait_status(&mut c, "lube pulse", HANG, |s| {
+        output(s, "lube_pump") == 1.0
+    });
+    assert_eq!(output(&s, "coolant_pump"), 1.0, "{s}");
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("done"), "{s}");
+    let s = wait_status(&mut c, "pump off", HANG, |s| {
+        output(s, "coolant_pump") == 0.0
+    });
+    assert_eq!(output(&s, "lube_pump"), 0.0, "the pulse is 2 s: {s}");
+}
+
+/// The e-stop chain: the button breaks it; `estop.reset` re-arms it with the machine, so the
+/// machine comes back on as it always did.
+#[test]
+fn estop_chain_rearms_with_machine_reset() {
+    let (d, _dir) = start(|t| t);
+    let mut c = d.client();
+    ready(&mut c);
+    input(&mut c, "estop", true);
+    wait_status(&mut c, "e-stop", HANG, |s| s["mode"] == json!("estop"));
+    std::thread::sleep(Duration::from_millis(200));
+    input(&mut c, "estop", false);
+    ok(&mut c, "estop.reset", Value::Null);
+    ok(&mut c, "machine.on", Value::Null);
+    wait_status(&mut c, "idle", HANG, |s| s["mode"] == json!("idle"));
+    std::thread::sleep(Duration::from_millis(500));
+    let s = ok(&mut c, "status", Value::Null);
+    assert_eq!(
+        s["mode"],
+        json!("idle"),
+        "the PLC chain did not trip again: {s}"
+    );
+}
+
+/// A runtime fault of a safety-relevant PLC: outputs safe, the machine stops, the fault names
+/// the file and line.
+#[test]
+fn plc_runtime_fault_stops_the_machine() {
+    let program = root().join("tests/plc/fault.st").display().to_string();
+    let (d, _dir) = start(move |t| {
+        let start = t.find("\n[plc]\n").unwrap() + 1;
+        format!(
+            "{}[plc]\nprogram = {program:?}\nsafety_relevant = true\n\
+             [plc.inputs]\ntrigger = \"door_open\"\n[plc.outputs]\nlamp = \"spindle_ready\"\n",
+            &t[..start]
+        )
+    });
+    let mut c = d.client();
+    ready(&mut c);
+    let s = wait_status(&mut c, "lamp on", HANG, |s| {
+        output(s, "spindle_ready") == 1.0
+    });
+    assert_eq!(s["plc"]["fault"], json!(false));
+    run_text(&mut c, "G21 G90\nG1 X20 F120\nM2\n", "fault.ngc");
+    wait_status(&mut c, "moving", HANG, |s| s["mode"] == json!("running"));
+    input(&mut c, "door_open", true);
+    let s = wait_status(&mut c, "fault", HANG, |s| s["mode"] == json!("fault"));
+    assert_eq!(s["plc"]["fault"], json!(true), "{s}");
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("failed"), "{s}");
+    let faults = s["faults"].to_string();
+    assert!(
+        faults.contains("fault.st:18") && faults.contains("PLC"),
+        "{faults}"
+    );
+    assert_eq!(
+        output(&s, "spindle_ready"),
+        0.0,
+        "outputs at their safe values: {s}"
+    );
+}
+
+fn builtin_with(edit: impl Fn(&mut MachineConfig)) -> Result<(), String> {
+    let mut cfg = config::builtin_sim().unwrap();
+    edit(&mut cfg);
+    let map = hytask::machine::devices::IoMap::new(&cfg).unwrap();
+    hytask::plc::deploy::prepare(&cfg, &map, 0.001).map(|_| ())
+}
+
+/// The built-in mill's bindings resolve; bad ones are refused naming the key and variable.
+#[test]
+fn bad_bindings_are_refused_naming_key_and_variable() {
+    builtin_with(|_| {}).unwrap();
+    let e = builtin_with(|c| {
+        c.plc
+            .as_mut()
+            .unwrap()
+            .inputs
+            .insert("tool_number".into(), "door_open".into());
+    })
+    .unwrap_err();
+    assert!(
+        e.contains("plc.inputs.tool_number")
+            && e.contains("Mill.tool_number")
+            && e.contains("BOOL"),
+        "{e}"
+    );
+    let e = builtin_with(|c| {
+        c.plc
+            .as_mut()
+            .unwrap()
+            .inputs
+            .insert("door_open".into(), "door_opne".into());
+    })
+    .unwrap_err();
+    assert!(
+        e.contains("plc.inputs.door_open: unknown signal \"door_opne\""),
+        "{e}"
+    );
+    let e = builtin_with(|c| {
+        c.plc
+            .as_mut()
+            .unwrap()
+            .outputs
+            .insert("coolant_pump".into(), "coolant_flood".into());
+    })
+    .unwrap_err();
+    assert!(
+        e.contains("plc.outputs.coolant_pump") && e.contains("two owners"),
+        "{e}"
+    );
+    let e = builtin_with(|c| {
+        c.plc
+            .as_mut()
+            .unwrap()
+            .outputs
+            .insert("no_such".into(), "lube_pump".into());
+    })
+    .unwrap_err();
+    assert!(
+        e.contains("plc.outputs.no_such") && e.contains("no variable"),
+        "{e}"
+    );
+    let e = builtin_with(|c| {
+        c.plc
+            .as_mut()
+            .unwrap()
+            .outputs
+            .insert("door_open".into(), "lube_pump".into());
+    })
+    .unwrap_err();
+    assert!(
+        e.contains("plc.outputs.door_open") && e.contains("VAR_OUTPUT"),
+        "{e}"
+    );
+}
