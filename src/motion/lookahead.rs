@@ -67,15 +67,16 @@ pub struct Lookahead {
 }
 
 impl Lookahead {
-    /// An empty lookahead with window `window` (moves).
-    pub fn new(lim: &Limits, window: usize) -> Self {
+    /// An empty lookahead with window `window` (moves), for a machine standing at `start_mm`
+    /// (where a dwell before the first move stands).
+    pub fn new(lim: &Limits, window: usize, start_mm: [f64; NUM_AXES]) -> Self {
         Lookahead {
             lim: *lim,
             window,
             run: Vec::new(),
             run_aux: Vec::new(),
             entry: None,
-            last_pose: [0.0; NUM_AXES],
+            last_pose: start_mm,
         }
     }
 
@@ -166,10 +167,15 @@ impl Lookahead {
     }
 }
 
-/// Plans a folded program into segment-queue items.
-pub fn plan_steps(steps: Vec<Step>, lim: &Limits, window: usize) -> Vec<Item> {
+/// Plans a folded program that starts at `start_mm` into segment-queue items.
+pub fn plan_steps(
+    steps: Vec<Step>,
+    lim: &Limits,
+    window: usize,
+    start_mm: [f64; NUM_AXES],
+) -> Vec<Item> {
     let mut out = Vec::new();
-    let mut la = Lookahead::new(lim, window);
+    let mut la = Lookahead::new(lim, window, start_mm);
     // Without a chunked run nothing can fail; with one, a refused chunk ends the plan (the
     // streaming planner reports the error, see `Lookahead`).
     let ok = steps.into_iter().try_for_each(|s| la.push(s, &mut out));

@@ -75,7 +75,7 @@ impl PlanStream {
             start_mm,
             pos_mm: start_mm,
             state,
-            la: Lookahead::new(&lim, cfg.lookahead_moves),
+            la: Lookahead::new(&lim, cfg.lookahead_moves, start_mm),
             fresh: Vec::new(),
             pending: Vec::new(),
             messages: Vec::new(),
@@ -253,6 +253,29 @@ mod tests {
                 Item::Aux(_) => None,
             })
             .collect()
+    }
+
+    /// A dwell before the first move stands where the machine is, not at pose 0 (a dwell at 0
+    /// from a machine elsewhere was a step of the setpoint and tripped the following-error
+    /// limit).
+    #[test]
+    fn a_dwell_before_any_move_stands_at_the_start_pose() {
+        let cfg = MotionConfig::default();
+        let loc = SourceLoc {
+            file: "d.ngc".into(),
+            line: 1,
+            col: 1,
+        };
+        let canon = [Canon {
+            loc,
+            cmd: CanonCmd::Dwell(0.5),
+        }];
+        let (items, _) = plan_in_pieces(&canon, 1, &cfg);
+        let segs = segments(&items);
+        assert_eq!(segs.len(), 1);
+        let start = [10.0, 10.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(segs[0].start_mm, start);
+        assert_eq!(segs[0].end_mm, start);
     }
 
     #[test]
