@@ -65,6 +65,7 @@ pub mod arcs;
 pub mod blend;
 pub mod bounds;
 pub mod config;
+pub mod draw;
 mod error;
 pub mod from_canon;
 pub mod interpolator;
