@@ -10,7 +10,7 @@ use hytask::gcode::{load_file, InterpOptions, NUM_AXES};
 use hytask::motion::draw::{self, Options, View};
 use hytask::motion::{plan, plan_from, svg, MotionConfig, Plan};
 use motion_util::*;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 const VIEWS: [View; 4] = [View::Top, View::Front, View::Side, View::Iso];
 
@@ -27,7 +27,7 @@ fn demo_jobs() -> Vec<PathBuf> {
 }
 
 /// Plans `job` from the built-in sim mill's home position (X300 Y300 Z0), as `hytask run`.
-fn plan_job(job: &PathBuf, start: [f64; 3]) -> Plan {
+fn plan_job(job: &Path, start: [f64; 3]) -> Plan {
     let canon = load_file(job, &InterpOptions::default()).unwrap().canon;
     let mut pose = [0.0; NUM_AXES];
     pose[..3].copy_from_slice(&start);

@@ -11,6 +11,9 @@ pub fn colour(b: usize) -> String {
     format!("hsl({h:.0},90%,45%)")
 }
 
+/// Draws one mark at a pixel position.
+pub type Mark = fn(&mut Doc, (f64, f64));
+
 /// Style of a rapid line.
 pub const RAPID_STYLE: &str = r##"stroke="#999" stroke-width="1.2" stroke-dasharray="6 4""##;
 
@@ -86,7 +89,7 @@ pub fn toolpath(doc: &mut Doc, f: &Frame, vmax: f64, summary: &str) {
     doc.line((x, y - 4.0), (x + 30.0, y - 4.0), RAPID_STYLE);
     doc.text((x + 36.0, y), 12.0, "start", "legend-text", "rapid");
     x += 90.0;
-    let items: [(fn(&mut Doc, (f64, f64)), &str); 4] = [
+    let items: [(Mark, &str); 4] = [
         (marks::start, "start"),
         (marks::end, "end"),
         (marks::plunge, "plunge"),

@@ -121,7 +121,7 @@ fn draw_marks(doc: &mut Doc, f: &Frame, tp: &Toolpath, px: &dyn Fn(&[f64; 3]) ->
         }
     }
     for (q, name, mark) in [
-        (&tp.start, "start", marks::start as fn(&mut Doc, (f64, f64))),
+        (&tp.start, "start", marks::start as legend::Mark),
         (&tp.end, "end", marks::end),
     ] {
         let at = px(q);
