@@ -1,6 +1,8 @@
 //! Client subcommands: talk to a running daemon over the control socket. Each maps to one
 //! control method (see `src/control/methods/`); `--json` prints the raw reply.
 
+use super::interrupt::{Interrupts, EXIT_INTERRUPTED};
+use super::wait::{self, Motion, WaitError};
 use crate::control::client::Client;
 use anyhow::Context;
 use serde_json::{json, Value};
@@ -24,6 +26,15 @@ pub struct SocketArg {
     pub json: bool,
 }
 
+/// `--no-wait` of the commands that start a motion.
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct NoWait {
+    /// Return as soon as the daemon has accepted the command (the motion goes on; the
+    /// next command may find the machine busy).
+    #[arg(long)]
+    pub no_wait: bool,
+}
+
 /// Client subcommands.
 #[derive(Debug, clap::Subcommand)]
 pub enum ClientCommand {
@@ -41,14 +52,18 @@ pub enum ClientCommand {
     On(SocketArg),
     /// Switch the machine off after a controlled stop.
     Off(SocketArg),
-    /// Home one axis, or all axes.
+    /// Home one axis, or all axes; waits until homing has ended (per-axis progress on a
+    /// terminal; Ctrl-C stops it).
     Home {
         /// Axis letter (all axes when absent).
         axis: Option<String>,
         #[command(flatten)]
+        wait: NoWait,
+        #[command(flatten)]
         sock: SocketArg,
     },
-    /// Jog an axis: continuous until `hytask jog-stop`, or by `--distance`.
+    /// Jog an axis: continuous until `hytask jog-stop`, or by `--distance` (waits until the
+    /// axis stops; Ctrl-C stops it).
     Jog {
         /// Axis letter.
         axis: String,
@@ -59,14 +74,18 @@ pub enum ClientCommand {
         #[arg(long)]
         distance: Option<f64>,
         #[command(flatten)]
+        wait: NoWait,
+        #[command(flatten)]
         sock: SocketArg,
     },
     /// Stop a continuous jog.
     JogStop(SocketArg),
-    /// Execute one line of G-code.
+    /// Execute one line of G-code; waits until its motion has ended (Ctrl-C stops it).
     Mdi {
         /// The G-code line.
         line: String,
+        #[command(flatten)]
+        wait: NoWait,
         #[command(flatten)]
         sock: SocketArg,
     },
@@ -158,6 +177,8 @@ pub fn run(cmd: ClientCommand) -> anyhow::Result<ExitCode> {
             nix::sys::signal::SigHandler::SigDfl,
         )
     };
+    // The motion a command starts and waits for (unless --no-wait).
+    let mut wait_for: Option<(Motion, Vec<String>)> = None;
     let (sock, method, params) = match cmd {
         C::Status(s) => (s, "status", Value::Null),
         C::Estop { reset, sock } => (
@@ -167,19 +188,36 @@ pub fn run(cmd: ClientCommand) -> anyhow::Result<ExitCode> {
         ),
         C::On(s) => (s, "machine.on", Value::Null),
         C::Off(s) => (s, "machine.off", Value::Null),
-        C::Home { axis, sock } => (sock, "home", json!({ "axis": axis })),
+        C::Home { axis, wait, sock } => {
+            if !wait.no_wait {
+                wait_for = Some((Motion::Home, axis.iter().cloned().collect()));
+            }
+            (sock, "home", json!({ "axis": axis }))
+        }
         C::Jog {
             axis,
             velocity,
             distance,
+            wait,
             sock,
-        } => (
-            sock,
-            "jog",
-            json!({"axis": axis, "velocity": velocity, "distance": distance}),
-        ),
+        } => {
+            // A continuous jog runs until jog-stop: nothing to wait for.
+            if distance.is_some() && !wait.no_wait {
+                wait_for = Some((Motion::Jog, vec![]));
+            }
+            (
+                sock,
+                "jog",
+                json!({"axis": axis, "velocity": velocity, "distance": distance}),
+            )
+        }
         C::JogStop(s) => (s, "jog.stop", Value::Null),
-        C::Mdi { line, sock } => (sock, "mdi", json!({ "line": line })),
+        C::Mdi { line, wait, sock } => {
+            if !wait.no_wait {
+                wait_for = Some((Motion::Mdi, vec![]));
+            }
+            (sock, "mdi", json!({ "line": line }))
+        }
         C::Pause(s) => (s, "job.pause", Value::Null),
         C::Resume(s) => (s, "job.resume", Value::Null),
         C::Abort(s) => (s, "job.abort", Value::Null),
@@ -236,7 +274,27 @@ pub fn run(cmd: ClientCommand) -> anyhow::Result<ExitCode> {
     let params = strip_nulls(params);
     let mut client = Client::connect(&sock.socket)
         .with_context(|| format!("cannot reach the daemon at {}", sock.socket.display()))?;
+    let mut intr = match &wait_for {
+        Some(_) => {
+            wait::subscribe(&mut client)?;
+            Some(Interrupts::install()?)
+        }
+        None => None,
+    };
     let reply = client.call(method, params)?;
+    if let (Some((motion, axes)), Some(intr)) = (&wait_for, &mut intr) {
+        if sock.json {
+            println!("{reply}");
+        }
+        return match wait::until_idle(&mut client, *motion, axes, intr) {
+            Ok(()) => Ok(ExitCode::SUCCESS),
+            Err(WaitError::Interrupted(what)) => {
+                eprintln!("hytask: {what} stopped by Ctrl-C");
+                Ok(ExitCode::from(EXIT_INTERRUPTED))
+            }
+            Err(e) => Err(e.into()),
+        };
+    }
     if sock.json {
         println!("{reply}");
     } else if method == "status" {

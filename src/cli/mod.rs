@@ -8,6 +8,7 @@ mod canopen_tool;
 mod check;
 mod client;
 mod gcode;
+mod interrupt;
 mod latency;
 mod modbus_sim;
 mod plan;
@@ -16,6 +17,7 @@ mod plot;
 mod run;
 mod serve;
 mod sim_drive;
+mod wait;
 
 /// hytask: realtime hybrid task-based controller for machine tools and robots.
 #[derive(Debug, Parser)]

@@ -8,6 +8,8 @@
 //! it, draw progress (line, percent, ETA), stream faults and messages, print a summary
 //! (time, distance, max following error per axis). Exits non-zero unless the job completes.
 
+use super::interrupt::{Interrupts, EXIT_INTERRUPTED};
+use super::wait::{self, WaitError};
 use crate::control::client::{Client, ClientError};
 use anyhow::{bail, Context};
 use serde_json::{json, Value};
@@ -45,10 +47,12 @@ pub struct RunArgs {
 pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let job = std::fs::canonicalize(&args.job)
         .with_context(|| format!("cannot open job {}", args.job.display()))?;
+    let mut intr = Interrupts::install()?;
     match Client::connect(&args.socket) {
         Ok(client) => {
             eprintln!("hytask: using the daemon at {}", args.socket.display());
-            follow_job(client, &job, args.feed_override)
+            let end = follow_job(client, &job, args.feed_override, &args.socket, &mut intr)?;
+            Ok(end.exit_code())
         }
         Err(_) if !args.no_embedded => {
             if std::env::var_os("RUST_LOG").is_none() {
@@ -69,9 +73,21 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 }
             );
             let client = Client::connect(daemon.socket())?;
-            let code = follow_job(client, &job, args.feed_override);
-            daemon.shutdown()?;
-            code
+            let socket = daemon.socket().to_path_buf();
+            let end = follow_job(client, &job, args.feed_override, &socket, &mut intr);
+            // Whatever happened to the client, the axes stop under control before exit.
+            let stopped = daemon.shutdown();
+            let end = end?;
+            if end == End::Interrupted {
+                match &stopped {
+                    Ok(()) => eprintln!(
+                        "hytask: job aborted by Ctrl-C; axes stopped, drives off, embedded machine shut down"
+                    ),
+                    Err(e) => eprintln!("hytask: job aborted by Ctrl-C; stopping the machine failed: {e:#}"),
+                }
+            }
+            stopped?;
+            Ok(end.exit_code())
         }
         Err(e) => {
             Err(e).with_context(|| format!("cannot reach the daemon at {}", args.socket.display()))
@@ -79,8 +95,36 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     }
 }
 
+/// How a followed job ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    /// Ran to its end.
+    Done,
+    /// Refused, failed or aborted by someone else.
+    Failed,
+    /// Aborted by the operator's second Ctrl-C.
+    Interrupted,
+}
+
+impl End {
+    fn exit_code(self) -> ExitCode {
+        match self {
+            End::Done => ExitCode::SUCCESS,
+            End::Failed => ExitCode::FAILURE,
+            End::Interrupted => ExitCode::from(EXIT_INTERRUPTED),
+        }
+    }
+}
+
 /// Brings the machine to idle and homed, runs the job, reports. Shared by both paths.
-fn follow_job(mut c: Client, job: &std::path::Path, feed: Option<f64>) -> anyhow::Result<ExitCode> {
+/// `socket` is where the operator can reach the same daemon (for `hytask resume`).
+fn follow_job(
+    mut c: Client,
+    job: &std::path::Path,
+    feed: Option<f64>,
+    socket: &std::path::Path,
+    intr: &mut Interrupts,
+) -> anyhow::Result<End> {
     c.call(
         "subscribe",
         json!({"topics": ["progress", "fault", "mode", "job", "message"]}),
@@ -99,17 +143,24 @@ fn follow_job(mut c: Client, job: &std::path::Path, feed: Option<f64>) -> anyhow
         None => bail!("the daemon sent a status without a mode"),
     }
     let status = c.call("status", Value::Null)?;
-    let unhomed: Vec<&str> = status["axes"]
+    let unhomed: Vec<String> = status["axes"]
         .as_array()
         .into_iter()
         .flatten()
         .filter(|a| a["homed"] != json!(true))
-        .filter_map(|a| a["name"].as_str())
+        .filter_map(|a| a["name"].as_str().map(str::to_string))
         .collect();
     if !unhomed.is_empty() {
         eprintln!("hytask: homing {}", unhomed.join(" "));
         c.call("home", Value::Null)?;
-        wait_for_mode(&mut c, "idle", Duration::from_secs(120))?;
+        match wait::until_idle(&mut c, wait::Motion::Home, &unhomed, intr) {
+            Ok(()) => eprintln!("hytask: homed {}", unhomed.join(" ")),
+            Err(WaitError::Interrupted(what)) => {
+                eprintln!("hytask: {what} stopped by Ctrl-C; the job did not start");
+                return Ok(End::Interrupted);
+            }
+            Err(e) => return Err(e).context("homing before the job"),
+        }
     }
     if let Some(f) = feed {
         c.call("override", json!({ "feed": f }))?;
@@ -118,7 +169,7 @@ fn follow_job(mut c: Client, job: &std::path::Path, feed: Option<f64>) -> anyhow
         Ok(info) => info,
         Err(ClientError::Remote { message, .. }) => {
             eprintln!("hytask: job refused, nothing moved: {message}");
-            return Ok(ExitCode::FAILURE);
+            return Ok(End::Failed);
         }
         Err(e) => return Err(e.into()),
     };
@@ -133,7 +184,9 @@ fn follow_job(mut c: Client, job: &std::path::Path, feed: Option<f64>) -> anyhow
     let started = Instant::now();
     c.call("job.run", Value::Null)?;
     let mut bar = ProgressBar::new();
+    let mut ctrl_c = CtrlC::new(socket);
     let outcome = loop {
+        ctrl_c.check(&mut c, intr, &mut bar)?;
         match c.next_event(Duration::from_millis(500))? {
             Some(ev) => match ev.topic.as_str() {
                 "progress" => bar.draw(&ev.data),
@@ -174,6 +227,20 @@ fn follow_job(mut c: Client, job: &std::path::Path, feed: Option<f64>) -> anyhow
     bar.finish();
     let status = c.call("status", Value::Null)?;
     let (state, job_status) = outcome;
+    if ctrl_c.aborted && state == "aborted" {
+        println!(
+            "job {} aborted by Ctrl-C at line {}/{} ({:.1} %, {:.1} of {:.1} mm); machine at {}",
+            job_status["name"].as_str().unwrap_or(""),
+            job_status["line"],
+            job_status["total_lines"],
+            job_status["progress"].as_f64().unwrap_or(0.0) * 100.0,
+            job_status["distance_mm"].as_f64().unwrap_or(0.0)
+                - job_status["distance_to_go_mm"].as_f64().unwrap_or(0.0),
+            job_status["distance_mm"].as_f64().unwrap_or(0.0),
+            per_axis(&status, "actual")
+        );
+        return Ok(End::Interrupted);
+    }
     println!("job:        {}", job_status["name"].as_str().unwrap_or(""));
     println!("result:     {state}");
     if let Some(reason) = job_status["reason"].as_str() {
@@ -197,10 +264,81 @@ fn follow_job(mut c: Client, job: &std::path::Path, feed: Option<f64>) -> anyhow
         println!("fault:      {}", f.as_str().unwrap_or(""));
     }
     Ok(if state == "done" {
-        ExitCode::SUCCESS
+        End::Done
     } else {
-        ExitCode::FAILURE
+        End::Failed
     })
+}
+
+/// Ctrl-C while a job runs: the first press holds it (feed hold: the axes decelerate on
+/// the path and the job can go on), the second aborts it under control. While held, Enter
+/// on the terminal resumes.
+struct CtrlC {
+    held: bool,
+    aborted: bool,
+    resume_hint: String,
+    stdin_tty: bool,
+}
+
+impl CtrlC {
+    fn new(socket: &std::path::Path) -> Self {
+        CtrlC {
+            held: false,
+            aborted: false,
+            resume_hint: format!("`hytask resume --socket {}`", socket.display()),
+            stdin_tty: std::io::stdin().is_terminal(),
+        }
+    }
+
+    fn check(
+        &mut self,
+        c: &mut Client,
+        intr: &mut Interrupts,
+        bar: &mut ProgressBar,
+    ) -> anyhow::Result<()> {
+        let presses = intr.take();
+        if presses > 0 && !self.held {
+            self.held = true;
+            c.call("job.pause", Value::Null)?;
+            bar.clear();
+            eprintln!(
+                "\nhytask: Ctrl-C: feed hold, the job stops on its path. {}{}; Ctrl-C again aborts the job.",
+                if self.stdin_tty { "Enter resumes, or " } else { "Resume with " },
+                self.resume_hint
+            );
+            if presses == 1 {
+                return Ok(());
+            }
+        }
+        if presses > 0 && self.held && !self.aborted {
+            self.aborted = true;
+            // A third press kills the client; the abort is already on its way.
+            intr.restore_default();
+            bar.clear();
+            eprintln!("hytask: Ctrl-C: aborting the job under control");
+            c.call("job.abort", Value::Null)?;
+            return Ok(());
+        }
+        if self.held && !self.aborted && self.stdin_tty && enter_pressed() {
+            self.held = false;
+            eprintln!("hytask: resuming");
+            c.call("job.resume", Value::Null)?;
+        }
+        Ok(())
+    }
+}
+
+/// Whether a line is waiting on stdin (Enter pressed); consumes it.
+fn enter_pressed() -> bool {
+    use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+    use std::os::fd::AsFd;
+    let stdin = std::io::stdin();
+    let mut fds = [PollFd::new(stdin.as_fd(), PollFlags::POLLIN)];
+    if !matches!(poll(&mut fds, PollTimeout::ZERO), Ok(n) if n > 0) {
+        return false;
+    }
+    let mut line = String::new();
+    matches!(stdin.read_line(&mut line), Ok(n) if n > 0)
 }
 
 /// `X 1.2345  Y ...`: one field of every axis of a status reply.
@@ -218,25 +356,6 @@ fn per_axis(status: &Value, field: &str) -> String {
         })
         .collect::<Vec<_>>()
         .join("  ")
-}
-
-fn wait_for_mode(c: &mut Client, mode: &str, timeout: Duration) -> anyhow::Result<()> {
-    let t0 = Instant::now();
-    while t0.elapsed() < timeout {
-        let s = c.call("status", Value::Null)?;
-        match s["mode"].as_str() {
-            Some(m) if m == mode => return Ok(()),
-            Some("fault") | Some("estop") => {
-                bail!(
-                    "machine stopped while waiting: {}",
-                    s["faults"].as_array().map(|f| f.len()).unwrap_or(0)
-                )
-            }
-            _ => {}
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    bail!("machine did not become {mode} within {timeout:?}")
 }
 
 fn fmt_duration(s: f64) -> String {

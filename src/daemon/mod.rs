@@ -53,6 +53,18 @@ pub fn run_with(
     options: ServerOptions,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
+    serve_until(machine, listener, options, shutdown, true)
+}
+
+/// [`run_with`]; `watch_sigint` false leaves Ctrl-C to the embedding command (`hytask run`
+/// holds the job on the first press and aborts on the second, then stops this daemon).
+fn serve_until(
+    machine: Arc<dyn Deployed>,
+    listener: Listener,
+    options: ServerOptions,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+    watch_sigint: bool,
+) -> anyhow::Result<()> {
     let (listener, claim) = listener.into_parts();
     let notifier = Notifier::from_env();
     let stop_watchdog = Arc::new(AtomicBool::new(false));
@@ -90,7 +102,11 @@ pub fn run_with(
             tokio::select! {
                 _ = shutdown => tracing::info!("shutdown requested"),
                 _ = term.recv() => tracing::info!("SIGTERM: stopping the machine"),
-                _ = tokio::signal::ctrl_c() => tracing::info!("SIGINT: stopping the machine"),
+                _ = async {
+                    if !watch_sigint || tokio::signal::ctrl_c().await.is_err() {
+                        std::future::pending::<()>().await
+                    }
+                } => tracing::info!("SIGINT: stopping the machine"),
             }
         })
         .await;
@@ -128,7 +144,10 @@ fn feed_watchdog(machine: &dyn Deployed, interval: Duration, stop: &AtomicBool) 
 }
 
 /// An in-process daemon on a private socket: what `hytask run` starts when no daemon is
-/// reachable, and what tests use.
+/// reachable, and what tests use. It does not react to SIGINT: Ctrl-C belongs to the command
+/// in front (a daemon thread shutting the socket on Ctrl-C made `hytask run` fail with
+/// "Broken pipe" while it was still following the job); the command calls
+/// [`shutdown`](Embedded::shutdown) when it is done.
 pub struct Embedded {
     machine: Arc<dyn Deployed>,
     socket: PathBuf,
@@ -157,9 +176,15 @@ impl Embedded {
         let thread = std::thread::Builder::new()
             .name("embedded-daemon".into())
             .spawn(move || {
-                run_with(m, listener, options, async move {
-                    let _ = rx.await;
-                })
+                serve_until(
+                    m,
+                    listener,
+                    options,
+                    async move {
+                        let _ = rx.await;
+                    },
+                    false,
+                )
             })?;
         Ok(Embedded {
             machine,

@@ -66,6 +66,7 @@ pub mod blend;
 pub mod bounds;
 pub mod config;
 pub mod css;
+pub mod draw;
 mod error;
 pub mod from_canon;
 pub mod interpolator;
