@@ -31,3 +31,4 @@ pub mod modbus;
 pub mod motion;
 pub mod plc;
 pub mod rt;
+pub mod script;
