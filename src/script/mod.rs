@@ -6,6 +6,7 @@ mod code;
 mod compile;
 pub mod engine;
 pub mod host;
+pub mod hosts;
 pub mod parser;
 
 pub use bind::{BindError, Bindings, Loaded};
@@ -15,6 +16,7 @@ pub use engine::{
     Ctl, Engine, EngineError, Limits, RunStatus, ScriptError, ScriptErrorKind, Status,
 };
 pub use host::{ControlError, ItemStatus, ScriptControl, ScriptHost, ScriptTask};
+pub use hosts::{HostsError, ScriptHosts};
 
 /// Reads and compiles a script file.
 pub fn load_file(path: &std::path::Path) -> Result<Script, crate::plc::LoadError> {

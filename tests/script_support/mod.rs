@@ -141,7 +141,7 @@ impl Task for Arm {
 /// The arm and a script host ("cell") on one 1 ms thread, started on simulated time.
 pub struct Cell {
     pub rt: hytask::rt::deploy::SteppedRuntime,
-    pub control: ScriptControl,
+    pub control: Arc<ScriptControl>,
     pub bindings: Bindings,
     pub done: Arc<AtomicU64>,
 }
@@ -168,7 +168,7 @@ pub fn cell() -> Cell {
     bindings.emit("done", done.clone());
     Cell {
         rt,
-        control,
+        control: Arc::new(control),
         bindings,
         done,
     }
