@@ -50,6 +50,7 @@ struct NativeMachine {
     s: S,
     k: i32,
     x: i32,
+    transitions: u64,
 }
 
 impl NativeMachine {
@@ -59,6 +60,7 @@ impl NativeMachine {
             S::A => {
                 if self.k % 4 == 3 {
                     self.s = S::B;
+                    self.transitions += 1;
                     assert!(self.k >= 0, "precondition");
                     self.x -= 1;
                 } else {
@@ -70,6 +72,7 @@ impl NativeMachine {
                 assert!(self.k >= 0, "precondition");
                 if self.k % 4 == 0 {
                     self.s = S::A;
+                    self.transitions += 1;
                 } else {
                     self.k += 1;
                 }
@@ -130,6 +133,7 @@ fn bench(c: &mut Criterion) {
         s: S::A,
         k: 0,
         x: 0,
+        transitions: 0,
     };
     for _ in 0..1000 {
         e.step_state_machines(0);
@@ -137,7 +141,10 @@ fn bench(c: &mut Criterion) {
     }
     assert_eq!(e.get(slot, "m.k").expect("k"), Value::Int(i64::from(nm.k)));
     assert_eq!(e.get(slot, "m.x").expect("x"), Value::Int(i64::from(nm.x)));
-    assert_eq!(e.status(slot).expect("status")[0].transitions, 500);
+    assert_eq!(
+        e.status(slot).expect("status")[0].transitions,
+        nm.transitions
+    );
 
     let (mut pe, pslot) = engine(&program(), "p");
     let (mut a, b) = (0i32, 7i32);

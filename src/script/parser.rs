@@ -506,3 +506,67 @@ pub(crate) fn to_plain(s: &SStmt, in_loop: bool) -> Option<Stmt> {
     };
     Some(Stmt { kind, span: s.span })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn program_body(src: &str) -> Vec<SStmt> {
+        let (f, diags) = parse(src);
+        assert!(diags.is_empty(), "{diags:?}");
+        match &f.items[0].kind {
+            ItemKind::Program(b) => b.clone(),
+            ItemKind::Machine(_) => panic!("not a program"),
+        }
+    }
+
+    #[test]
+    fn plain_st_stays_plain_script_statements_do_not() {
+        let b = program_body(
+            "PROGRAM p\n  IF a THEN b := 1; END_IF;\n  WHILE a DO IF c THEN EXIT; END_IF; END_WHILE;\n  IF a THEN DO x.y(); END_IF;\n  WHILE a DO IF c THEN EXIT; END_IF; WAIT UNTIL c; END_WHILE;\nEND_PROGRAM\n",
+        );
+        assert!(matches!(b[0].kind, SKind::Plain(_)));
+        assert!(matches!(b[1].kind, SKind::Plain(_)), "EXIT of its own loop");
+        assert!(matches!(b[2].kind, SKind::If(..)));
+        match &b[3].kind {
+            SKind::While(_, body) => assert!(
+                matches!(body[0].kind, SKind::If(..)),
+                "an EXIT of a script loop is a script statement"
+            ),
+            k => panic!("{k:?}"),
+        }
+    }
+
+    #[test]
+    fn script_words_remain_usable_as_names() {
+        let b = program_body("PROGRAM p\n  stop := start;\n  wait := 1;\n  STOP q;\nEND_PROGRAM\n");
+        assert!(matches!(b[0].kind, SKind::Plain(_)));
+        assert!(matches!(b[1].kind, SKind::Plain(_)));
+        assert!(matches!(&b[2].kind, SKind::Stop(n) if n.name == "q"));
+    }
+
+    #[test]
+    fn machine_parts_and_their_errors() {
+        let (f, diags) = parse(
+            "STATE_MACHINE m\n  INITIAL STATE a\n    PRECONDITION x > 0;\n    ENTRY DO r.go(1, 2.5); END_ENTRY\n    RUN y := 1; END_RUN\n    EXIT y := 0; END_EXIT\n    TRANSITION ON r.done WHEN y = 1 TO b;\n  END_STATE\n  FINAL STATE b BOGUS END_STATE\nEND_STATE_MACHINE\n",
+        );
+        let ItemKind::Machine(states) = &f.items[0].kind else {
+            panic!("machine")
+        };
+        let a = &states[0];
+        assert_eq!(
+            (a.kind, a.pre.len(), a.entry.len()),
+            (StateKind::Initial, 1, 1)
+        );
+        assert!(
+            matches!(&a.entry[0].kind, SKind::Do { peer, op, args } if peer == "r" && op.name == "go" && args.len() == 2)
+        );
+        assert_eq!(
+            a.transitions[0].event.as_ref().map(|e| e.0.as_str()),
+            Some("r.done")
+        );
+        assert_eq!(states[1].kind, StateKind::Final);
+        assert_eq!(diags.len(), 1);
+        assert_eq!(diags[0].span, Span { line: 9, col: 17 });
+    }
+}
