@@ -10,6 +10,8 @@
 //! - [`config`]: the TOML machine description, validated with errors that name the key.
 //! - [`motion`]: lookahead planner, kinematics and the realtime interpolator.
 //! - [`plc`]: IEC 61131-3 Structured Text: compiler and allocation-free scan.
+//! - [`script`]: programs and state machines in the PLC's Structured Text plus script
+//!   statements (DO, WAIT, TRY, states and transitions), run step by step inside a task.
 //! - [`gcode`]: RS274/NGC (LinuxCNC dialect) front end: text in, canonical commands out.
 //! - [`rt`]: the reusable realtime task model: activities, data objects, buffers, events,
 //!   commands, lifecycle, timing statistics. It knows nothing of machines.
@@ -31,3 +33,4 @@ pub mod modbus;
 pub mod motion;
 pub mod plc;
 pub mod rt;
+pub mod script;

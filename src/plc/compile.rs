@@ -17,6 +17,9 @@ use super::vm::{Cmp, Op};
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
+pub(crate) mod fragment;
+mod stmt;
+
 /// Compiler options.
 #[derive(Debug, Clone, Copy)]
 pub struct Options {
@@ -237,6 +240,17 @@ impl<'u> Compiler<'u> {
     }
 
     fn run(&mut self, file: &str, opts: Options) -> Option<Program> {
+        let instances = self.declare();
+        if instances.is_empty() && self.diags.is_empty() {
+            self.err(Span { line: 1, col: 1 }, "no PROGRAM in the file");
+        }
+        let mut programs = self.bodies(&instances);
+        self.finish(file, opts, &mut programs, &instances, &mut [])
+    }
+
+    /// Declares every name, type, global, block and function, and lays out one instance of
+    /// every PROGRAM: (POU index, component, base address) per PROGRAM.
+    pub(crate) fn declare(&mut self) -> Vec<(usize, u32, u32)> {
         let unit = self.unit;
         // Names first, so declarations can refer to types and blocks declared later.
         for (i, t) in unit.types.iter().enumerate() {
@@ -277,7 +291,6 @@ impl<'u> Compiler<'u> {
                 PouKind::Program => {}
             }
         }
-        let mut programs = Vec::new();
         let mut instances = Vec::new();
         for (i, p) in unit.pous.iter().enumerate() {
             if p.kind == PouKind::Program {
@@ -296,9 +309,13 @@ impl<'u> Compiler<'u> {
                 instances.push((i, cid, base));
             }
         }
-        if instances.is_empty() && self.diags.is_empty() {
-            self.err(Span { line: 1, col: 1 }, "no PROGRAM in the file");
-        }
+        instances
+    }
+
+    /// Compiles every body; returns (entry, base) of each PROGRAM.
+    fn bodies(&mut self, instances: &[(usize, u32, u32)]) -> Vec<(u32, u32)> {
+        let unit = self.unit;
+        let mut programs = Vec::new();
         // Bodies.
         for (i, p) in unit.pous.iter().enumerate() {
             let members = match &p.kind {
@@ -321,6 +338,21 @@ impl<'u> Compiler<'u> {
                 programs.push((entry, base));
             }
         }
+        programs
+    }
+
+    /// Patches calls, checks recursion, builds the variable table, optimises and sizes the
+    /// stack. `extra` are further entry points (script fragments) remapped by the peephole
+    /// pass like the POUs' entries.
+    pub(crate) fn finish(
+        &mut self,
+        file: &str,
+        opts: Options,
+        programs: &mut [(u32, u32)],
+        instances: &[(usize, u32, u32)],
+        extra: &mut [u32],
+    ) -> Option<Program> {
+        let unit = self.unit;
         for &(at, pou) in &self.patches {
             let e = self.entries.get(&pou).copied().unwrap_or(0);
             if let Op::Call { entry, .. } | Op::CallInd(entry) = &mut self.ops[at] {
@@ -343,7 +375,7 @@ impl<'u> Compiler<'u> {
                 &mut vars,
             );
         }
-        for &(pou, cid, base) in &instances {
+        for &(pou, cid, base) in instances {
             let pname = unit.pous[pou].name.name.clone();
             for m in self.comps[cid as usize].members.clone() {
                 let kind = match m.section {
@@ -369,9 +401,13 @@ impl<'u> Compiler<'u> {
         {
             let mut entries: Vec<&mut u32> = programs.iter_mut().map(|(e, _)| e).collect();
             entries.extend(self.entries.values_mut());
+            entries.extend(extra.iter_mut());
             super::peephole::optimize(&mut self.ops, &mut self.spans, &mut entries);
         }
-        let stack = super::stack::max_depth(&self.ops, self.entries.values().copied());
+        let stack = super::stack::max_depth(
+            &self.ops,
+            self.entries.values().chain(extra.iter()).copied(),
+        );
         let depth = unit.pous.len() + 2;
         Some(Program::new(
             Arc::from(file),
@@ -380,7 +416,7 @@ impl<'u> Compiler<'u> {
             std::mem::take(&mut self.init),
             stack * depth + 8,
             depth,
-            programs,
+            programs.to_vec(),
             vars,
             self.enums.clone(),
             std::mem::take(&mut self.interface),
@@ -1092,6 +1128,15 @@ impl<'u> Compiler<'u> {
 
     fn body(&mut self, pou: usize, members: &[Member]) -> u32 {
         let p = &self.unit.pous[pou];
+        self.enter_scope(pou, members);
+        let entry = self.here();
+        self.stmts(&p.body);
+        self.emit(Op::Ret, p.name.span);
+        entry
+    }
+
+    /// Makes the members of POU `pou` the local symbols of the code emitted next.
+    fn enter_scope(&mut self, pou: usize, members: &[Member]) {
         self.cur_pou = pou;
         self.locals.clear();
         self.peek_cache.clear();
@@ -1105,310 +1150,6 @@ impl<'u> Compiler<'u> {
             };
             self.locals.insert(m.name.to_ascii_uppercase(), sym);
         }
-        let entry = self.here();
-        self.stmts(&p.body);
-        self.emit(Op::Ret, p.name.span);
-        entry
-    }
-
-    fn stmts(&mut self, list: &[Stmt]) {
-        for s in list {
-            self.stmt(s);
-        }
-    }
-
-    fn stmt(&mut self, s: &Stmt) {
-        let span = s.span;
-        match &s.kind {
-            StmtKind::Assign(lhs, rhs) => self.assign(lhs, rhs, span),
-            StmtKind::Call(callee, args) => self.call_stmt(callee, args, span),
-            StmtKind::If(arms, els) => {
-                let mut ends = Vec::new();
-                for (c, body) in arms {
-                    self.cond(c);
-                    let jz = self.emit(Op::Jz(0), c.span);
-                    self.stmts(body);
-                    ends.push(self.emit(Op::Jmp(0), span));
-                    let h = self.here();
-                    self.patch(jz, h);
-                }
-                if let Some(b) = els {
-                    self.stmts(b);
-                }
-                let h = self.here();
-                for e in ends {
-                    self.patch(e, h);
-                }
-            }
-            StmtKind::Case(sel, arms, els) => self.case(sel, arms, els.as_deref(), span),
-            StmtKind::For {
-                var,
-                from,
-                to,
-                by,
-                body,
-            } => self.for_loop(var, from, to, by.as_ref(), body, span),
-            StmtKind::While(c, body) => {
-                let top = self.here();
-                self.cond(c);
-                let jz = self.emit(Op::Jz(0), c.span);
-                self.loops.push(Loop::default());
-                self.stmts(body);
-                self.emit(Op::Jmp(top), span);
-                let l = self.loops.pop().unwrap_or_default();
-                let end = self.here();
-                self.patch(jz, end);
-                self.close_loop(l, top, end);
-            }
-            StmtKind::Repeat(body, c) => {
-                let top = self.here();
-                self.loops.push(Loop::default());
-                self.stmts(body);
-                let cont = self.here();
-                self.cond(c);
-                self.emit(Op::Jz(top), c.span);
-                let l = self.loops.pop().unwrap_or_default();
-                let end = self.here();
-                self.close_loop(l, cont, end);
-            }
-            StmtKind::Exit | StmtKind::Continue => {
-                let j = self.emit(Op::Jmp(0), span);
-                let exit = matches!(s.kind, StmtKind::Exit);
-                match self.loops.last_mut() {
-                    Some(l) if exit => l.exits.push(j),
-                    Some(l) => l.conts.push(j),
-                    None => self.err(
-                        span,
-                        format!("{} outside a loop", if exit { "EXIT" } else { "CONTINUE" }),
-                    ),
-                }
-            }
-            StmtKind::Return => {
-                self.emit(Op::Ret, span);
-            }
-        }
-    }
-
-    fn close_loop(&mut self, l: Loop, cont: u32, end: u32) {
-        for j in l.exits {
-            self.patch(j, end);
-        }
-        for j in l.conts {
-            self.patch(j, cont);
-        }
-    }
-
-    /// A BOOL condition.
-    fn cond(&mut self, c: &Expr) {
-        let t = self.expr(c, Some(Ty::Bool));
-        self.coerce(t, Ty::Bool, c.span);
-    }
-
-    fn temp(&mut self) -> u32 {
-        self.alloc(&[0])
-    }
-
-    fn case(
-        &mut self,
-        sel: &Expr,
-        arms: &[(Vec<CaseLabel>, Vec<Stmt>)],
-        els: Option<&[Stmt]>,
-        span: Span,
-    ) {
-        let st = self.expr(sel, None);
-        if !(st.int().is_some() || matches!(st, Ty::Enum(_)) || is_void(st)) {
-            let n = self.ty_name(st);
-            self.err(
-                sel.span,
-                format!("CASE selector must be an integer or enumeration, found {n}"),
-            );
-        }
-        let t = self.temp();
-        self.emit(Op::StoreG(t), sel.span);
-        let cmp_u = st.int().is_some_and(|k| k.bits() == 64 && !k.signed());
-        let mut seen: Vec<(i128, i128, Span)> = Vec::new();
-        let mut ends = Vec::new();
-        for (labels, body) in arms {
-            let mut to_body = Vec::new();
-            for l in labels {
-                let (lo, hi, lspan) = match l {
-                    CaseLabel::One(e) => {
-                        let v = self.case_value(e, st);
-                        (v, v, e.span)
-                    }
-                    CaseLabel::Range(a, b) => {
-                        (self.case_value(a, st), self.case_value(b, st), a.span)
-                    }
-                };
-                let (Some(lo), Some(hi)) = (lo, hi) else {
-                    continue;
-                };
-                if let Some(prev) = seen.iter().find(|(a, b, _)| lo <= *b && *a <= hi) {
-                    let msg = format!("CASE label overlaps the label at line {}", prev.2.line);
-                    self.err(lspan, msg);
-                }
-                seen.push((lo, hi, lspan));
-                let cmp = |c| if cmp_u { Op::CmpU(c) } else { Op::CmpI(c) };
-                if lo == hi {
-                    self.emit(Op::LoadG(t), lspan);
-                    self.emit(Op::Push(lo as i64 as u64), lspan);
-                    self.emit(cmp(Cmp::Eq), lspan);
-                } else {
-                    self.emit(Op::LoadG(t), lspan);
-                    self.emit(Op::Push(lo as i64 as u64), lspan);
-                    self.emit(cmp(Cmp::Ge), lspan);
-                    self.emit(Op::LoadG(t), lspan);
-                    self.emit(Op::Push(hi as i64 as u64), lspan);
-                    self.emit(cmp(Cmp::Le), lspan);
-                    self.emit(Op::And, lspan);
-                }
-                to_body.push(self.emit(Op::Jnz(0), lspan));
-            }
-            let skip = self.emit(Op::Jmp(0), span);
-            let h = self.here();
-            for j in to_body {
-                self.patch(j, h);
-            }
-            self.stmts(body);
-            ends.push(self.emit(Op::Jmp(0), span));
-            let h = self.here();
-            self.patch(skip, h);
-        }
-        if let Some(b) = els {
-            self.stmts(b);
-        }
-        let h = self.here();
-        for e in ends {
-            self.patch(e, h);
-        }
-    }
-
-    fn case_value(&mut self, e: &Expr, st: Ty) -> Option<i128> {
-        match (self.const_eval(e), st) {
-            (Some(CVal::Int(v)), Ty::Int(k)) => {
-                if v < k.min() || v > k.max() {
-                    self.err(
-                        e.span,
-                        format!("CASE label {v} is out of the range of {}", k.name()),
-                    );
-                }
-                Some(v)
-            }
-            (Some(CVal::Enum(a, v)), Ty::Enum(b)) if a == b => Some(v as i128),
-            (_, Ty::Void) => None,
-            _ => {
-                self.err(
-                    e.span,
-                    "CASE label must be a constant of the selector's type",
-                );
-                None
-            }
-        }
-    }
-
-    fn for_loop(
-        &mut self,
-        var: &Ident,
-        from: &Expr,
-        to: &Expr,
-        by: Option<&Expr>,
-        body: &[Stmt],
-        span: Span,
-    ) {
-        let Some(sym) = self.lookup(&var.key()) else {
-            self.err(var.span, format!("unknown variable {}", var.name));
-            return;
-        };
-        let Some(k) = sym.ty.int().filter(|_| !sym.inout && !sym.constant) else {
-            self.err(
-                var.span,
-                format!(
-                    "FOR variable {} must be a writable integer variable",
-                    var.name
-                ),
-            );
-            return;
-        };
-        let ty = sym.ty;
-        let place = sym.place;
-        let t = self.expr(from, Some(ty));
-        self.coerce(t, ty, from.span);
-        self.store(place, span);
-        let end = self.temp();
-        let t = self.expr(to, Some(ty));
-        self.coerce(t, ty, to.span);
-        self.emit(Op::StoreG(end), to.span);
-        let step_const = match by {
-            None => Some(1),
-            Some(e) => match self.const_eval(e) {
-                Some(CVal::Int(v)) if v != 0 => Some(v),
-                Some(CVal::Int(_)) => {
-                    self.err(e.span, "FOR step must not be zero");
-                    Some(1)
-                }
-                _ => None,
-            },
-        };
-        let step = self.temp();
-        if let Some(e) = by {
-            let t = self.expr(e, Some(ty));
-            self.coerce(t, ty, e.span);
-            self.emit(Op::StoreG(step), e.span);
-        } else {
-            self.emit(Op::Push(1), span);
-            self.emit(Op::StoreG(step), span);
-        }
-        let cmp = |c| {
-            if k.bits() == 64 && !k.signed() {
-                Op::CmpU(c)
-            } else {
-                Op::CmpI(c)
-            }
-        };
-        let top = self.here();
-        let mut exits = Vec::new();
-        match step_const {
-            Some(s) => {
-                self.load(place, span);
-                self.emit(Op::LoadG(end), span);
-                self.emit(cmp(if s > 0 { Cmp::Gt } else { Cmp::Lt }), span);
-                exits.push(self.emit(Op::Jnz(0), span));
-            }
-            None => {
-                // Direction by the sign of the step, known only at run time.
-                self.emit(Op::LoadG(step), span);
-                self.emit(Op::Push(0), span);
-                self.emit(Op::CmpI(Cmp::Lt), span);
-                let neg = self.emit(Op::Jnz(0), span);
-                self.load(place, span);
-                self.emit(Op::LoadG(end), span);
-                self.emit(cmp(Cmp::Gt), span);
-                exits.push(self.emit(Op::Jnz(0), span));
-                let to_body = self.emit(Op::Jmp(0), span);
-                let h = self.here();
-                self.patch(neg, h);
-                self.load(place, span);
-                self.emit(Op::LoadG(end), span);
-                self.emit(cmp(Cmp::Lt), span);
-                exits.push(self.emit(Op::Jnz(0), span));
-                let h = self.here();
-                self.patch(to_body, h);
-            }
-        }
-        self.loops.push(Loop::default());
-        self.stmts(body);
-        let cont = self.here();
-        self.load(place, span);
-        self.emit(Op::LoadG(step), span);
-        self.emit(Op::Add(k), span);
-        self.store(place, span);
-        self.emit(Op::Jmp(top), span);
-        let l = self.loops.pop().unwrap_or_default();
-        let end_pc = self.here();
-        for j in exits {
-            self.patch(j, end_pc);
-        }
-        self.close_loop(l, cont, end_pc);
     }
 
     fn lookup(&self, key: &str) -> Option<Sym> {
