@@ -26,11 +26,6 @@ enum Allowed {
 /// Per-file deliberate differences, with the reason (see DIFFERENCES.md).
 const ALLOWED: &[(&str, Allowed, &str)] = &[
     (
-        "err_cutter_comp",
-        Allowed::HytaskRejects,
-        "cutter radius compensation (G41/G42) is refused with a clear error until implemented",
-    ),
-    (
         "err_g33_1",
         Allowed::HytaskRejects,
         "G33.1 rigid tapping is refused by name until implemented",

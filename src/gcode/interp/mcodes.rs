@@ -64,6 +64,7 @@ impl Interp<'_> {
             if m == 6 {
                 // Without a T word LinuxCNC changes to the empty slot 0.
                 let (n, slot) = self.s.selected.unwrap_or((0, 0));
+                self.refuse_with_comp(col, "Cannot change tools")?;
                 self.emit(CanonCmd::StartChange)?;
                 self.emit(CanonCmd::StopSpindle)?;
                 self.s.spindle = 0;
@@ -384,6 +385,7 @@ impl Interp<'_> {
 
     /// M0, M1, M2, M30, M60.
     pub(super) fn stop(&mut self, m: u16) -> Result<(), GcodeError> {
+        self.comp_at_stop(matches!(m, 2 | 30))?;
         match m {
             0 => self.emit(CanonCmd::ProgramStop),
             1 => self.emit(CanonCmd::OptionalProgramStop),

@@ -1,0 +1,927 @@
+//! Cutter radius compensation (G40, G41, G42, G41.1, G42.1), as LinuxCNC 2.9's interpreter
+//! does it, so traces match `rs274` call for call.
+//!
+//! The compensated path is computed in the plane of compensation (XY, or ZX for a lathe in
+//! G18) with the programmed point (`prog`) and the tool point (`Settings::pos`) kept apart.
+//! A compensated move cannot be sent before the next one is known: a concave corner moves
+//! its end back to the intersection with the next offset path. So, like LinuxCNC, each move
+//! is held in a queue until the next move decides its end; the queue also holds the
+//! non-motion calls (comments, feed, spindle, coolant, dwell) issued in between so they
+//! stay in program order, while every other call goes out at once (as in rs274's trace).
+//! Convex corners get an arc around the programmed corner (a traverse for G0).
+
+use super::arcs::{self, add_half_pi, find_turn, plane_axes};
+use super::motion::pose6;
+use super::Interp;
+use crate::gcode::canon::{CanonCmd, Plane, SourceLoc};
+use crate::gcode::modal::Block;
+use crate::gcode::GcodeError;
+use std::f64::consts::PI;
+
+/// Angle below which a corner is straight (LinuxCNC `TOLERANCE_CONCAVE_CORNER`, radians).
+const SMALL: f64 = 0.05;
+/// LinuxCNC `TOLERANCE_EQUAL`.
+const TOLERANCE_EQUAL: f64 = 0.0001;
+
+/// Side of the programmed path the tool is kept on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Side {
+    /// G41: left of the direction of travel.
+    Left,
+    /// G42: right.
+    Right,
+}
+
+/// A compensated move (plane coordinates: first, second, normal) or a deferred call.
+#[derive(Debug, Clone)]
+enum Item {
+    /// STRAIGHT_FEED (feed) or STRAIGHT_TRAVERSE, with the direction of the programmed
+    /// motion (a concave corner that reverses it would gouge).
+    Line {
+        feed: bool,
+        dir: (f64, f64),
+        end: [f64; 6],
+    },
+    /// ARC_FEED with the sweep it had when queued (0: never moved).
+    Arc {
+        sweep: f64,
+        end: (f64, f64),
+        center: (f64, f64),
+        turn: i32,
+        rest: [f64; 4],
+    },
+    /// Any other deferred call.
+    Other(CanonCmd),
+}
+
+/// Compensation state and the queue of held calls.
+#[derive(Debug)]
+pub(crate) struct Comp {
+    pub side: Option<Side>,
+    /// Tool radius, program units (always >= 0; a negative one swaps the side).
+    pub radius: f64,
+    /// Lathe tool orientation (0 and 9: the controlled point is the tool centre).
+    pub orientation: i32,
+    /// The next move is the entry move.
+    pub first: bool,
+    /// Programmed (uncompensated) point X Y Z.
+    pub prog: [f64; 3],
+    /// The move after G40 turned compensation off must be straight.
+    pub arc_not_allowed: bool,
+    queue: Vec<(SourceLoc, Item)>,
+    endpoint: (f64, f64),
+    endpoint_valid: bool,
+}
+
+impl Default for Comp {
+    fn default() -> Self {
+        Comp {
+            side: None,
+            radius: 0.0,
+            orientation: 0,
+            first: true,
+            prog: [0.0; 3],
+            arc_not_allowed: false,
+            queue: Vec::new(),
+            endpoint: (0.0, 0.0),
+            endpoint_valid: false,
+        }
+    }
+}
+
+impl Comp {
+    /// Compensation changes the path (on, with a non-zero radius).
+    pub(crate) fn active(&self) -> bool {
+        self.side.is_some() && self.radius > 0.0
+    }
+
+    /// Moves are measured from the programmed point (on, after the entry move).
+    pub(crate) fn from_program(&self) -> bool {
+        self.side.is_some() && !self.first
+    }
+
+    /// Calls wait behind a held move.
+    pub(crate) fn holding(&self) -> bool {
+        !self.queue.is_empty()
+    }
+
+    /// Holds a non-motion call behind the held move.
+    pub(crate) fn hold(&mut self, loc: SourceLoc, cmd: CanonCmd) {
+        self.queue.push((loc, Item::Other(cmd)));
+    }
+
+    /// G20/G21 with moves held: everything held scales with the units.
+    pub(crate) fn scale(&mut self, k: f64) {
+        self.radius *= k;
+        for v in &mut self.prog {
+            *v *= k;
+        }
+        if self.queue.is_empty() {
+            return;
+        }
+        for (_, it) in &mut self.queue {
+            self.endpoint.0 *= k;
+            self.endpoint.1 *= k;
+            match it {
+                Item::Line { end, .. } => {
+                    for v in &mut end[..3] {
+                        *v *= k;
+                    }
+                }
+                Item::Arc {
+                    end, center, rest, ..
+                } => {
+                    end.0 *= k;
+                    end.1 *= k;
+                    center.0 *= k;
+                    center.1 *= k;
+                    rest[0] *= k;
+                }
+                Item::Other(_) => {}
+            }
+        }
+    }
+}
+
+/// True for the calls LinuxCNC queues behind a held move (its `enqueue_*` calls).
+pub(crate) fn deferred(cmd: &CanonCmd) -> bool {
+    matches!(
+        cmd,
+        CanonCmd::SetFeedRate(_)
+            | CanonCmd::Dwell(_)
+            | CanonCmd::SetFeedMode(_)
+            | CanonCmd::MistOn
+            | CanonCmd::MistOff
+            | CanonCmd::FloodOn
+            | CanonCmd::FloodOff
+            | CanonCmd::StartSpindle(_)
+            | CanonCmd::StopSpindle
+            | CanonCmd::SetSpindleMode { .. }
+            | CanonCmd::SetSpindleSpeed(_)
+            | CanonCmd::Comment(_)
+    )
+}
+
+/// The arc words of a G2/G3 block, to find its centre from any start point.
+pub(crate) struct ArcSpec {
+    pub cw: bool,
+    pub r: Option<f64>,
+    pub off: (f64, f64),
+    pub turns: i32,
+    pub names: (char, char),
+    pub ijk_absolute: bool,
+    pub radius_tol: f64,
+    pub spiral_abs: f64,
+    /// F word (inverse time).
+    pub f: Option<f64>,
+}
+
+impl ArcSpec {
+    fn center(&self, start: (f64, f64), end: (f64, f64)) -> Result<(f64, f64, i32), String> {
+        match self.r {
+            Some(r) => arcs::arc_data_r(
+                self.cw,
+                start.0,
+                start.1,
+                end.0,
+                end.1,
+                r,
+                self.turns,
+                self.radius_tol,
+            ),
+            None => arcs::arc_data_ijk(
+                self.cw,
+                self.names,
+                start,
+                end,
+                self.ijk_absolute,
+                self.off,
+                self.turns,
+                self.radius_tol,
+                self.spiral_abs,
+            ),
+        }
+    }
+}
+
+fn inside(side: Side, turn: i32) -> bool {
+    (side == Side::Left && turn > 0) || (side == Side::Right && turn < 0)
+}
+
+const TOOL_TOO_BIG: &str = "Tool radius not less than arc radius with cutter radius compensation";
+
+impl Interp<'_> {
+    /// A setting that cannot change while compensation is on.
+    pub(super) fn refuse_with_comp(&self, col: u32, what: &str) -> Result<(), GcodeError> {
+        if self.comp.side.is_some() {
+            return Err(self.err(col, format!("{what} with cutter radius compensation on")));
+        }
+        Ok(())
+    }
+
+    fn comp_plane(&self) -> Result<(usize, usize, usize), GcodeError> {
+        match self.s.plane {
+            Plane::Xy | Plane::Xz => Ok(plane_axes(self.s.plane)),
+            _ => Err(self.err(
+                self.loc.col,
+                "Cutter radius compensation works only in the XY (G17) or XZ (G18) plane",
+            )),
+        }
+    }
+
+    /// Group 7: G40, G41, G42, G41.1, G42.1.
+    pub(super) fn cutter_comp(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {
+        if g == 400 {
+            return self.comp_off();
+        }
+        let col = self.loc.col;
+        if !matches!(self.s.plane, Plane::Xy | Plane::Xz) {
+            return Err(self.err(col, "Cutter radius compensation can be turned on only in the XY (G17) or XZ (G18) plane"));
+        }
+        if self.comp.side.is_some() {
+            return Err(self.err(col, "Cannot turn cutter radius comp on when already on"));
+        }
+        let mut side = if g == 410 || g == 411 {
+            Side::Left
+        } else {
+            Side::Right
+        };
+        let name = g / 10;
+        let (mut radius, orientation) = if g == 411 || g == 421 {
+            let d = b
+                .get(b'd')
+                .ok_or_else(|| self.err(col, format!("G{name}.1 with no D word")))?;
+            let orientation = match b.get(b'l') {
+                Some(l) => {
+                    if self.s.plane != Plane::Xz {
+                        return Err(self.err(
+                            b.col_of(b'l'),
+                            format!("G{name}.1 with L word, but plane is not G18"),
+                        ));
+                    }
+                    l as i32
+                }
+                None => 0,
+            };
+            (d / 2.0, orientation)
+        } else {
+            let entry = match b.get(b'd') {
+                None => self.s.spindle_tool.clone(),
+                Some(d) => {
+                    let tool = (d + 0.5) as i64;
+                    if (tool as f64 - d).abs() >= 0.0001 || tool < 0 {
+                        return Err(self.err(
+                            b.col_of(b'd'),
+                            format!("G{name} requires D word to be a whole number (a tool number)"),
+                        ));
+                    }
+                    if tool == 0 {
+                        self.s.spindle_tool.clone()
+                    } else {
+                        let slot = u32::try_from(tool)
+                            .ok()
+                            .and_then(|t| self.tools.slot_of(t))
+                            .ok_or_else(|| {
+                                self.err(
+                                    b.col_of(b'd'),
+                                    format!("Requested tool {tool} not found in the tool table"),
+                                )
+                            })?;
+                        self.tools.at_slot(slot).cloned()
+                    }
+                }
+            };
+            let (dia, orientation) = entry.map_or((0.0, 0), |t| (t.diameter, t.orientation));
+            if self.s.plane != Plane::Xz && orientation != 0 && orientation != 9 {
+                return Err(self.err(
+                    col,
+                    format!("G{name} with lathe tool, but plane is not G18"),
+                ));
+            }
+            (dia * self.s.k_mp() / 2.0, orientation)
+        };
+        if radius < 0.0 {
+            radius = -radius;
+            side = if side == Side::Left {
+                Side::Right
+            } else {
+                Side::Left
+            };
+        }
+        self.emit(CanonCmd::Comment(
+            if side == Side::Right {
+                "interpreter: cutter radius compensation on right"
+            } else {
+                "interpreter: cutter radius compensation on left"
+            }
+            .into(),
+        ))?;
+        self.comp.radius = radius;
+        self.comp.orientation = orientation;
+        self.comp.side = Some(side);
+        Ok(())
+    }
+
+    fn comp_off(&mut self) -> Result<(), GcodeError> {
+        self.emit(CanonCmd::Comment(
+            "interpreter: cutter radius compensation off".into(),
+        ))?;
+        if self.comp.active() && !self.comp.first {
+            let (a1, a2, _) = self.comp_plane()?;
+            let (cx, cy) = (self.s.pos[a1], self.s.pos[a2]);
+            self.move_endpoint_and_flush(cx, cy)?;
+            self.s.pos[..3].copy_from_slice(&self.comp.prog);
+            self.comp.arc_not_allowed = true;
+        }
+        self.comp.side = None;
+        self.comp.first = true;
+        Ok(())
+    }
+
+    /// M0/M1/M2/M30/M60: held calls go out; a program end also turns compensation off.
+    pub(super) fn comp_at_stop(&mut self, end: bool) -> Result<(), GcodeError> {
+        self.dequeue()?;
+        if end {
+            self.comp.side = None;
+            self.comp.first = true;
+            self.comp.arc_not_allowed = false;
+        }
+        Ok(())
+    }
+
+    fn set_endpoint(&mut self, x: f64, y: f64) {
+        self.comp.endpoint = (x, y);
+        self.comp.endpoint_valid = true;
+    }
+
+    fn enqueue(&mut self, item: Item) {
+        self.comp.queue.push((self.loc.clone(), item));
+    }
+
+    /// Sends every held call (LinuxCNC `dequeue_canons`).
+    fn dequeue(&mut self) -> Result<(), GcodeError> {
+        self.comp.endpoint_valid = false;
+        if self.comp.queue.is_empty() {
+            return Ok(());
+        }
+        let q = std::mem::take(&mut self.comp.queue);
+        let here = self.loc.clone();
+        let plane = self.s.plane;
+        let (a1, a2, n) = plane_axes(plane);
+        let lathe = plane == Plane::Xz;
+        let (o, r) = (self.comp.orientation, self.comp.radius);
+        // The controlled point of a lathe tool is not its centre (LinuxCNC latheorigin_*).
+        let ox = |x: f64| match o {
+            _ if !lathe => x,
+            1 | 2 | 6 => x - r,
+            3 | 4 | 8 => x + r,
+            _ => x,
+        };
+        let oz = |z: f64| match o {
+            _ if !lathe => z,
+            2 | 3 | 7 => z - r,
+            1 | 4 | 5 => z + r,
+            _ => z,
+        };
+        let fix = |p: &mut [f64; 6]| {
+            p[0] = ox(p[0]);
+            p[2] = oz(p[2]);
+        };
+        for (loc, it) in q {
+            self.loc = loc;
+            let cmd = match it {
+                Item::Line { feed, end, .. } => {
+                    let mut p = [0.0; 6];
+                    p[a1] = end[0];
+                    p[a2] = end[1];
+                    p[n] = end[2];
+                    p[3..].copy_from_slice(&end[3..]);
+                    fix(&mut p);
+                    if feed {
+                        CanonCmd::StraightFeed(pose6(&p))
+                    } else {
+                        CanonCmd::StraightTraverse(pose6(&p))
+                    }
+                }
+                Item::Arc {
+                    end,
+                    center,
+                    turn,
+                    rest,
+                    ..
+                } => {
+                    let (mut e1, mut e2, mut c1, mut c2) = (end.0, end.1, center.0, center.1);
+                    if lathe {
+                        (e1, e2, c1, c2) = (oz(e1), ox(e2), oz(c1), ox(c2));
+                    }
+                    let mut p = [0.0; 6];
+                    p[a1] = e1;
+                    p[a2] = e2;
+                    p[n] = rest[0];
+                    p[3..].copy_from_slice(&rest[1..]);
+                    CanonCmd::ArcFeed {
+                        first_end: e1,
+                        second_end: e2,
+                        first_center: c1,
+                        second_center: c2,
+                        rotation: turn,
+                        axis_end: rest[0],
+                        plane,
+                        end: pose6(&p),
+                    }
+                }
+                Item::Other(c) => c,
+            };
+            self.emit(cmd)?;
+        }
+        self.loc = here;
+        Ok(())
+    }
+
+    /// Moves the end of every held move to (x, y), checks that none reverses, and sends
+    /// them (LinuxCNC `move_endpoint_and_flush`).
+    fn move_endpoint_and_flush(&mut self, x: f64, y: f64) -> Result<(), GcodeError> {
+        if self.comp.queue.is_empty() {
+            return Ok(());
+        }
+        let (ep, valid) = (self.comp.endpoint, self.comp.endpoint_valid);
+        let mut err = None;
+        for (_, it) in &mut self.comp.queue {
+            match it {
+                Item::Arc {
+                    sweep,
+                    end,
+                    center,
+                    turn,
+                    ..
+                } => {
+                    let l2 = find_turn(ep.0, ep.1, center.0, center.1, *turn, x, y);
+                    if *sweep != 0.0 && valid && l2.abs() > sweep.abs() + 0.001 {
+                        err = Some("Arc move in concave corner cannot be reached by the tool without gouging");
+                    }
+                    *end = (x, y);
+                }
+                Item::Line { feed, dir, end } => {
+                    let dot = dir.0 * (x - ep.0) + dir.1 * (y - ep.1);
+                    if valid && dot < 0.0 {
+                        err = Some(if *feed {
+                            "Straight feed in concave corner cannot be reached by the tool without gouging"
+                        } else {
+                            "Straight traverse in concave corner cannot be reached by the tool without gouging"
+                        });
+                    }
+                    end[0] = x;
+                    end[1] = y;
+                }
+                Item::Other(_) => {}
+            }
+            if let Some(m) = err {
+                let col = self.loc.col;
+                return Err(self.err(col, format!("{m} (tool radius {:.4})", self.comp.radius)));
+            }
+        }
+        self.dequeue()?;
+        self.set_endpoint(x, y);
+        Ok(())
+    }
+
+    fn front_arc(&self) -> Option<(f64, (f64, f64), (f64, f64), i32)> {
+        match self.comp.queue.first() {
+            Some((
+                _,
+                Item::Arc {
+                    sweep,
+                    end,
+                    center,
+                    turn,
+                    ..
+                },
+            )) => Some((*sweep, *end, *center, *turn)),
+            _ => None,
+        }
+    }
+
+    /// Current (tool) point in plane coordinates.
+    fn comp_current(&self, ax: (usize, usize, usize)) -> (f64, f64, f64) {
+        (self.s.pos[ax.0], self.s.pos[ax.1], self.s.pos[ax.2])
+    }
+
+    fn comp_programmed(&self, ax: (usize, usize, usize)) -> (f64, f64, f64) {
+        let p = &self.comp.prog;
+        (p[ax.0], p[ax.1], p[ax.2])
+    }
+
+    /// Ends a compensated move: the tool at (x, y, z) in plane coordinates, the programmed
+    /// point at `prog`, rotary axes at `end`.
+    fn comp_finish(&mut self, ax: (usize, usize, usize), tool: (f64, f64, f64), end: &[f64; 6]) {
+        let (a1, a2, n) = ax;
+        let mut pos = *end;
+        pos[a1] = tool.0;
+        pos[a2] = tool.1;
+        pos[n] = tool.2;
+        self.s.pos = pos;
+        self.comp.prog.copy_from_slice(&end[..3]);
+    }
+
+    /// G0/G1 with compensation on (`end` is the programmed end, program frame).
+    pub(super) fn comp_straight(
+        &mut self,
+        m: u16,
+        b: &Block,
+        end: [f64; 6],
+    ) -> Result<(), GcodeError> {
+        if b.gcode(0) == Some(530) {
+            return Err(self.err(self.loc.col, "Cannot use G53 with cutter radius comp"));
+        }
+        let ax = self.comp_plane()?;
+        let (px, py, pz) = (end[ax.0], end[ax.1], end[ax.2]);
+        let mut rest = [0.0; 6];
+        rest[2] = pz;
+        rest[3..].copy_from_slice(&end[3..]);
+        let feed = m == 10;
+        let radius = self.comp.radius;
+        let side = self.comp.side.unwrap_or(Side::Left);
+        let (cx, cy, cz) = self.comp_current(ax);
+        if self.comp.first {
+            let distance = (px - cx).hypot(py - cy);
+            if distance <= radius {
+                return Err(self.err(
+                    self.loc.col,
+                    format!("Length of cutter compensation entry move ({distance:.4}) is not greater than the tool radius ({radius:.4})"),
+                ));
+            }
+            let alpha = add_half_pi(
+                (py - cy).atan2(px - cx),
+                if side == Side::Left { 1.0 } else { -1.0 },
+            );
+            let (ex, ey) = (px + radius * alpha.cos(), py + radius * alpha.sin());
+            self.set_endpoint(cx, cy);
+            rest[0] = ex;
+            rest[1] = ey;
+            self.enqueue(Item::Line {
+                feed,
+                dir: (alpha.cos(), alpha.sin()),
+                end: rest,
+            });
+            self.comp.first = false;
+            self.comp_finish(ax, (ex, ey, pz), &end);
+            return Ok(());
+        }
+        let (opx, opy, _) = self.comp_programmed(ax);
+        let (mut ex, mut ey) = (cx, cy);
+        if py == opy && px == opx {
+            rest[0] = cx;
+            rest[1] = cy;
+            self.enqueue(Item::Line {
+                feed,
+                dir: (0.0, 0.0),
+                end: rest,
+            });
+        } else {
+            let mut theta = (cy - opy).atan2(cx - opx);
+            let mut alpha = (py - opy).atan2(px - opx);
+            let (beta, gamma) = if side == Side::Left {
+                if theta < alpha {
+                    theta += 2.0 * PI;
+                }
+                (
+                    add_half_pi(theta - alpha, -1.0),
+                    std::f64::consts::FRAC_PI_2,
+                )
+            } else {
+                if alpha < theta {
+                    alpha += 2.0 * PI;
+                }
+                (
+                    add_half_pi(alpha - theta, -1.0),
+                    -std::f64::consts::FRAC_PI_2,
+                )
+            };
+            let ag = alpha + gamma;
+            ex = px + radius * ag.cos();
+            ey = py + radius * ag.sin();
+            let (mid_x, mid_y) = (opx + radius * ag.cos(), opy + radius * ag.sin());
+            let front = self.front_arc();
+            let concave = beta < -SMALL
+                || beta > PI + SMALL
+                || (beta > PI - SMALL
+                    && front.is_some_and(|(_, _, _, t)| {
+                        (side == Side::Right && t > 0) || (side == Side::Left && t < 0)
+                    }));
+            if !concave && beta > SMALL {
+                // convex corner: an arc around the programmed corner (a traverse for G0)
+                self.move_endpoint_and_flush(cx, cy)?;
+                let mut p = rest;
+                p[0] = mid_x;
+                p[1] = mid_y;
+                p[2] = cz;
+                if feed {
+                    self.enqueue(Item::Arc {
+                        sweep: 0.0,
+                        end: (mid_x, mid_y),
+                        center: (opx, opy),
+                        turn: if side == Side::Left { -1 } else { 1 },
+                        rest: [cz, end[3], end[4], end[5]],
+                    });
+                } else {
+                    self.enqueue(Item::Line {
+                        feed: false,
+                        dir: (0.0, 0.0),
+                        end: p,
+                    });
+                }
+                self.dequeue()?;
+                self.set_endpoint(mid_x, mid_y);
+            } else if concave {
+                let (mx, my) = match front {
+                    None => {
+                        // line -> line: back along the held move to the intersection
+                        let halfcorner = (beta + PI) / 2.0;
+                        if halfcorner == 0.0 {
+                            return Err(self.err(
+                                self.loc.col,
+                                "Zero degree inside corner is invalid for cutter compensation",
+                            ));
+                        }
+                        let retreat = radius / halfcorner.tan();
+                        (
+                            cx + retreat * (theta + gamma).cos(),
+                            cy + retreat * (theta + gamma).sin(),
+                        )
+                    }
+                    Some((_, pend, pcen, pturn)) => {
+                        // arc -> line: where the held (compensated) arc meets the new offset line
+                        let oldrad = (pcen.1 - pend.1).hypot(pcen.0 - pend.0);
+                        let base_dir = (py - opy).atan2(px - opx);
+                        let th = add_half_pi(base_dir, if pturn > 0 { 1.0 } else { -1.0 });
+                        let phi = (pcen.1 - opy).atan2(pcen.0 - opx);
+                        let ins = inside(side, pturn);
+                        let oldrad_uncomp = if ins {
+                            oldrad + radius
+                        } else {
+                            oldrad - radius
+                        };
+                        let d = oldrad_uncomp * (th - phi).cos();
+                        let l = if ins { d - radius } else { d + radius } / oldrad;
+                        if !(-1.0..=1.0).contains(&l) {
+                            return Err(self.err(self.loc.col, format!("Arc to straight motion makes a corner the compensated tool (radius {radius:.4}) can't fit in without gouging")));
+                        }
+                        let a = if (pturn > 0) == ins {
+                            -l.acos()
+                        } else {
+                            l.acos()
+                        };
+                        let ang = a + th + PI;
+                        (pcen.0 + oldrad * ang.cos(), pcen.1 + oldrad * ang.sin())
+                    }
+                };
+                self.move_endpoint_and_flush(mx, my)?;
+            } else {
+                self.dequeue()?;
+                self.set_endpoint(cx, cy);
+            }
+            rest[0] = ex;
+            rest[1] = ey;
+            self.enqueue(Item::Line {
+                feed,
+                dir: (px - opx, py - opy),
+                end: rest,
+            });
+        }
+        self.comp_finish(ax, (ex, ey, pz), &end);
+        Ok(())
+    }
+
+    /// G2/G3 with compensation on.
+    pub(super) fn comp_arc(&mut self, spec: &ArcSpec, end: [f64; 6]) -> Result<(), GcodeError> {
+        let ax = self.comp_plane()?;
+        let col = self.loc.col;
+        let (ex, ey, ez) = (end[ax.0], end[ax.1], end[ax.2]);
+        let rest = [ez, end[3], end[4], end[5]];
+        let radius = self.comp.radius;
+        let side = self.comp.side.unwrap_or(Side::Left);
+        let (cx, cy, cz) = self.comp_current(ax);
+        if self.comp.first {
+            if (ex - cx).hypot(ey - cy) <= radius {
+                return Err(self.err(col, format!("Radius of cutter compensation entry arc is not greater than the tool radius ({radius:.4})")));
+            }
+            let (cenx, ceny, turn) = spec
+                .center((cx, cy), (ex, ey))
+                .map_err(|m| self.err(col, m))?;
+            let arc_r = match spec.r {
+                Some(r) => r.abs(),
+                None => (cenx - cx).hypot(ceny - cy),
+            };
+            if arc_r <= radius && inside(side, turn) {
+                return Err(self.err(col, TOOL_TOO_BIG));
+            }
+            self.comp_inverse_time_arc(spec, (cx, cy, cz), (cenx, ceny), turn, (ex, ey, ez))?;
+            let gamma = if inside(side, turn) {
+                (ceny - ey).atan2(cenx - ex)
+            } else {
+                (ey - ceny).atan2(ex - cenx)
+            };
+            self.comp.first = false;
+            let (nx, ny) = (ex + radius * gamma.cos(), ey + radius * gamma.sin());
+            let b_len = (cy - ny).hypot(cx - nx) / 2.0;
+            let ab_ang = (ceny - ny).atan2(cenx - nx);
+            let a_ang = (cy - ny).atan2(cx - nx) - ab_ang;
+            if a_ang.cos().abs() < TOLERANCE_EQUAL {
+                return Err(self.err(col, TOOL_TOO_BIG));
+            }
+            let c_len = b_len / a_ang.cos();
+            let (ncx, ncy) = (nx + c_len * ab_ang.cos(), ny + c_len * ab_ang.sin());
+            if ((ncx - nx).hypot(ncy - ny) - (ncx - cx).hypot(ncy - cy)).abs() > spec.spiral_abs {
+                return Err(self.err(
+                    col,
+                    "Cutter compensation could not find the entry arc (bug in tool radius comp)",
+                ));
+            }
+            if self.comp.orientation != 0 && self.comp.orientation != 9 {
+                let mut p = [0.0; 6];
+                p[0] = cx;
+                p[1] = cy;
+                p[2] = cz;
+                p[3..].copy_from_slice(&end[3..]);
+                self.enqueue(Item::Line {
+                    feed: true,
+                    dir: (0.0, 0.0),
+                    end: p,
+                });
+                self.set_endpoint(cx, cy);
+            }
+            self.enqueue(Item::Arc {
+                sweep: find_turn(cx, cy, ncx, ncy, turn, nx, ny),
+                end: (nx, ny),
+                center: (ncx, ncy),
+                turn,
+                rest,
+            });
+            self.comp_finish(ax, (nx, ny, ez), &end);
+            return Ok(());
+        }
+        let (opx, opy, opz) = self.comp_programmed(ax);
+        let (cenx, ceny, turn) = spec
+            .center((opx, opy), (ex, ey))
+            .map_err(|m| self.err(col, m))?;
+        self.comp_inverse_time_arc(spec, (opx, opy, opz), (cenx, ceny), turn, (ex, ey, ez))?;
+        let arc_radius = (cenx - ex).hypot(ceny - ey);
+        let theta = add_half_pi(
+            (cy - opy).atan2(cx - opx),
+            if side == Side::Left { -1.0 } else { 1.0 },
+        );
+        let mut delta = (ceny - opy).atan2(cenx - opx);
+        let alpha = add_half_pi(delta, if spec.cw { 1.0 } else { -1.0 });
+        let mut beta = if side == Side::Left {
+            theta - alpha
+        } else {
+            alpha - theta
+        };
+        if beta > 1.5 * PI {
+            beta -= 2.0 * PI;
+        } else if beta < -std::f64::consts::FRAC_PI_2 {
+            beta += 2.0 * PI;
+        }
+        let cutting_inside = (side == Side::Left && !spec.cw) || (side == Side::Right && spec.cw);
+        let gamma = if cutting_inside {
+            if arc_radius <= radius {
+                return Err(self.err(
+                    col,
+                    format!("{TOOL_TOO_BIG} (arc radius {arc_radius:.4}, tool radius {radius:.4})"),
+                ));
+            }
+            (ceny - ey).atan2(cenx - ex)
+        } else {
+            delta += PI;
+            (ey - ceny).atan2(ex - cenx)
+        };
+        let (nx, ny) = (ex + radius * gamma.cos(), ey + radius * gamma.sin());
+        let sweep = find_turn(opx, opy, cenx, ceny, turn, ex, ey);
+        let main = Item::Arc {
+            sweep,
+            end: (nx, ny),
+            center: (cenx, ceny),
+            turn,
+            rest,
+        };
+        let gouge = "Arc move in concave corner cannot be reached by the tool without gouging";
+        if beta < -SMALL || beta > PI + SMALL || ((beta - PI).abs() < SMALL && !inside(side, turn))
+        {
+            // concave corner
+            let (mx, my) = match self.front_arc() {
+                None => {
+                    let ccy = arc_radius * add_half_pi(beta, -1.0).sin();
+                    let (dist, ang) = if inside(side, turn) {
+                        let dist = arc_radius - radius;
+                        let l = (ccy + radius) / dist;
+                        if !(-1.0..=1.0).contains(&l) {
+                            return Err(self.err(col, gouge));
+                        }
+                        (
+                            dist,
+                            if turn > 0 {
+                                theta + l.asin()
+                            } else {
+                                theta - l.asin()
+                            },
+                        )
+                    } else {
+                        let dist = arc_radius + radius;
+                        let l = (ccy - radius) / dist;
+                        if !(-1.0..=1.0).contains(&l) {
+                            return Err(self.err(col, gouge));
+                        }
+                        (
+                            dist,
+                            if turn > 0 {
+                                theta + PI - l.asin()
+                            } else {
+                                theta + PI + l.asin()
+                            },
+                        )
+                    };
+                    (cenx + dist * ang.cos(), ceny + dist * ang.sin())
+                }
+                Some((_, pend, pcen, pturn)) => {
+                    let oldrad = (pcen.1 - pend.1).hypot(pcen.0 - pend.0);
+                    let newrad = if inside(side, turn) {
+                        arc_radius - radius
+                    } else {
+                        arc_radius + radius
+                    };
+                    let arc_cc = (pcen.1 - ceny).hypot(pcen.0 - cenx);
+                    if oldrad == 0.0 || arc_cc == 0.0 {
+                        return Err(self.err(
+                            col,
+                            "Arc to arc motion is invalid because the arcs have the same center",
+                        ));
+                    }
+                    let a = (oldrad * oldrad + arc_cc * arc_cc - newrad * newrad)
+                        / (2.0 * oldrad * arc_cc);
+                    if !(-1.0..=1.0).contains(&a) {
+                        return Err(self.err(col, format!("Arc to arc motion makes a corner the compensated tool (radius {radius:.4}) can't fit in without gouging")));
+                    }
+                    let pullback = a.acos();
+                    let cc_dir = (ceny - pcen.1).atan2(cenx - pcen.0);
+                    let plus = if inside(side, pturn) {
+                        turn > 0
+                    } else {
+                        turn <= 0
+                    };
+                    let dir = if plus {
+                        cc_dir + pullback
+                    } else {
+                        cc_dir - pullback
+                    };
+                    (pcen.0 + oldrad * dir.cos(), pcen.1 + oldrad * dir.sin())
+                }
+            };
+            self.move_endpoint_and_flush(mx, my)?;
+            self.enqueue(main);
+        } else if beta > SMALL {
+            // convex corner: an arc around the programmed corner first
+            let (mx, my) = (opx + radius * delta.cos(), opy + radius * delta.sin());
+            self.dequeue()?;
+            self.enqueue(Item::Arc {
+                sweep: 0.0,
+                end: (mx, my),
+                center: (opx, opy),
+                turn: if side == Side::Left { -1 } else { 1 },
+                rest: [cz, end[3], end[4], end[5]],
+            });
+            self.dequeue()?;
+            self.set_endpoint(mx, my);
+            self.enqueue(main);
+        } else {
+            self.dequeue()?;
+            self.set_endpoint(cx, cy);
+            self.enqueue(main);
+        }
+        self.comp_finish(ax, (nx, ny, ez), &end);
+        Ok(())
+    }
+
+    /// Inverse-time feed of a compensated arc: the programmed arc's length (LinuxCNC).
+    fn comp_inverse_time_arc(
+        &mut self,
+        spec: &ArcSpec,
+        start: (f64, f64, f64),
+        center: (f64, f64),
+        turn: i32,
+        end: (f64, f64, f64),
+    ) -> Result<(), GcodeError> {
+        if self.s.feed_mode != crate::gcode::canon::FeedMode::InverseTime {
+            return Ok(());
+        }
+        let radius = (start.0 - center.0).hypot(start.1 - center.1);
+        let theta = find_turn(start.0, start.1, center.0, center.1, turn, end.0, end.1);
+        let len = if end.2 == start.2 {
+            radius * theta.abs()
+        } else {
+            (radius * theta).hypot(end.2 - start.2)
+        };
+        let rate = (len * spec.f.unwrap_or(0.0)).max(0.1);
+        self.s.feed_rate = rate;
+        self.emit(CanonCmd::SetFeedRate(rate))
+    }
+}
