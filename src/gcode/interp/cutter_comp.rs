@@ -96,7 +96,7 @@ impl Comp {
     }
 
     /// Moves are measured from the programmed point (on, after the entry move).
-    pub(crate) fn from_program(&self) -> bool {
+    pub(crate) fn measures_from_program(&self) -> bool {
         self.side.is_some() && !self.first
     }
 
@@ -204,6 +204,10 @@ impl ArcSpec {
     }
 }
 
+/// A held arc: end, centre, turn.
+type HeldArc = ((f64, f64), (f64, f64), i32);
+
+/// The tool is on the inside of an arc turning `turn` (LinuxCNC `TOOL_INSIDE_ARC`).
 fn inside(side: Side, turn: i32) -> bool {
     (side == Side::Left && turn > 0) || (side == Side::Right && turn < 0)
 }
@@ -340,6 +344,12 @@ impl Interp<'_> {
 
     /// M0/M1/M2/M30/M60: held calls go out; a program end also turns compensation off.
     pub(super) fn comp_at_stop(&mut self, end: bool) -> Result<(), GcodeError> {
+        if self.comp.active() && !self.comp.first {
+            // As rs274: the held move is checked (a reversed one gouges) and sent.
+            let (a1, a2, _) = self.comp_plane()?;
+            let (cx, cy) = (self.s.pos[a1], self.s.pos[a2]);
+            self.move_endpoint_and_flush(cx, cy)?;
+        }
         self.dequeue()?;
         if end {
             self.comp.side = None;
@@ -485,18 +495,15 @@ impl Interp<'_> {
         Ok(())
     }
 
-    fn front_arc(&self) -> Option<(f64, (f64, f64), (f64, f64), i32)> {
+    /// The first held move, when it is an arc: (end, centre, turn).
+    fn front_arc(&self) -> Option<HeldArc> {
         match self.comp.queue.first() {
             Some((
                 _,
                 Item::Arc {
-                    sweep,
-                    end,
-                    center,
-                    turn,
-                    ..
+                    end, center, turn, ..
                 },
-            )) => Some((*sweep, *end, *center, *turn)),
+            )) => Some((*end, *center, *turn)),
             _ => None,
         }
     }
@@ -602,10 +609,9 @@ impl Interp<'_> {
             ey = py + radius * ag.sin();
             let (mid_x, mid_y) = (opx + radius * ag.cos(), opy + radius * ag.sin());
             let front = self.front_arc();
-            let concave = beta < -SMALL
-                || beta > PI + SMALL
+            let concave = !(-SMALL..=PI + SMALL).contains(&beta)
                 || (beta > PI - SMALL
-                    && front.is_some_and(|(_, _, _, t)| {
+                    && front.is_some_and(|(_, _, t)| {
                         (side == Side::Right && t > 0) || (side == Side::Left && t < 0)
                     }));
             if !concave && beta > SMALL {
@@ -649,7 +655,7 @@ impl Interp<'_> {
                             cy + retreat * (theta + gamma).sin(),
                         )
                     }
-                    Some((_, pend, pcen, pturn)) => {
+                    Some((pend, pcen, pturn)) => {
                         // arc -> line: where the held (compensated) arc meets the new offset line
                         let oldrad = (pcen.1 - pend.1).hypot(pcen.0 - pend.0);
                         let base_dir = (py - opy).atan2(px - opx);
@@ -805,7 +811,8 @@ impl Interp<'_> {
             rest,
         };
         let gouge = "Arc move in concave corner cannot be reached by the tool without gouging";
-        if beta < -SMALL || beta > PI + SMALL || ((beta - PI).abs() < SMALL && !inside(side, turn))
+        if !(-SMALL..=PI + SMALL).contains(&beta)
+            || ((beta - PI).abs() < SMALL && !inside(side, turn))
         {
             // concave corner
             let (mx, my) = match self.front_arc() {
@@ -842,7 +849,7 @@ impl Interp<'_> {
                     };
                     (cenx + dist * ang.cos(), ceny + dist * ang.sin())
                 }
-                Some((_, pend, pcen, pturn)) => {
+                Some((pend, pcen, pturn)) => {
                     let oldrad = (pcen.1 - pend.1).hypot(pcen.0 - pend.0);
                     let newrad = if inside(side, turn) {
                         arc_radius - radius
