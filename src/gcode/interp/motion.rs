@@ -22,7 +22,7 @@ impl Interp<'_> {
     /// End point of a move from the axis words (LinuxCNC `find_ends`).
     pub(crate) fn find_ends(&self, b: &Block) -> [f64; 6] {
         let mut end = self.s.pos;
-        if self.comp.from_program() {
+        if self.comp.measures_from_program() {
             // With compensation on, moves are measured from the programmed point.
             end[..3].copy_from_slice(&self.comp.prog);
         }
@@ -118,7 +118,7 @@ impl Interp<'_> {
         if self.comp.active() {
             if m == 10 && self.s.feed_mode == FeedMode::InverseTime {
                 let mut from = self.s.pos;
-                if self.comp.from_program() {
+                if self.comp.measures_from_program() {
                     from[..3].copy_from_slice(&self.comp.prog);
                 }
                 self.inverse_time_straight(&from, &end, b.get(b'f').unwrap_or(0.0))?;
