@@ -465,8 +465,13 @@ impl Interp<'_> {
                     turn,
                     ..
                 } => {
+                    let r1 = (end.0 - center.0).hypot(end.1 - center.1);
+                    let r2 = (x - center.0).hypot(y - center.1);
                     let l2 = find_turn(ep.0, ep.1, center.0, center.1, *turn, x, y);
-                    if *sweep != 0.0 && valid && l2.abs() > sweep.abs() + 0.001 {
+                    if (r1 - r2).abs() > 0.01 {
+                        // rs274 reports this as a bug of its own; it refuses the program too.
+                        err = Some("Cutter compensation cannot join these moves: the corner point is off the compensated arc (mismatched radii)");
+                    } else if *sweep != 0.0 && valid && l2.abs() > sweep.abs() + 0.001 {
                         err = Some("Arc move in concave corner cannot be reached by the tool without gouging");
                     }
                     *end = (x, y);
