@@ -144,6 +144,7 @@ impl Interp<'_> {
         // overrides
         if let Some((m, col)) = b.m[9] {
             self.loc.col = col;
+            self.refuse_with_comp(col, "Cannot change overrides (M48-M53)")?;
             let on = b.get(b'p').map(|p| p != 0.0).unwrap_or(true);
             let ov = |which, on| CanonCmd::OverrideEnable { which, on };
             match m {
@@ -187,6 +188,7 @@ impl Interp<'_> {
 
     fn io(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
         let col = self.loc.col;
+        self.refuse_with_comp(col, "Cannot set outputs or wait for inputs (M62-M68)")?;
         match m {
             62..=65 => {
                 let p = b

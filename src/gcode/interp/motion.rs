@@ -411,13 +411,19 @@ impl Interp<'_> {
 
     /// Group 0 codes other than G4 and G53.
     pub(super) fn non_modal(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {
-        if matches!(g, 520 | 920..=923) {
+        if matches!(g, 520 | 920) {
             self.refuse_with_comp(self.loc.col, "Cannot change axis offsets")?;
+        }
+        if matches!(g, 921..=923) && self.comp.side.is_some() {
+            // rs274 2.9 ignores G92.1/G92.2/G92.3 while compensation is on (no call, the
+            // offsets unchanged); so does hytask, to keep the same path.
+            return Ok(());
         }
         match g {
             100 => self.g10(b),
             280 | 300 => self.go_home(g, b),
             281 | 301 => {
+                self.refuse_with_comp(self.loc.col, "Cannot set the G28.1/G30.1 reference point")?;
                 let base = if g == 281 {
                     params::G28_BASE
                 } else {
