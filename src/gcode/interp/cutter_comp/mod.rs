@@ -10,18 +10,20 @@
 //! stay in program order, while every other call goes out at once (as in rs274's trace).
 //! Convex corners get an arc around the programmed corner (a traverse for G0).
 
+mod arc;
+mod straight;
+
 use super::arcs::{self, add_half_pi, find_turn, plane_axes};
 use super::motion::pose6;
 use super::Interp;
 use crate::gcode::canon::{CanonCmd, Plane, SourceLoc};
 use crate::gcode::modal::Block;
 use crate::gcode::GcodeError;
-use std::f64::consts::PI;
 
 /// Angle below which a corner is straight (LinuxCNC `TOLERANCE_CONCAVE_CORNER`, radians).
-const SMALL: f64 = 0.05;
+pub(super) const SMALL: f64 = 0.05;
 /// LinuxCNC `TOLERANCE_EQUAL`.
-const TOLERANCE_EQUAL: f64 = 0.0001;
+pub(super) const TOLERANCE_EQUAL: f64 = 0.0001;
 
 /// Side of the programmed path the tool is kept on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,7 +36,7 @@ pub(crate) enum Side {
 
 /// A compensated move (plane coordinates: first, second, normal) or a deferred call.
 #[derive(Debug, Clone)]
-enum Item {
+pub(super) enum Item {
     /// STRAIGHT_FEED (feed) or STRAIGHT_TRAVERSE, with the direction of the programmed
     /// motion (a concave corner that reverses it would gouge).
     Line {
@@ -177,7 +179,11 @@ pub(crate) struct ArcSpec {
 }
 
 impl ArcSpec {
-    fn center(&self, start: (f64, f64), end: (f64, f64)) -> Result<(f64, f64, i32), String> {
+    pub(super) fn center(
+        &self,
+        start: (f64, f64),
+        end: (f64, f64),
+    ) -> Result<(f64, f64, i32), String> {
         match self.r {
             Some(r) => arcs::arc_data_r(
                 self.cw,
@@ -204,15 +210,35 @@ impl ArcSpec {
     }
 }
 
+/// The arc round a convex corner: from the end of the last offset move to `mid`, centred
+/// on the programmed corner, turning against the side (its end is never moved, so its
+/// sweep is not needed); the normal axis stays where it is (`cz`), the rotary axes end.
+pub(super) fn corner_arc(
+    side: Side,
+    mid: (f64, f64),
+    corner: (f64, f64),
+    cz: f64,
+    end: &[f64; 6],
+) -> Item {
+    Item::Arc {
+        sweep: 0.0,
+        end: mid,
+        center: corner,
+        turn: if side == Side::Left { -1 } else { 1 },
+        rest: [cz, end[3], end[4], end[5]],
+    }
+}
+
 /// A held arc: end, centre, turn.
-type HeldArc = ((f64, f64), (f64, f64), i32);
+pub(super) type HeldArc = ((f64, f64), (f64, f64), i32);
 
 /// The tool is on the inside of an arc turning `turn` (LinuxCNC `TOOL_INSIDE_ARC`).
-fn inside(side: Side, turn: i32) -> bool {
+pub(super) fn inside(side: Side, turn: i32) -> bool {
     (side == Side::Left && turn > 0) || (side == Side::Right && turn < 0)
 }
 
-const TOOL_TOO_BIG: &str = "Tool radius not less than arc radius with cutter radius compensation";
+pub(super) const TOOL_TOO_BIG: &str =
+    "Tool radius not less than arc radius with cutter radius compensation";
 
 impl Interp<'_> {
     /// A setting that cannot change while compensation is on.
@@ -223,7 +249,7 @@ impl Interp<'_> {
         Ok(())
     }
 
-    fn comp_plane(&self) -> Result<(usize, usize, usize), GcodeError> {
+    pub(super) fn comp_plane(&self) -> Result<(usize, usize, usize), GcodeError> {
         match self.s.plane {
             Plane::Xy | Plane::Xz => Ok(plane_axes(self.s.plane)),
             _ => Err(self.err(
@@ -359,17 +385,17 @@ impl Interp<'_> {
         Ok(())
     }
 
-    fn set_endpoint(&mut self, x: f64, y: f64) {
+    pub(super) fn set_endpoint(&mut self, x: f64, y: f64) {
         self.comp.endpoint = (x, y);
         self.comp.endpoint_valid = true;
     }
 
-    fn enqueue(&mut self, item: Item) {
+    pub(super) fn enqueue(&mut self, item: Item) {
         self.comp.queue.push((self.loc.clone(), item));
     }
 
     /// Sends every held call (LinuxCNC `dequeue_canons`).
-    fn dequeue(&mut self) -> Result<(), GcodeError> {
+    pub(super) fn dequeue(&mut self) -> Result<(), GcodeError> {
         self.comp.endpoint_valid = false;
         if self.comp.queue.is_empty() {
             return Ok(());
@@ -450,7 +476,7 @@ impl Interp<'_> {
 
     /// Moves the end of every held move to (x, y), checks that none reverses, and sends
     /// them (LinuxCNC `move_endpoint_and_flush`).
-    fn move_endpoint_and_flush(&mut self, x: f64, y: f64) -> Result<(), GcodeError> {
+    pub(super) fn move_endpoint_and_flush(&mut self, x: f64, y: f64) -> Result<(), GcodeError> {
         if self.comp.queue.is_empty() {
             return Ok(());
         }
@@ -501,7 +527,7 @@ impl Interp<'_> {
     }
 
     /// The first held move, when it is an arc: (end, centre, turn).
-    fn front_arc(&self) -> Option<HeldArc> {
+    pub(super) fn front_arc(&self) -> Option<HeldArc> {
         match self.comp.queue.first() {
             Some((
                 _,
@@ -514,18 +540,23 @@ impl Interp<'_> {
     }
 
     /// Current (tool) point in plane coordinates.
-    fn comp_current(&self, ax: (usize, usize, usize)) -> (f64, f64, f64) {
+    pub(super) fn comp_current(&self, ax: (usize, usize, usize)) -> (f64, f64, f64) {
         (self.s.pos[ax.0], self.s.pos[ax.1], self.s.pos[ax.2])
     }
 
-    fn comp_programmed(&self, ax: (usize, usize, usize)) -> (f64, f64, f64) {
+    pub(super) fn comp_programmed(&self, ax: (usize, usize, usize)) -> (f64, f64, f64) {
         let p = &self.comp.prog;
         (p[ax.0], p[ax.1], p[ax.2])
     }
 
     /// Ends a compensated move: the tool at (x, y, z) in plane coordinates, the programmed
     /// point at `prog`, rotary axes at `end`.
-    fn comp_finish(&mut self, ax: (usize, usize, usize), tool: (f64, f64, f64), end: &[f64; 6]) {
+    pub(super) fn comp_finish(
+        &mut self,
+        ax: (usize, usize, usize),
+        tool: (f64, f64, f64),
+        end: &[f64; 6],
+    ) {
         let (a1, a2, n) = ax;
         let mut pos = *end;
         pos[a1] = tool.0;
@@ -533,407 +564,5 @@ impl Interp<'_> {
         pos[n] = tool.2;
         self.s.pos = pos;
         self.comp.prog.copy_from_slice(&end[..3]);
-    }
-
-    /// G0/G1 with compensation on (`end` is the programmed end, program frame).
-    pub(super) fn comp_straight(
-        &mut self,
-        m: u16,
-        b: &Block,
-        end: [f64; 6],
-    ) -> Result<(), GcodeError> {
-        if b.gcode(0) == Some(530) {
-            return Err(self.err(self.loc.col, "Cannot use G53 with cutter radius comp"));
-        }
-        let ax = self.comp_plane()?;
-        let (px, py, pz) = (end[ax.0], end[ax.1], end[ax.2]);
-        let mut rest = [0.0; 6];
-        rest[2] = pz;
-        rest[3..].copy_from_slice(&end[3..]);
-        let feed = m == 10;
-        let radius = self.comp.radius;
-        let side = self.comp.side.unwrap_or(Side::Left);
-        let (cx, cy, cz) = self.comp_current(ax);
-        if self.comp.first {
-            let distance = (px - cx).hypot(py - cy);
-            if distance <= radius {
-                return Err(self.err(
-                    self.loc.col,
-                    format!("Length of cutter compensation entry move ({distance:.4}) is not greater than the tool radius ({radius:.4})"),
-                ));
-            }
-            let alpha = add_half_pi(
-                (py - cy).atan2(px - cx),
-                if side == Side::Left { 1.0 } else { -1.0 },
-            );
-            let (ex, ey) = (px + radius * alpha.cos(), py + radius * alpha.sin());
-            self.set_endpoint(cx, cy);
-            rest[0] = ex;
-            rest[1] = ey;
-            self.enqueue(Item::Line {
-                feed,
-                dir: (alpha.cos(), alpha.sin()),
-                end: rest,
-            });
-            self.comp.first = false;
-            self.comp_finish(ax, (ex, ey, pz), &end);
-            return Ok(());
-        }
-        let (opx, opy, _) = self.comp_programmed(ax);
-        let (mut ex, mut ey) = (cx, cy);
-        if py == opy && px == opx {
-            rest[0] = cx;
-            rest[1] = cy;
-            self.enqueue(Item::Line {
-                feed,
-                dir: (0.0, 0.0),
-                end: rest,
-            });
-        } else {
-            let mut theta = (cy - opy).atan2(cx - opx);
-            let mut alpha = (py - opy).atan2(px - opx);
-            let (beta, gamma) = if side == Side::Left {
-                if theta < alpha {
-                    theta += 2.0 * PI;
-                }
-                (
-                    add_half_pi(theta - alpha, -1.0),
-                    std::f64::consts::FRAC_PI_2,
-                )
-            } else {
-                if alpha < theta {
-                    alpha += 2.0 * PI;
-                }
-                (
-                    add_half_pi(alpha - theta, -1.0),
-                    -std::f64::consts::FRAC_PI_2,
-                )
-            };
-            let ag = alpha + gamma;
-            ex = px + radius * ag.cos();
-            ey = py + radius * ag.sin();
-            let (mid_x, mid_y) = (opx + radius * ag.cos(), opy + radius * ag.sin());
-            let front = self.front_arc();
-            let concave = !(-SMALL..=PI + SMALL).contains(&beta)
-                || (beta > PI - SMALL
-                    && front.is_some_and(|(_, _, t)| {
-                        (side == Side::Right && t > 0) || (side == Side::Left && t < 0)
-                    }));
-            if !concave && beta > SMALL {
-                // convex corner: an arc around the programmed corner (a traverse for G0)
-                self.move_endpoint_and_flush(cx, cy)?;
-                let mut p = rest;
-                p[0] = mid_x;
-                p[1] = mid_y;
-                p[2] = cz;
-                if feed {
-                    self.enqueue(Item::Arc {
-                        sweep: 0.0,
-                        end: (mid_x, mid_y),
-                        center: (opx, opy),
-                        turn: if side == Side::Left { -1 } else { 1 },
-                        rest: [cz, end[3], end[4], end[5]],
-                    });
-                } else {
-                    self.enqueue(Item::Line {
-                        feed: false,
-                        dir: (0.0, 0.0),
-                        end: p,
-                    });
-                }
-                self.dequeue()?;
-                self.set_endpoint(mid_x, mid_y);
-            } else if concave {
-                let (mx, my) = match front {
-                    None => {
-                        // line -> line: back along the held move to the intersection
-                        let halfcorner = (beta + PI) / 2.0;
-                        if halfcorner == 0.0 {
-                            return Err(self.err(
-                                self.loc.col,
-                                "Zero degree inside corner is invalid for cutter compensation",
-                            ));
-                        }
-                        let retreat = radius / halfcorner.tan();
-                        (
-                            cx + retreat * (theta + gamma).cos(),
-                            cy + retreat * (theta + gamma).sin(),
-                        )
-                    }
-                    Some((pend, pcen, pturn)) => {
-                        // arc -> line: where the held (compensated) arc meets the new offset line
-                        let oldrad = (pcen.1 - pend.1).hypot(pcen.0 - pend.0);
-                        let base_dir = (py - opy).atan2(px - opx);
-                        let th = add_half_pi(base_dir, if pturn > 0 { 1.0 } else { -1.0 });
-                        let phi = (pcen.1 - opy).atan2(pcen.0 - opx);
-                        let ins = inside(side, pturn);
-                        let oldrad_uncomp = if ins {
-                            oldrad + radius
-                        } else {
-                            oldrad - radius
-                        };
-                        let d = oldrad_uncomp * (th - phi).cos();
-                        let l = if ins { d - radius } else { d + radius } / oldrad;
-                        if !(-1.0..=1.0).contains(&l) {
-                            return Err(self.err(self.loc.col, format!("Arc to straight motion makes a corner the compensated tool (radius {radius:.4}) can't fit in without gouging")));
-                        }
-                        let a = if (pturn > 0) == ins {
-                            -l.acos()
-                        } else {
-                            l.acos()
-                        };
-                        let ang = a + th + PI;
-                        (pcen.0 + oldrad * ang.cos(), pcen.1 + oldrad * ang.sin())
-                    }
-                };
-                self.move_endpoint_and_flush(mx, my)?;
-            } else {
-                self.dequeue()?;
-                self.set_endpoint(cx, cy);
-            }
-            rest[0] = ex;
-            rest[1] = ey;
-            self.enqueue(Item::Line {
-                feed,
-                dir: (px - opx, py - opy),
-                end: rest,
-            });
-        }
-        self.comp_finish(ax, (ex, ey, pz), &end);
-        Ok(())
-    }
-
-    /// G2/G3 with compensation on.
-    pub(super) fn comp_arc(&mut self, spec: &ArcSpec, end: [f64; 6]) -> Result<(), GcodeError> {
-        let ax = self.comp_plane()?;
-        let col = self.loc.col;
-        let (ex, ey, ez) = (end[ax.0], end[ax.1], end[ax.2]);
-        let rest = [ez, end[3], end[4], end[5]];
-        let radius = self.comp.radius;
-        let side = self.comp.side.unwrap_or(Side::Left);
-        let (cx, cy, cz) = self.comp_current(ax);
-        if self.comp.first {
-            if (ex - cx).hypot(ey - cy) <= radius {
-                return Err(self.err(col, format!("Radius of cutter compensation entry arc is not greater than the tool radius ({radius:.4})")));
-            }
-            let (cenx, ceny, turn) = spec
-                .center((cx, cy), (ex, ey))
-                .map_err(|m| self.err(col, m))?;
-            let arc_r = match spec.r {
-                Some(r) => r.abs(),
-                None => (cenx - cx).hypot(ceny - cy),
-            };
-            if arc_r <= radius && inside(side, turn) {
-                return Err(self.err(col, TOOL_TOO_BIG));
-            }
-            self.comp_inverse_time_arc(spec, (cx, cy, cz), (cenx, ceny), turn, (ex, ey, ez))?;
-            let gamma = if inside(side, turn) {
-                (ceny - ey).atan2(cenx - ex)
-            } else {
-                (ey - ceny).atan2(ex - cenx)
-            };
-            self.comp.first = false;
-            let (nx, ny) = (ex + radius * gamma.cos(), ey + radius * gamma.sin());
-            let b_len = (cy - ny).hypot(cx - nx) / 2.0;
-            let ab_ang = (ceny - ny).atan2(cenx - nx);
-            let a_ang = (cy - ny).atan2(cx - nx) - ab_ang;
-            if a_ang.cos().abs() < TOLERANCE_EQUAL {
-                return Err(self.err(col, TOOL_TOO_BIG));
-            }
-            let c_len = b_len / a_ang.cos();
-            let (ncx, ncy) = (nx + c_len * ab_ang.cos(), ny + c_len * ab_ang.sin());
-            if ((ncx - nx).hypot(ncy - ny) - (ncx - cx).hypot(ncy - cy)).abs() > spec.spiral_abs {
-                return Err(self.err(
-                    col,
-                    "Cutter compensation could not find the entry arc (bug in tool radius comp)",
-                ));
-            }
-            if self.comp.orientation != 0 && self.comp.orientation != 9 {
-                let mut p = [0.0; 6];
-                p[0] = cx;
-                p[1] = cy;
-                p[2] = cz;
-                p[3..].copy_from_slice(&end[3..]);
-                self.enqueue(Item::Line {
-                    feed: true,
-                    dir: (0.0, 0.0),
-                    end: p,
-                });
-                self.set_endpoint(cx, cy);
-            }
-            self.enqueue(Item::Arc {
-                sweep: find_turn(cx, cy, ncx, ncy, turn, nx, ny),
-                end: (nx, ny),
-                center: (ncx, ncy),
-                turn,
-                rest,
-            });
-            self.comp_finish(ax, (nx, ny, ez), &end);
-            return Ok(());
-        }
-        let (opx, opy, opz) = self.comp_programmed(ax);
-        let (cenx, ceny, turn) = spec
-            .center((opx, opy), (ex, ey))
-            .map_err(|m| self.err(col, m))?;
-        self.comp_inverse_time_arc(spec, (opx, opy, opz), (cenx, ceny), turn, (ex, ey, ez))?;
-        let arc_radius = (cenx - ex).hypot(ceny - ey);
-        let theta = add_half_pi(
-            (cy - opy).atan2(cx - opx),
-            if side == Side::Left { -1.0 } else { 1.0 },
-        );
-        let mut delta = (ceny - opy).atan2(cenx - opx);
-        let alpha = add_half_pi(delta, if spec.cw { 1.0 } else { -1.0 });
-        let mut beta = if side == Side::Left {
-            theta - alpha
-        } else {
-            alpha - theta
-        };
-        if beta > 1.5 * PI {
-            beta -= 2.0 * PI;
-        } else if beta < -std::f64::consts::FRAC_PI_2 {
-            beta += 2.0 * PI;
-        }
-        let cutting_inside = (side == Side::Left && !spec.cw) || (side == Side::Right && spec.cw);
-        let gamma = if cutting_inside {
-            if arc_radius <= radius {
-                return Err(self.err(
-                    col,
-                    format!("{TOOL_TOO_BIG} (arc radius {arc_radius:.4}, tool radius {radius:.4})"),
-                ));
-            }
-            (ceny - ey).atan2(cenx - ex)
-        } else {
-            delta += PI;
-            (ey - ceny).atan2(ex - cenx)
-        };
-        let (nx, ny) = (ex + radius * gamma.cos(), ey + radius * gamma.sin());
-        let sweep = find_turn(opx, opy, cenx, ceny, turn, ex, ey);
-        let main = Item::Arc {
-            sweep,
-            end: (nx, ny),
-            center: (cenx, ceny),
-            turn,
-            rest,
-        };
-        let gouge = "Arc move in concave corner cannot be reached by the tool without gouging";
-        if !(-SMALL..=PI + SMALL).contains(&beta)
-            || ((beta - PI).abs() < SMALL && !inside(side, turn))
-        {
-            // concave corner
-            let (mx, my) = match self.front_arc() {
-                None => {
-                    let ccy = arc_radius * add_half_pi(beta, -1.0).sin();
-                    let (dist, ang) = if inside(side, turn) {
-                        let dist = arc_radius - radius;
-                        let l = (ccy + radius) / dist;
-                        if !(-1.0..=1.0).contains(&l) {
-                            return Err(self.err(col, gouge));
-                        }
-                        (
-                            dist,
-                            if turn > 0 {
-                                theta + l.asin()
-                            } else {
-                                theta - l.asin()
-                            },
-                        )
-                    } else {
-                        let dist = arc_radius + radius;
-                        let l = (ccy - radius) / dist;
-                        if !(-1.0..=1.0).contains(&l) {
-                            return Err(self.err(col, gouge));
-                        }
-                        (
-                            dist,
-                            if turn > 0 {
-                                theta + PI - l.asin()
-                            } else {
-                                theta + PI + l.asin()
-                            },
-                        )
-                    };
-                    (cenx + dist * ang.cos(), ceny + dist * ang.sin())
-                }
-                Some((pend, pcen, pturn)) => {
-                    let oldrad = (pcen.1 - pend.1).hypot(pcen.0 - pend.0);
-                    let newrad = if inside(side, turn) {
-                        arc_radius - radius
-                    } else {
-                        arc_radius + radius
-                    };
-                    let arc_cc = (pcen.1 - ceny).hypot(pcen.0 - cenx);
-                    if oldrad == 0.0 || arc_cc == 0.0 {
-                        return Err(self.err(
-                            col,
-                            "Arc to arc motion is invalid because the arcs have the same center",
-                        ));
-                    }
-                    let a = (oldrad * oldrad + arc_cc * arc_cc - newrad * newrad)
-                        / (2.0 * oldrad * arc_cc);
-                    if !(-1.0..=1.0).contains(&a) {
-                        return Err(self.err(col, format!("Arc to arc motion makes a corner the compensated tool (radius {radius:.4}) can't fit in without gouging")));
-                    }
-                    let pullback = a.acos();
-                    let cc_dir = (ceny - pcen.1).atan2(cenx - pcen.0);
-                    let plus = if inside(side, pturn) {
-                        turn > 0
-                    } else {
-                        turn <= 0
-                    };
-                    let dir = if plus {
-                        cc_dir + pullback
-                    } else {
-                        cc_dir - pullback
-                    };
-                    (pcen.0 + oldrad * dir.cos(), pcen.1 + oldrad * dir.sin())
-                }
-            };
-            self.move_endpoint_and_flush(mx, my)?;
-            self.enqueue(main);
-        } else if beta > SMALL {
-            // convex corner: an arc around the programmed corner first
-            let (mx, my) = (opx + radius * delta.cos(), opy + radius * delta.sin());
-            self.dequeue()?;
-            self.enqueue(Item::Arc {
-                sweep: 0.0,
-                end: (mx, my),
-                center: (opx, opy),
-                turn: if side == Side::Left { -1 } else { 1 },
-                rest: [cz, end[3], end[4], end[5]],
-            });
-            self.dequeue()?;
-            self.set_endpoint(mx, my);
-            self.enqueue(main);
-        } else {
-            self.dequeue()?;
-            self.set_endpoint(cx, cy);
-            self.enqueue(main);
-        }
-        self.comp_finish(ax, (nx, ny, ez), &end);
-        Ok(())
-    }
-
-    /// Inverse-time feed of a compensated arc: the programmed arc's length (LinuxCNC).
-    fn comp_inverse_time_arc(
-        &mut self,
-        spec: &ArcSpec,
-        start: (f64, f64, f64),
-        center: (f64, f64),
-        turn: i32,
-        end: (f64, f64, f64),
-    ) -> Result<(), GcodeError> {
-        if self.s.feed_mode != crate::gcode::canon::FeedMode::InverseTime {
-            return Ok(());
-        }
-        let radius = (start.0 - center.0).hypot(start.1 - center.1);
-        let theta = find_turn(start.0, start.1, center.0, center.1, turn, end.0, end.1);
-        let len = if end.2 == start.2 {
-            radius * theta.abs()
-        } else {
-            (radius * theta).hypot(end.2 - start.2)
-        };
-        let rate = (len * spec.f.unwrap_or(0.0)).max(0.1);
-        self.s.feed_rate = rate;
-        self.emit(CanonCmd::SetFeedRate(rate))
     }
 }
