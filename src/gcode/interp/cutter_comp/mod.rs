@@ -400,7 +400,8 @@ impl Interp<'_> {
         if self.comp.queue.is_empty() {
             return Ok(());
         }
-        let q = std::mem::take(&mut self.comp.queue);
+        // Emitted with the queue empty (so nothing is held again); its buffer is kept.
+        let mut q = std::mem::take(&mut self.comp.queue);
         let here = self.loc.clone();
         let plane = self.s.plane;
         let (a1, a2, n) = plane_axes(plane);
@@ -423,7 +424,7 @@ impl Interp<'_> {
             p[0] = ox(p[0]);
             p[2] = oz(p[2]);
         };
-        for (loc, it) in q {
+        for (loc, it) in q.drain(..) {
             self.loc = loc;
             let cmd = match it {
                 Item::Line { feed, end, .. } => {
@@ -470,6 +471,7 @@ impl Interp<'_> {
             };
             self.emit(cmd)?;
         }
+        self.comp.queue = q;
         self.loc = here;
         Ok(())
     }
