@@ -26,11 +26,6 @@ enum Allowed {
 /// Per-file deliberate differences, with the reason (see DIFFERENCES.md).
 const ALLOWED: &[(&str, Allowed, &str)] = &[
     (
-        "err_cutter_comp",
-        Allowed::HytaskRejects,
-        "cutter radius compensation (G41/G42) is refused with a clear error until implemented",
-    ),
-    (
         "ocode_do_after_break",
         Allowed::Rs274Bug,
         "rs274 runs a do/while loop only once after a while loop left by break",

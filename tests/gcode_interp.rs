@@ -314,8 +314,16 @@ fn canned_cycle_repeats_and_retract_modes() {
 }
 
 #[test]
-fn cutter_compensation_is_refused_clearly() {
-    assert!(err("G21 G41 D1\nM2\n").message.contains("not supported"));
+fn cutter_compensation_offsets_the_path_and_names_the_line_of_a_gouge() {
+    // G41.1 D4: radius 2, left of moves along +X: the tool runs 2 mm above them; the
+    // entry move is held until the next move, G40 sends the last one.
+    let p = run("G21 F100\nG0 X0 Y0\nG41.1 D4\nG1 X10 Y0\nG1 X20\nG40\nM2\n");
+    assert_eq!(feeds(&p), vec![[10.0, 2.0, 0.0], [20.0, 2.0, 0.0]]);
+    // A concave corner the tool cannot reach: refused on the move that makes it.
+    let e = err("G21 F100\nG0 X0 Y0\nG41.1 D4\nG1 X10 Y0\nG1 X9 Y1\nG1 X9 Y10\nM2\n");
+    assert_eq!((e.line, e.col), (6, 1), "{e}");
+    assert!(e.message.contains("concave corner"), "{e}");
+    assert!(e.message.contains("tool radius 2.0000"), "{e}");
 }
 
 #[test]
@@ -324,14 +332,6 @@ fn unsupported_g_codes_say_their_name() {
         (
             "G87 X1 Z-1 R1 I1 J1 K1",
             "G87 (back boring cycle) is not supported",
-        ),
-        (
-            "G42 D1",
-            "G41/G42 (cutter radius compensation) is not supported",
-        ),
-        (
-            "G41.1 D1",
-            "G41.1/G42.1 (dynamic cutter radius compensation)",
         ),
     ] {
         let e = err(&format!("G21 F100 S100 M3\n{line}\nM2\n"));

@@ -30,7 +30,7 @@ const TINY: f64 = 1e-12;
 const PI_2_LO: f64 = 6.123_233_995_736_766e-17;
 
 /// `a + s * pi/2` rounded once (as x87 long double arithmetic would, then stored to double).
-fn add_half_pi(a: f64, sign: f64) -> f64 {
+pub(super) fn add_half_pi(a: f64, sign: f64) -> f64 {
     let hi = sign * FRAC_PI_2;
     let s = a + hi;
     // two-sum error of a + hi
@@ -40,7 +40,7 @@ fn add_half_pi(a: f64, sign: f64) -> f64 {
 }
 
 /// Which axes (indices into X Y Z A B C) form the plane: first, second, normal.
-fn plane_axes(p: Plane) -> (usize, usize, usize) {
+pub(super) fn plane_axes(p: Plane) -> (usize, usize, usize) {
     match p {
         Plane::Xz => (2, 0, 1),
         Plane::Yz => (1, 2, 0),
@@ -52,6 +52,12 @@ impl Interp<'_> {
     pub(super) fn arc(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
         let col = self.loc.col;
         let plane = self.s.plane;
+        if self.comp.arc_not_allowed {
+            return Err(self.err(
+                col,
+                "The move just after exiting cutter compensation mode must be straight, not an arc",
+            ));
+        }
         if matches!(plane, Plane::Uv | Plane::Uw | Plane::Vw) {
             return Err(self.err(col, "Arcs in the UVW planes are not supported by hytask"));
         }
@@ -125,6 +131,21 @@ impl Interp<'_> {
         } else {
             RADIUS_TOLERANCE_INCH * 25.4
         };
+        if self.comp.active() && plane != Plane::Yz {
+            let spiral_abs = if inch { CENTER_TOL_INCH } else { CENTER_TOL_MM };
+            let spec = super::cutter_comp::ArcSpec {
+                cw,
+                r,
+                off: (o1, o2),
+                turns,
+                names,
+                ijk_absolute: self.s.ijk_absolute,
+                radius_tol,
+                spiral_abs,
+                f: b.get(b'f'),
+            };
+            return self.comp_arc(&spec, end);
+        }
         let (cen1, cen2, turn) = if let Some(r) = r {
             arc_data_r(cw, c1, c2, e1, e2, r, turns, radius_tol).map_err(|m| self.err(col, m))?
         } else {
@@ -172,7 +193,7 @@ impl Interp<'_> {
 
 /// LinuxCNC `arc_data_r`.
 #[allow(clippy::too_many_arguments)]
-fn arc_data_r(
+pub(super) fn arc_data_r(
     cw: bool,
     cx: f64,
     cy: f64,
@@ -210,7 +231,7 @@ fn arc_data_r(
 
 /// LinuxCNC `arc_data_ijk`.
 #[allow(clippy::too_many_arguments)]
-fn arc_data_ijk(
+pub(super) fn arc_data_ijk(
     cw: bool,
     names: (char, char),
     cur: (f64, f64),
@@ -253,7 +274,7 @@ fn arc_data_ijk(
 }
 
 /// LinuxCNC `find_turn`: signed angle swept by an arc, radians.
-fn find_turn(x1: f64, y1: f64, cx: f64, cy: f64, turn: i32, x2: f64, y2: f64) -> f64 {
+pub(super) fn find_turn(x1: f64, y1: f64, cx: f64, cy: f64, turn: i32, x2: f64, y2: f64) -> f64 {
     if turn == 0 {
         return 0.0;
     }

@@ -91,6 +91,9 @@ impl Interp<'_> {
                 181 => Plane::Uw,
                 _ => Plane::Vw,
             };
+            if plane != self.s.plane {
+                self.refuse_with_comp(col, "Cannot change planes")?;
+            }
             self.s.plane = plane;
             self.emit(CanonCmd::SelectPlane(plane))?;
         }
@@ -107,12 +110,7 @@ impl Interp<'_> {
         // 16. cutter compensation
         if let Some((g, col)) = b.g[7] {
             self.loc.col = col;
-            if let Some(what) = super::unsupported::g_code(g) {
-                return Err(self.err(col, what));
-            }
-            self.emit(CanonCmd::Comment(
-                "interpreter: cutter radius compensation off".into(),
-            ))?;
+            self.cutter_comp(g, b)?;
         }
         // 17. tool length offset
         if let Some((g, col)) = b.g[8] {
@@ -133,6 +131,7 @@ impl Interp<'_> {
         // 19. path control
         if let Some((g, col)) = b.g[13] {
             self.loc.col = col;
+            self.refuse_with_comp(col, "Cannot change control mode")?;
             self.path_control(g, b)?;
         }
         // 20. distance modes
@@ -320,7 +319,8 @@ impl Interp<'_> {
             || cycle
             || (matches!(motion, 730 | 810..=890) && axis)
             || b.mcode(5) == Some(66)
-            || g76;
+            || g76
+            || matches!(b.gcode(7), Some(411 | 421));
         let checks: [(u8, bool, &str); 10] = [
             (
                 b'i',

@@ -28,6 +28,7 @@ impl Interp<'_> {
     }
 
     pub(super) fn cycle(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+        self.refuse_with_comp(self.loc.col, "Cannot use canned cycles")?;
         let col = self.loc.col;
         // LinuxCNC convert_cycle_xy / _zx / _yz: (first, second, drilling) axes.
         let (ax, letters, plane_name): ((usize, usize, usize), [u8; 3], &str) = match self.s.plane {

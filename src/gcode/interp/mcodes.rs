@@ -64,6 +64,7 @@ impl Interp<'_> {
             if m == 6 {
                 // Without a T word LinuxCNC changes to the empty slot 0.
                 let (n, slot) = self.s.selected.unwrap_or((0, 0));
+                self.refuse_with_comp(col, "Cannot change tools")?;
                 self.emit(CanonCmd::StartChange)?;
                 self.emit(CanonCmd::StopSpindle)?;
                 self.s.spindle = 0;
@@ -144,6 +145,7 @@ impl Interp<'_> {
         // overrides
         if let Some((m, col)) = b.m[9] {
             self.loc.col = col;
+            self.refuse_with_comp(col, "Cannot change overrides (M48-M53)")?;
             let on = b.get(b'p').map(|p| p != 0.0).unwrap_or(true);
             let ov = |which, on| CanonCmd::OverrideEnable { which, on };
             match m {
@@ -187,6 +189,7 @@ impl Interp<'_> {
 
     fn io(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
         let col = self.loc.col;
+        self.refuse_with_comp(col, "Cannot set outputs or wait for inputs (M62-M68)")?;
         match m {
             62..=65 => {
                 let p = b
@@ -385,6 +388,7 @@ impl Interp<'_> {
 
     /// M0, M1, M2, M30, M60.
     pub(super) fn stop(&mut self, m: u16) -> Result<(), GcodeError> {
+        self.comp_at_stop(matches!(m, 2 | 30))?;
         match m {
             0 => self.emit(CanonCmd::ProgramStop),
             1 => self.emit(CanonCmd::OptionalProgramStop),

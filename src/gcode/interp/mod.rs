@@ -7,6 +7,7 @@
 
 mod arcs;
 mod block;
+mod cutter_comp;
 mod cycles;
 mod fanuc;
 mod frame;
@@ -241,6 +242,8 @@ pub(crate) struct Interp<'a> {
     /// Loop iterations, keyed like `repeats`, for the iteration limit.
     loop_iters: HashMap<(usize, usize, usize), u64>,
     pc: (usize, usize),
+    /// Cutter radius compensation and its queue of held calls.
+    pub(crate) comp: cutter_comp::Comp,
     /// Axis indices (first, second, drilling) of the canned cycle being generated.
     cycle_axes: (usize, usize, usize),
     ended: bool,
@@ -307,6 +310,7 @@ impl<'a> Interp<'a> {
             repeats: HashMap::new(),
             loop_iters: HashMap::new(),
             pc: (0, 0),
+            comp: cutter_comp::Comp::default(),
             cycle_axes: (0, 1, 2),
             ended: false,
             steps: 0,
@@ -318,6 +322,11 @@ impl<'a> Interp<'a> {
 
     /// Emits one canonical command at the current location.
     pub(crate) fn emit(&mut self, cmd: CanonCmd) -> Result<(), GcodeError> {
+        if self.comp.holding() && cutter_comp::deferred(&cmd) {
+            // Behind a compensated move whose end is not known yet (LinuxCNC's queue).
+            self.comp.hold(self.loc.clone(), cmd);
+            return Ok(());
+        }
         if self.count >= self.opts.limits.max_canon {
             return Err(self.err(
                 1,

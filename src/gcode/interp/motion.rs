@@ -22,6 +22,11 @@ impl Interp<'_> {
     /// End point of a move from the axis words (LinuxCNC `find_ends`).
     pub(crate) fn find_ends(&self, b: &Block) -> [f64; 6] {
         let mut end = self.s.pos;
+        if self.comp.measures_from_program() {
+            // With compensation on, moves are measured from the programmed point.
+            end[..3].copy_from_slice(&self.comp.prog);
+        }
+        let base = end;
         let g53 = b.gcode(0) == Some(530);
         if g53 && self.s.rotation != 0.0 {
             // G53 names machine coordinates, which the XY rotation does not turn: the axes
@@ -41,7 +46,7 @@ impl Interp<'_> {
                 } else if self.s.absolute {
                     v
                 } else {
-                    self.s.pos[i] + v
+                    base[i] + v
                 };
             }
         }
@@ -111,12 +116,24 @@ impl Interp<'_> {
             }
         }
         self.s.motion = m;
+        self.comp.arc_not_allowed = false;
         let end = self.find_ends(b);
+        if self.comp.active() {
+            if m == 10 && self.s.feed_mode == FeedMode::InverseTime {
+                let mut from = self.s.pos;
+                if self.comp.measures_from_program() {
+                    from[..3].copy_from_slice(&self.comp.prog);
+                }
+                self.inverse_time_straight(&from, &end, b.get(b'f').unwrap_or(0.0))?;
+            }
+            return self.comp_straight(m, b, end);
+        }
         if m == 0 {
             self.emit(CanonCmd::StraightTraverse(pose6(&end)))?;
         } else {
             if self.s.feed_mode == FeedMode::InverseTime {
-                self.inverse_time_straight(&end, b.get(b'f').unwrap_or(0.0))?;
+                let from = self.s.pos;
+                self.inverse_time_straight(&from, &end, b.get(b'f').unwrap_or(0.0))?;
             }
             self.emit(CanonCmd::StraightFeed(pose6(&end)))?;
         }
@@ -124,8 +141,12 @@ impl Interp<'_> {
         Ok(())
     }
 
-    fn inverse_time_straight(&mut self, end: &[f64; 6], f: f64) -> Result<(), GcodeError> {
-        let p = &self.s.pos;
+    fn inverse_time_straight(
+        &mut self,
+        p: &[f64; 6],
+        end: &[f64; 6],
+        f: f64,
+    ) -> Result<(), GcodeError> {
         let mut len =
             ((end[0] - p[0]).powi(2) + (end[1] - p[1]).powi(2) + (end[2] - p[2]).powi(2)).sqrt();
         if len == 0.0 {
@@ -138,6 +159,7 @@ impl Interp<'_> {
     }
 
     fn probe(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+        self.refuse_with_comp(self.loc.col, "Cannot probe")?;
         if !b.has_axis() {
             return Err(self.err(
                 self.loc.col,
@@ -236,6 +258,7 @@ impl Interp<'_> {
             self.s.g5x[i] *= k;
             self.s.g92[i] *= k;
         }
+        self.comp.scale(k);
         // LinuxCNC 2.9 keeps the tool length offset's number unchanged across G20/G21 (it
         // is not converted until the next G43); hytask reproduces that.
         // Stored offsets (parameters) stay in machine units, as in LinuxCNC.
@@ -244,6 +267,7 @@ impl Interp<'_> {
 
     /// G43 / G43.1 / G49.
     pub(super) fn tool_length(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {
+        self.refuse_with_comp(self.loc.col, "Cannot change tool offset")?;
         let mut off: Pose = [0.0; 9];
         match g {
             430 => {
@@ -377,6 +401,7 @@ impl Interp<'_> {
 
     /// G54…G59.3.
     pub(super) fn select_coord_system(&mut self, index: u8) -> Result<(), GcodeError> {
+        self.refuse_with_comp(self.loc.col, "Cannot change coordinate systems")?;
         if index == self.s.origin_index {
             return self.emit(CanonCmd::Comment(
                 "interpreter: continuing to use same coordinate system".into(),
@@ -389,10 +414,19 @@ impl Interp<'_> {
 
     /// Group 0 codes other than G4 and G53.
     pub(super) fn non_modal(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {
+        if matches!(g, 520 | 920) {
+            self.refuse_with_comp(self.loc.col, "Cannot change axis offsets")?;
+        }
+        if matches!(g, 921..=923) && self.comp.side.is_some() {
+            // rs274 2.9 ignores G92.1/G92.2/G92.3 while compensation is on (no call, the
+            // offsets unchanged); so does hytask, to keep the same path.
+            return Ok(());
+        }
         match g {
             100 => self.g10(b),
             280 | 300 => self.go_home(g, b),
             281 | 301 => {
+                self.refuse_with_comp(self.loc.col, "Cannot set the G28.1/G30.1 reference point")?;
                 let base = if g == 281 {
                     params::G28_BASE
                 } else {
@@ -467,6 +501,7 @@ impl Interp<'_> {
     }
 
     fn go_home(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {
+        self.refuse_with_comp(self.loc.col, "Cannot use G28 or G30")?;
         let base = if g == 280 {
             params::G28_BASE
         } else {
@@ -531,6 +566,12 @@ impl Interp<'_> {
                 };
                 if l == 20 && b.has(b'r') {
                     return Err(self.err(b.col_of(b'r'), "R not allowed in G10 L20"));
+                }
+                if index == self.s.origin_index {
+                    self.refuse_with_comp(
+                        self.loc.col,
+                        "Cannot change the active coordinate system",
+                    )?;
                 }
                 let base = g5x_base(index);
                 let to_param = lin(0, 1.0 / self.s.k_mp());

@@ -120,6 +120,7 @@ impl Interp<'_> {
     }
 
     pub(super) fn spline(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+        self.refuse_with_comp(self.loc.col, "Cannot make a spline (G5/G5.1)")?;
         let col = self.loc.col;
         if self.s.plane != Plane::Xy {
             return Err(self.err(col, "Splines must be in the XY plane"));
