@@ -272,8 +272,17 @@ fn settle(
     match step {
         SdoStep::Ignored => {}
         SdoStep::Send(f) => bus.try_send(&f)?,
+        SdoStep::SendBlock(frames) => {
+            for f in &frames {
+                bus.try_send(f)?;
+            }
+        }
         SdoStep::Downloaded => *result = Some(Ok(Vec::new())),
         SdoStep::Uploaded(v) => *result = Some(Ok(v)),
+        SdoStep::BlockUploaded { value, confirm } => {
+            bus.try_send(&confirm)?;
+            *result = Some(Ok(value));
+        }
         SdoStep::Failed { error, abort } => {
             if let Some(a) = abort {
                 bus.try_send(&a)?;
@@ -298,7 +307,9 @@ fn sdo(
     let mut c = SdoClient::with_timeout(n, Duration::from_millis(a.timeout_ms));
     let first = match write {
         Some(d) => c.download(index, sub, d, clock.now())?,
-        None => c.upload(index, sub, clock.now())?,
+        // Block upload where the node offers it (a long value goes in one sub-block);
+        // the client falls back to segmented when the node refuses.
+        None => c.upload_block(index, sub, clock.now())?,
     };
     bus.try_send(&first)?;
     let mut clients = [(c, None)];

@@ -6,10 +6,11 @@
 //! [`DriveSlave::poll`] does both over any [`CanBus`]. What it implements:
 //!
 //! * NMT (start, stop, pre-operational, reset node, reset communication) with boot-up;
-//! * an SDO server (expedited, segmented) on its object dictionary: 0x1000, 0x1001, 0x1008,
+//! * an SDO server (expedited, segmented, block) on its object dictionary: 0x1000, 0x1001, 0x1008,
 //!   0x1017, 0x1018, 0x1400-3/0x1600-3, 0x1800-3/0x1A00-3, 0x603F, 0x6040, 0x6041, 0x6060,
 //!   0x6061, 0x6064, 0x6065, 0x606C, 0x607A, 0x6098, 0x60FF, 0x6502, and the fault injection
-//!   object [`od::INJECT`] (0x2000: drive fault, stop heartbeat, EMCY);
+//!   object [`od::INJECT`] (0x2000: drive fault, stop heartbeat, EMCY) and a domain for
+//!   block transfers, [`od::DOMAIN`] (0x2001);
 //! * PDOs by their mapping (RPDOs with a synchronous transmission type take effect at the
 //!   next SYNC, TPDOs with type n go out every n-th SYNC);
 //! * the heartbeat producer (0x1017), EMCY on faults (and 0x0000 on fault reset);
@@ -149,6 +150,17 @@ impl DriveSlave {
         }
     }
 
+    /// Segments of a block upload's sub-block, as many as leave room in `out` for the
+    /// frames of a cycle (EMCY, TPDOs, heartbeat); the rest go on the next calls.
+    fn push_burst(&mut self, out: &mut Outbox<OUTBOX>) {
+        while out.len() + 8 < OUTBOX {
+            match self.sdo.next_burst() {
+                Some(f) => out.push(f),
+                None => break,
+            }
+        }
+    }
+
     fn flush_pending(&mut self, out: &mut Outbox<OUTBOX>) {
         for f in self.core.pending.iter() {
             out.push(*f);
@@ -181,6 +193,7 @@ impl DriveSlave {
         }
         if let Some(reply) = self.sdo.on_frame(f, now, &mut self.core) {
             out.push(reply);
+            self.push_burst(out);
             self.flush_pending(out);
             self.apply_heartbeat(now);
             return;
@@ -281,6 +294,7 @@ impl DriveSlave {
         if let Some(f) = self.sdo.poll(now) {
             out.push(f);
         }
+        self.push_burst(out);
         let cycle = self.core.cfg.cycle;
         let sync_alive = self
             .last_sync

@@ -13,6 +13,19 @@ use super::SlaveConfig;
 /// with it; sub 2 = write 1 to stop the heartbeat, 0 to resume; sub 3 = write an error code
 /// to send an EMCY without a fault.
 pub const INJECT: u16 = 0x2000;
+/// A read/write domain (manufacturer area) for block transfers: any length up to
+/// [`DOMAIN_MAX`]; initially [`domain_default`].
+pub const DOMAIN: u16 = 0x2001;
+/// The longest value [`DOMAIN`] stores.
+pub const DOMAIN_MAX: usize = 4096;
+
+/// The initial content of [`DOMAIN`]: 1000 bytes, `i * 7 + 3` (mod 256), so a reader can
+/// check every byte without knowing more.
+pub fn domain_default() -> Vec<u8> {
+    // Cannot truncate: the value is taken mod 256 on purpose.
+    (0..1000usize).map(|i| (i * 7 + 3) as u8).collect()
+}
+
 /// Device name (0x1008), long enough to need a segmented upload.
 pub const DEVICE_NAME: &str = "hytask loopback CiA 402 drive";
 /// Device type 0x1000: CiA 402 profile, servo drive.
@@ -90,6 +103,8 @@ pub(crate) struct Core {
     pub(crate) tpdo: [PdoParams; 4],
     /// Frames produced by object writes (EMCY), sent by the slave after the write.
     pub(crate) pending: Outbox<8>,
+    /// The value of [`DOMAIN`].
+    pub(crate) domain: Vec<u8>,
 }
 
 impl Core {
@@ -104,6 +119,7 @@ impl Core {
             rpdo: [PdoParams::new(0, 0, None); 4],
             tpdo: [PdoParams::new(0, 0, None); 4],
             pending: Outbox::default(),
+            domain: domain_default(),
         };
         c.reset_communication();
         c
@@ -300,6 +316,7 @@ impl ObjectAccess for Core {
             (0x1A00..=0x1A03, _) => {
                 Self::pdo_read(&self.tpdo[usize::from(index - 0x1A00)], false, true, sub)?
             }
+            (DOMAIN, 0) => self.domain.clone(),
             (INJECT, 0) => vec![3],
             (INJECT, 1) => d.error_code.to_le_bytes().to_vec(),
             (INJECT, 2) => vec![u8::from(self.heartbeat_stopped)],
@@ -317,7 +334,7 @@ impl ObjectAccess for Core {
             (0x60FF, 0) => d.target_velocity.to_le_bytes().to_vec(),
             // Supported drive modes: PP (bit 0), HM (bit 5), CSP (bit 7).
             (0x6502, 0) => 0x0000_00A1u32.to_le_bytes().to_vec(),
-            (0x1000 | 0x1001 | 0x1008 | 0x1017 | 0x1018 | INJECT | 0x603F..=0x6502, _)
+            (0x1000 | 0x1001 | 0x1008 | 0x1017 | 0x1018 | INJECT | DOMAIN | 0x603F..=0x6502, _)
                 if self.exists(index) =>
             {
                 return Err(NoSub)
@@ -362,6 +379,12 @@ impl ObjectAccess for Core {
                 sub,
                 data,
             )?,
+            (DOMAIN, 0) => {
+                if data.len() > DOMAIN_MAX {
+                    return Err(A::LengthTooHigh);
+                }
+                self.domain = data.to_vec();
+            }
             (INJECT, 1) => {
                 let code = u16_of(data)?;
                 if code == 0 {
@@ -419,6 +442,7 @@ impl Core {
                 | 0x1017
                 | 0x1018
                 | INJECT
+                | DOMAIN
                 | 0x603F
                 | 0x6040
                 | 0x6041

@@ -335,3 +335,68 @@ fn profile_position_and_homing_on_current_position() {
         "switch homing not modelled: homing error"
     );
 }
+
+impl T {
+    /// A transfer of any kind to its end: frames to the drive one per call, time passing
+    /// (a tick per ms) when none is queued, so a block upload's sub-block goes out over
+    /// several calls as the outbox allows. Returns the final step and the largest number
+    /// of frames one call produced.
+    fn transfer(&mut self, first: CanFrame) -> (SdoStep, usize) {
+        let mut to_slave = std::collections::VecDeque::from([first]);
+        let mut widest = 0;
+        let mut done = None;
+        for _ in 0..10_000 {
+            let mut out = Outbox::default();
+            match to_slave.pop_front() {
+                Some(f) => self.s.on_frame(&f, self.now, &mut out),
+                None if done.is_some() => return (done.unwrap_or(SdoStep::Ignored), widest),
+                None => {
+                    self.now += MS;
+                    self.s.tick(self.now, &mut out);
+                }
+            }
+            widest = widest.max(out.len());
+            for r in out.iter().filter(|r| r.id().raw() == 0x581) {
+                match self.c.on_frame(r, self.now) {
+                    SdoStep::Ignored => {}
+                    SdoStep::Send(f) => to_slave.push_back(f),
+                    SdoStep::SendBlock(v) => to_slave.extend(v),
+                    SdoStep::BlockUploaded { value, confirm } => {
+                        to_slave.push_back(confirm);
+                        done = Some(SdoStep::Uploaded(value));
+                    }
+                    other => done = Some(other),
+                }
+            }
+        }
+        panic!("transfer did not end")
+    }
+}
+
+#[test]
+fn the_domain_object_goes_by_block_transfer_both_ways() {
+    let mut t = T::new(SlaveConfig::default());
+    let f = t.c.upload_block(od::DOMAIN, 0, t.now).unwrap();
+    let (step, widest) = t.transfer(f);
+    assert_eq!(step, SdoStep::Uploaded(od::domain_default()));
+    assert!(
+        widest < OUTBOX,
+        "the burst is paced: {widest} frames in one call"
+    );
+    let value: Vec<u8> = (0..2000u32).map(|i| (i % 251) as u8).collect();
+    let f = t.c.download(od::DOMAIN, 0, &value, t.now).unwrap();
+    assert_eq!(f.data()[0] >> 5, 6, "block download");
+    assert_eq!(t.transfer(f).0, SdoStep::Downloaded);
+    assert_eq!(t.read(od::DOMAIN, 0).unwrap(), value, "read back segmented");
+    let f = t.c.download(od::DOMAIN, 0, &[0; 5000], t.now).unwrap();
+    assert!(matches!(
+        t.transfer(f).0,
+        SdoStep::Failed {
+            error: crate::canopen::CanOpenError::SdoAbort {
+                abort: SdoAbortCode::LengthTooHigh,
+                ..
+            },
+            ..
+        }
+    ));
+}
