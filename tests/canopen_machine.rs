@@ -116,7 +116,7 @@ fn homes_and_runs_a_job_to_completion_on_canopen_drives() {
 
 /// Runs a long job, injects `inject` once it moves, and checks the controlled stop, the
 /// fault naming node and cause, and the failed job with its line.
-fn fault_mid_job(inject: impl FnOnce(&Machine), node: u8, cause: &str, bus_alive: bool) {
+fn fault_mid_job(inject: impl FnOnce(&Machine), who: &str, cause: &str, bus_alive: bool) {
     let (_dir, m) = machine();
     ready(&m);
     m.job_load(&job(
@@ -130,17 +130,16 @@ fn fault_mid_job(inject: impl FnOnce(&Machine), node: u8, cause: &str, bus_alive
     inject(&m);
     let s = wait(&m, "job failed", |s| s.job.state == "failed");
     let reason = s.job.reason.clone().unwrap();
-    assert!(
-        reason.contains(&format!("CANopen node {node}")) && reason.contains(cause),
-        "{reason}"
-    );
+    assert!(reason.contains(who) && reason.contains(cause), "{reason}");
     assert!(reason.contains("line 3"), "{reason}");
     // Without a bus the feedback is stale: only the mode can be checked.
     let s = wait(&m, "stopped in fault", |s| {
         s.mode == Mode::Fault && (!bus_alive || s.axes.iter().all(|a| a.velocity.abs() < 1e-6))
     });
     assert!(
-        s.faults.iter().any(|f| f.contains(&format!("node {node}"))),
+        s.faults
+            .iter()
+            .any(|f| f.contains(who) && f.contains(cause)),
         "{:?}",
         s.faults
     );
@@ -155,7 +154,7 @@ fn a_drive_fault_mid_job_stops_the_machine_and_names_the_node() {
                 .write("y-servo", 0x2000, 1, &0x2310u16.to_le_bytes())
                 .unwrap()
         },
-        2,
+        "CANopen node 2",
         "0x2310",
         true,
     );
@@ -165,7 +164,7 @@ fn a_drive_fault_mid_job_stops_the_machine_and_names_the_node() {
 fn a_lost_heartbeat_mid_job_stops_the_machine_and_names_the_node() {
     fault_mid_job(
         |m| m.can_sdo().write("z-servo", 0x2000, 2, &[1]).unwrap(),
-        3,
+        "CANopen node 3",
         "heartbeat lost",
         true,
     );
@@ -179,19 +178,29 @@ fn an_emcy_mid_job_stops_the_machine_and_names_the_node() {
                 .write("x-servo", 0x2000, 3, &0x4210u16.to_le_bytes())
                 .unwrap()
         },
-        1,
+        "CANopen node 1",
         "emergency (error code 0x4210",
         true,
     );
 }
 
 #[test]
-fn a_bus_off_mid_job_stops_the_machine_and_names_the_bus_error() {
+fn a_bus_off_mid_job_stops_the_machine_and_names_the_interface() {
     fault_mid_job(
         |m| m.sim_can_bus(0).unwrap().set_bus_off(true),
-        1,
-        "CAN bus error",
+        "sim: bus-off",
+        "error code 0x8140",
         false,
+    );
+}
+
+#[test]
+fn an_error_frame_mid_job_stops_the_machine_and_names_the_interface() {
+    fault_mid_job(
+        |m| m.sim_can_bus(0).unwrap().error_frame(),
+        "sim: error frame",
+        "error code 0x8120",
+        true,
     );
 }
 

@@ -39,6 +39,7 @@ use crate::can::{CanFrame, CanId};
 use core::fmt;
 
 pub mod axis;
+pub mod bus_health;
 pub mod busload;
 pub mod cia402;
 pub mod emcy;
