@@ -307,3 +307,53 @@ fn a_canopen_axis_that_homes_on_a_switch_is_refused_by_the_check() {
         "{err}"
     );
 }
+
+/// A fault while the machine is in e-stop (drives disabled, nothing moving) is still a
+/// fault event naming node and cause: the operator must learn about it before the next
+/// machine-on, not from a refused enable.
+fn fault_in_estop(inject: impl FnOnce(&Machine), node: u8, cause: &str) {
+    let (_dir, m) = machine();
+    wait(&m, "feedback from every drive", |s| {
+        s.axes.iter().all(|a| a.drive_state == "switch on disabled")
+    });
+    assert_eq!(m.status().mode, Mode::Estop);
+    inject(&m);
+    let s = wait(&m, "fault reported", |s| {
+        s.faults
+            .iter()
+            .any(|f| f.contains(&format!("CANopen node {node}")) && f.contains(cause))
+    });
+    assert_eq!(s.mode, Mode::Estop, "still in e-stop: {:?}", s.faults);
+    shutdown(&m);
+}
+
+#[test]
+fn a_drive_fault_in_estop_is_reported() {
+    fault_in_estop(
+        |m| {
+            m.can_sdo()
+                .write("y-servo", 0x2000, 1, &0x2310u16.to_le_bytes())
+                .unwrap()
+        },
+        2,
+        "0x2310",
+    );
+}
+
+#[test]
+fn an_emcy_and_a_lost_heartbeat_in_estop_are_reported() {
+    fault_in_estop(
+        |m| {
+            m.can_sdo()
+                .write("x-servo", 0x2000, 3, &0x4210u16.to_le_bytes())
+                .unwrap()
+        },
+        1,
+        "emergency (error code 0x4210",
+    );
+    fault_in_estop(
+        |m| m.can_sdo().write("z-servo", 0x2000, 2, &[1]).unwrap(),
+        3,
+        "heartbeat lost",
+    );
+}
