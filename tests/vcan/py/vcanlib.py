@@ -151,6 +151,17 @@ def drive_od():
     od.add_object(var("Velocity actual value", 0x606C, 0, I32, "ro", pdo=True))
     od.add_object(var("Target position", 0x607A, 0, I32, "rw", pdo=True))
     od.add_object(var("Homing method", 0x6098, 0, I8))
+    od.add_object(var("Home offset", 0x607C, 0, I32))
+    od.add_object(record("Homing speeds", 0x6099, [
+        var("Highest sub-index", 0x6099, 0, U8, "const"),
+        var("Speed during search for switch", 0x6099, 1, U32),
+        var("Speed during search for zero", 0x6099, 2, U32)]))
+    od.add_object(var("Homing acceleration", 0x609A, 0, U32))
+    od.add_object(record("Simulated switches", 0x2002, [
+        var("Highest sub-index", 0x2002, 0, U8, "const"),
+        var("Home switch", 0x2002, 1, I32),
+        var("Negative limit switch", 0x2002, 2, I32),
+        var("Positive limit switch", 0x2002, 3, I32)]))
     od.add_object(var("Target velocity", 0x60FF, 0, I32, "rw", pdo=True))
     od.add_object(var("Supported drive modes", 0x6502, 0, U32, "ro"))
     return od

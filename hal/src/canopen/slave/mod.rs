@@ -8,14 +8,17 @@
 //! * NMT (start, stop, pre-operational, reset node, reset communication) with boot-up;
 //! * an SDO server (expedited, segmented, block) on its object dictionary: 0x1000, 0x1001, 0x1008,
 //!   0x1017, 0x1018, 0x1400-3/0x1600-3, 0x1800-3/0x1A00-3, 0x603F, 0x6040, 0x6041, 0x6060,
-//!   0x6061, 0x6064, 0x6065, 0x606C, 0x607A, 0x6098, 0x60FF, 0x6502, and the fault injection
+//!   0x6061, 0x6064, 0x6065, 0x606C, 0x607A, 0x607C, 0x6098, 0x6099, 0x609A, 0x60FF, 0x6502,
+//!   the simulated switches [`od::SWITCHES`] (0x2002), and the fault injection
 //!   object [`od::INJECT`] (0x2000: drive fault, stop heartbeat, EMCY) and a domain for
 //!   block transfers, [`od::DOMAIN`] (0x2001);
 //! * PDOs by their mapping (RPDOs with a synchronous transmission type take effect at the
 //!   next SYNC, TPDOs with type n go out every n-th SYNC);
 //! * the heartbeat producer (0x1017), EMCY on faults (and 0x0000 on fault reset);
 //! * the CiA 402 state machine, CSP following the target each SYNC with the simulated
-//!   axis's motor model, PP moves and homing on the current position (methods 35/37).
+//!   axis's motor model, PP moves and homing mode: methods 35/37 (current position), 17/18
+//!   (limit switch) and 19-22 (home switch) with the speeds 0x6099, acceleration 0x609A and
+//!   home offset 0x607C; statusword bit 12 homing attained, 10 target reached, 13 error.
 //!
 //! Motion advances one cycle per SYNC; without SYNCs (a master doing only SDO, or PP moves)
 //! it free-runs on [`tick`](DriveSlave::tick) at the configured cycle.

@@ -327,13 +327,76 @@ fn profile_position_and_homing_on_current_position() {
         t.s.statusword() & crate::canopen::cia402::SW_OP_MODE_12 != 0,
         "homing attained"
     );
-    t.write(0x6098, 0, &[19]).unwrap();
+    t.write(0x6098, 0, &[1]).unwrap();
     t.write(0x6040, 0, &0x0Fu16.to_le_bytes()).unwrap();
     t.write(0x6040, 0, &0x1Fu16.to_le_bytes()).unwrap();
     assert!(
         t.s.statusword() & crate::canopen::cia402::SW_OP_MODE_13 != 0,
-        "switch homing not modelled: homing error"
+        "method 1 (index pulse) is not modelled: homing error"
     );
+}
+
+impl T {
+    /// Homing mode, method `method` with home offset `offset`, started by a rising bit 4;
+    /// free-runs (no SYNC) until homing attained or error. Returns the statusword.
+    fn home(&mut self, method: i8, offset: i32) -> u16 {
+        use crate::canopen::cia402::{SW_OP_MODE_12, SW_OP_MODE_13, SW_TARGET_REACHED};
+        self.write(0x6060, 0, &[6]).unwrap();
+        assert_eq!(self.read(0x6061, 0).unwrap(), vec![6], "mode confirmed");
+        self.write(0x6098, 0, &[method as u8]).unwrap();
+        self.write(0x607C, 0, &offset.to_le_bytes()).unwrap();
+        self.write(0x6040, 0, &0x0Fu16.to_le_bytes()).unwrap();
+        self.write(0x6040, 0, &0x1Fu16.to_le_bytes()).unwrap();
+        for _ in 0..20_000 {
+            let sw = self.s.statusword();
+            let done = sw & SW_OP_MODE_12 != 0 && sw & SW_TARGET_REACHED != 0;
+            if done || sw & SW_OP_MODE_13 != 0 {
+                return sw;
+            }
+            self.now += MS;
+            let mut out = Outbox::default();
+            self.s.tick(self.now, &mut out);
+        }
+        panic!("homing method {method} did not end")
+    }
+}
+
+#[test]
+fn homing_on_the_home_switch_and_the_limit_switches_with_speeds_and_offset() {
+    use crate::canopen::cia402::SW_OP_MODE_13;
+    let mut t = T::new(SlaveConfig::default());
+    t.start();
+    t.enable(6);
+    // Home switch at motor count 5000, active above; search 50000/s, back-off 1000/s.
+    t.write(od::SWITCHES, 1, &5000i32.to_le_bytes()).unwrap();
+    t.write(0x6099, 1, &50_000u32.to_le_bytes()).unwrap();
+    t.write(0x6099, 2, &1000u32.to_le_bytes()).unwrap();
+    t.write(0x609A, 0, &1_000_000u32.to_le_bytes()).unwrap();
+    assert_eq!(t.read(0x6099, 0).unwrap(), vec![2]);
+    let sw = t.home(19, 100);
+    assert_eq!(sw & SW_OP_MODE_13, 0, "no homing error");
+    // Home = the switch edge (motor 5000) is position 100 now; the drive stopped within
+    // its back-off deceleration of the edge.
+    let p = t.s.position();
+    assert!((p - 100).abs() <= 2, "at {p}");
+    // Method 21 (switch active below) homes on the same edge from the other side.
+    let sw = t.home(21, -7);
+    assert_eq!(sw & SW_OP_MODE_13, 0);
+    assert!((t.s.position() + 7).abs() <= 2, "at {}", t.s.position());
+    // Method 17: the negative limit switch at motor -20000.
+    t.write(od::SWITCHES, 2, &(-20_000i32).to_le_bytes())
+        .unwrap();
+    let sw = t.home(17, 0);
+    assert_eq!(sw & SW_OP_MODE_13, 0);
+    assert!(t.s.position().abs() <= 2);
+    // Method 18 with the positive limit beyond reach of a home switch search: method 20
+    // (home switch) with the switch outside the limits runs into the limit: homing error.
+    t.write(od::SWITCHES, 1, &300_000i32.to_le_bytes()).unwrap();
+    t.write(od::SWITCHES, 3, &30_000i32.to_le_bytes()).unwrap();
+    let sw = t.home(20, 0);
+    assert_ne!(sw & SW_OP_MODE_13, 0, "limit switch before the home switch");
+    let sw = t.home(18, 0);
+    assert_eq!(sw & SW_OP_MODE_13, 0, "method 18 homes on that limit");
 }
 
 impl T {
