@@ -188,7 +188,8 @@ impl Rig {
 
 #[test]
 fn each_bus_failure_is_a_fault_naming_the_interface_on_every_drive() {
-    let cases: [(fn(&SimCanBus), LinkCause, &str); 4] = [
+    type Inject = fn(&SimCanBus);
+    let cases: [(Inject, LinkCause, &str); 4] = [
         (
             |w| w.set_bus_off(true),
             LinkCause::BusOff,
