@@ -42,6 +42,7 @@ pub mod axis;
 pub mod bus_health;
 pub mod busload;
 pub mod cia402;
+pub mod eds;
 pub mod emcy;
 pub mod error;
 pub mod heartbeat;
