@@ -95,8 +95,22 @@ impl SdoServer {
         Some(sdo_frame(self.node, TX, data))
     }
 
-    /// A segmented transfer whose client went silent is aborted with 0x05040000.
+    /// A server for `node` that aborts a transfer whose client is silent for `timeout`.
+    pub fn with_timeout(node: NodeId, timeout: Duration) -> SdoServer {
+        SdoServer {
+            timeout,
+            ..SdoServer::new(node)
+        }
+    }
+
+    /// A segmented transfer whose client went silent is aborted with 0x05040000. While a
+    /// block upload's sub-block is still going out, the client is not late: the wait
+    /// for its acknowledgement counts from the last poll with segments left to send.
     pub fn poll(&mut self, now: Duration) -> Option<CanFrame> {
+        let sending = matches!(&self.phase, Phase::BlkUp { data, tx, next } if tx.segment(data, *next).is_some());
+        if sending {
+            self.deadline = now + self.timeout;
+        }
         if !matches!(self.phase, Phase::Idle) && now > self.deadline {
             return self.abort(SdoAbortCode::ProtocolTimedOut);
         }

@@ -481,3 +481,31 @@ fn server_checks_the_crc_and_the_size_of_a_block_download() {
     assert_eq!(&a.data()[4..], &0x0504_0004u32.to_le_bytes());
     assert!(!od.0.contains_key(&(0x2014, 0)), "nothing stored");
 }
+
+#[test]
+fn a_block_upload_still_going_out_is_not_a_silent_client() {
+    let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
+    od.0.insert((0x2011, 0), long_value(500));
+    let t = Duration::ZERO;
+    let init = s
+        .on_frame(&c.upload_block(0x2011, 0, t).unwrap(), t, &mut od)
+        .unwrap();
+    let SdoStep::Send(start) = c.on_frame(&init, t) else {
+        panic!()
+    };
+    assert!(s.on_frame(&start, t, &mut od).is_some(), "first segment");
+    // The caller's transmit queue holds the rest back for a long while.
+    let late = DEFAULT_TIMEOUT * 3;
+    assert_eq!(s.poll(late), None, "segments left to send: no timeout");
+    let rest = std::iter::from_fn(|| s.next_burst()).count();
+    assert_eq!(rest, 71, "72 segments of 7 bytes");
+    assert_eq!(s.poll(late + DEFAULT_TIMEOUT), None);
+    let a = s
+        .poll(late + DEFAULT_TIMEOUT + Duration::from_millis(1))
+        .unwrap();
+    assert_eq!(
+        &a.data()[4..],
+        &0x0504_0000u32.to_le_bytes(),
+        "then the ack is late"
+    );
+}

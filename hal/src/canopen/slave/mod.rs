@@ -40,6 +40,10 @@ use crate::can::{CanBus, CanFrame};
 use od::Core;
 use std::time::Duration;
 
+/// The SDO server's wait for a silent client: generous, since the loopback drive's
+/// clients include python-canopen under software emulation on a loaded host.
+pub const SDO_TIMEOUT: Duration = Duration::from_secs(5);
+
 /// How many frames one call may produce (SDO reply, EMCYs, up to 4 TPDOs, heartbeat).
 pub const OUTBOX: usize = 16;
 
@@ -95,7 +99,7 @@ impl DriveSlave {
         DriveSlave {
             node,
             nmt: None,
-            sdo: SdoServer::new(node),
+            sdo: SdoServer::with_timeout(node, SDO_TIMEOUT),
             heartbeat: HeartbeatProducer::new(node, Duration::ZERO),
             core: Core::new(node, cfg),
             rpdo_latched: [None; 4],
@@ -134,7 +138,7 @@ impl DriveSlave {
 
     fn boot(&mut self, out: &mut Outbox<OUTBOX>, now: Duration) {
         self.nmt = Some(NmtState::PreOperational);
-        self.sdo = SdoServer::new(self.node);
+        self.sdo = SdoServer::with_timeout(self.node, SDO_TIMEOUT);
         self.rpdo_latched = [None; 4];
         out.push(NmtState::BootUp.heartbeat_frame(self.node));
         self.core.heartbeat_changed = true;
