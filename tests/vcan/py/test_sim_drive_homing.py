@@ -3,6 +3,8 @@ homing mode (0x6060 = 6, confirmed by 0x6061) with method 19 on the drive's simu
 switch, the search and zero speeds 0x6099, acceleration 0x609A and home offset 0x607C;
 statusword bits 12/10 end it. Then method 35 (current position), and an unsupported
 method ends in a homing error (bit 13). State machine and statusword go by SDO."""
+import logging
+
 import canopen
 
 from vcanlib import HYTASK, IFACE, Proc, check, drive_od, finish, network, relax_timeouts
@@ -11,6 +13,8 @@ NODE = 4
 
 
 def main():
+    # Without PDOs python-canopen warns on every statusword poll that it falls back to SDO.
+    logging.getLogger("canopen.profiles.p402").setLevel(logging.ERROR)
     drive = Proc([HYTASK, "sim-drive", "--iface", IFACE, "--node", str(NODE)])
     net = None
     try:
