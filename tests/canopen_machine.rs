@@ -116,7 +116,7 @@ fn homes_and_runs_a_job_to_completion_on_canopen_drives() {
 
 /// Runs a long job, injects `inject` once it moves, and checks the controlled stop, the
 /// fault naming node and cause, and the failed job with its line.
-fn fault_mid_job(inject: impl FnOnce(&Machine), node: u8, cause: &str, bus_alive: bool) {
+fn fault_mid_job(inject: impl FnOnce(&Machine), who: &str, cause: &str, bus_alive: bool) {
     let (_dir, m) = machine();
     ready(&m);
     m.job_load(&job(
@@ -130,17 +130,16 @@ fn fault_mid_job(inject: impl FnOnce(&Machine), node: u8, cause: &str, bus_alive
     inject(&m);
     let s = wait(&m, "job failed", |s| s.job.state == "failed");
     let reason = s.job.reason.clone().unwrap();
-    assert!(
-        reason.contains(&format!("CANopen node {node}")) && reason.contains(cause),
-        "{reason}"
-    );
+    assert!(reason.contains(who) && reason.contains(cause), "{reason}");
     assert!(reason.contains("line 3"), "{reason}");
     // Without a bus the feedback is stale: only the mode can be checked.
     let s = wait(&m, "stopped in fault", |s| {
         s.mode == Mode::Fault && (!bus_alive || s.axes.iter().all(|a| a.velocity.abs() < 1e-6))
     });
     assert!(
-        s.faults.iter().any(|f| f.contains(&format!("node {node}"))),
+        s.faults
+            .iter()
+            .any(|f| f.contains(who) && f.contains(cause)),
         "{:?}",
         s.faults
     );
@@ -155,7 +154,7 @@ fn a_drive_fault_mid_job_stops_the_machine_and_names_the_node() {
                 .write("y-servo", 0x2000, 1, &0x2310u16.to_le_bytes())
                 .unwrap()
         },
-        2,
+        "CANopen node 2",
         "0x2310",
         true,
     );
@@ -165,7 +164,7 @@ fn a_drive_fault_mid_job_stops_the_machine_and_names_the_node() {
 fn a_lost_heartbeat_mid_job_stops_the_machine_and_names_the_node() {
     fault_mid_job(
         |m| m.can_sdo().write("z-servo", 0x2000, 2, &[1]).unwrap(),
-        3,
+        "CANopen node 3",
         "heartbeat lost",
         true,
     );
@@ -179,19 +178,29 @@ fn an_emcy_mid_job_stops_the_machine_and_names_the_node() {
                 .write("x-servo", 0x2000, 3, &0x4210u16.to_le_bytes())
                 .unwrap()
         },
-        1,
+        "CANopen node 1",
         "emergency (error code 0x4210",
         true,
     );
 }
 
 #[test]
-fn a_bus_off_mid_job_stops_the_machine_and_names_the_bus_error() {
+fn a_bus_off_mid_job_stops_the_machine_and_names_the_interface() {
     fault_mid_job(
         |m| m.sim_can_bus(0).unwrap().set_bus_off(true),
-        1,
-        "CAN bus error",
+        "sim: bus-off",
+        "error code 0x8140",
         false,
+    );
+}
+
+#[test]
+fn an_error_frame_mid_job_stops_the_machine_and_names_the_interface() {
+    fault_mid_job(
+        |m| m.sim_can_bus(0).unwrap().error_frame(),
+        "sim: error frame",
+        "error code 0x8120",
+        true,
     );
 }
 
@@ -296,5 +305,55 @@ fn a_canopen_axis_that_homes_on_a_switch_is_refused_by_the_check() {
     assert!(
         err.contains("drive[0] (x-servo).canopen: axis X homes with a switch: CANopen drives home with method = \"current_position\" only"),
         "{err}"
+    );
+}
+
+/// A fault while the machine is in e-stop (drives disabled, nothing moving) is still a
+/// fault event naming node and cause: the operator must learn about it before the next
+/// machine-on, not from a refused enable.
+fn fault_in_estop(inject: impl FnOnce(&Machine), node: u8, cause: &str) {
+    let (_dir, m) = machine();
+    wait(&m, "feedback from every drive", |s| {
+        s.axes.iter().all(|a| a.drive_state == "switch on disabled")
+    });
+    assert_eq!(m.status().mode, Mode::Estop);
+    inject(&m);
+    let s = wait(&m, "fault reported", |s| {
+        s.faults
+            .iter()
+            .any(|f| f.contains(&format!("CANopen node {node}")) && f.contains(cause))
+    });
+    assert_eq!(s.mode, Mode::Estop, "still in e-stop: {:?}", s.faults);
+    shutdown(&m);
+}
+
+#[test]
+fn a_drive_fault_in_estop_is_reported() {
+    fault_in_estop(
+        |m| {
+            m.can_sdo()
+                .write("y-servo", 0x2000, 1, &0x2310u16.to_le_bytes())
+                .unwrap()
+        },
+        2,
+        "0x2310",
+    );
+}
+
+#[test]
+fn an_emcy_and_a_lost_heartbeat_in_estop_are_reported() {
+    fault_in_estop(
+        |m| {
+            m.can_sdo()
+                .write("x-servo", 0x2000, 3, &0x4210u16.to_le_bytes())
+                .unwrap()
+        },
+        1,
+        "emergency (error code 0x4210",
+    );
+    fault_in_estop(
+        |m| m.can_sdo().write("z-servo", 0x2000, 2, &[1]).unwrap(),
+        3,
+        "heartbeat lost",
     );
 }

@@ -6,6 +6,7 @@
 //! realtime: it waits on the bus with short sleeps.
 
 use anyhow::{bail, Context};
+use hytask_hal::canopen::eds::{DataType, Eds};
 use hytask_hal::canopen::heartbeat::{HeartbeatConsumer, HeartbeatEvent};
 use hytask_hal::canopen::nmt::{NmtCommand, NmtState};
 use hytask_hal::canopen::sdo::{SdoClient, SdoStep};
@@ -37,15 +38,18 @@ pub enum Action {
         /// The server node (1..=127).
         #[arg(long)]
         node: u8,
-        /// Object index, e.g. 0x1018.
-        #[arg(value_parser = parse_u16)]
-        index: u16,
+        /// Object index, e.g. 0x1018; with --eds also an object name ("Statusword",
+        /// "Identity object.Vendor-ID"), whose sub-index the EDS gives.
+        object: String,
         /// Sub-index, e.g. 1 or 0x01.
         #[arg(value_parser = parse_u8, default_value = "0")]
         sub: u8,
-        /// How to print the value.
-        #[arg(long = "type", value_enum, default_value = "hex")]
-        ty: ValueType,
+        /// How to print the value (default: the EDS's data type, else hex).
+        #[arg(long = "type", value_enum)]
+        ty: Option<ValueType>,
+        /// The node's EDS file (CiA 306): object names and data types.
+        #[arg(long)]
+        eds: Option<std::path::PathBuf>,
     },
     /// Write an object over SDO.
     SdoWrite {
@@ -272,8 +276,17 @@ fn settle(
     match step {
         SdoStep::Ignored => {}
         SdoStep::Send(f) => bus.try_send(&f)?,
+        SdoStep::SendBlock(frames) => {
+            for f in &frames {
+                bus.try_send(f)?;
+            }
+        }
         SdoStep::Downloaded => *result = Some(Ok(Vec::new())),
         SdoStep::Uploaded(v) => *result = Some(Ok(v)),
+        SdoStep::BlockUploaded { value, confirm } => {
+            bus.try_send(&confirm)?;
+            *result = Some(Ok(value));
+        }
         SdoStep::Failed { error, abort } => {
             if let Some(a) = abort {
                 bus.try_send(&a)?;
@@ -298,7 +311,9 @@ fn sdo(
     let mut c = SdoClient::with_timeout(n, Duration::from_millis(a.timeout_ms));
     let first = match write {
         Some(d) => c.download(index, sub, d, clock.now())?,
-        None => c.upload(index, sub, clock.now())?,
+        // Block upload where the node offers it (a long value goes in one sub-block);
+        // the client falls back to segmented when the node refuses.
+        None => c.upload_block(index, sub, clock.now())?,
     };
     bus.try_send(&first)?;
     let mut clients = [(c, None)];
@@ -382,17 +397,56 @@ fn heartbeat(a: &CanopenArgs, nodes: &[u8], for_ms: u64) -> anyhow::Result<ExitC
     Ok(ExitCode::SUCCESS)
 }
 
+fn load_eds(path: &std::path::Path) -> anyhow::Result<Eds> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading the EDS file {}", path.display()))?;
+    Ok(Eds::parse(&text, &path.display().to_string())?)
+}
+
+/// The object `object` names (an index, or with an EDS a name) and its EDS data type.
+fn resolve(
+    object: &str,
+    sub: u8,
+    eds: Option<&Eds>,
+) -> anyhow::Result<(u16, u8, Option<DataType>)> {
+    if let Ok(index) = parse_u16(object) {
+        return Ok((
+            index,
+            sub,
+            eds.and_then(|e| e.get(index, sub)).map(|e| e.data_type),
+        ));
+    }
+    let Some(eds) = eds else {
+        bail!("{object:?} is not an object index (an object name needs --eds)");
+    };
+    match eds.find(object) {
+        Some(e) => Ok((e.index, e.sub, Some(e.data_type))),
+        None => bail!("no object named {object:?} in the EDS file"),
+    }
+}
+
 /// Runs `hytask canopen`.
 pub fn run(a: CanopenArgs) -> anyhow::Result<ExitCode> {
     match &a.action {
         Action::SdoRead {
             node: n,
-            index,
+            object,
             sub,
             ty,
+            eds,
         } => {
-            let v = sdo(&a, node(*n)?, *index, *sub, None)?;
-            println!("{}", decode(&v, *ty)?);
+            let eds = eds.as_deref().map(load_eds).transpose()?;
+            let (index, sub, eds_type) = resolve(object, *sub, eds.as_ref())?;
+            let v = sdo(&a, node(*n)?, index, sub, None)?;
+            match (ty, eds_type) {
+                (Some(t), _) => println!("{}", decode(&v, *t)?),
+                (None, Some(t)) => println!(
+                    "{}",
+                    t.format(&v)
+                        .map_err(|e| anyhow::anyhow!("{index:04X}:{sub:02X}: {e}"))?
+                ),
+                (None, None) => println!("{}", decode(&v, ValueType::Hex)?),
+            }
         }
         Action::SdoWrite {
             node: n,
@@ -426,6 +480,33 @@ pub fn run(a: CanopenArgs) -> anyhow::Result<ExitCode> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn objects_resolve_by_index_or_by_eds_name_with_their_type() {
+        let eds = Eds::parse(
+            "[6041]\nParameterName=Statusword\nDataType=0x0006\nAccessType=ro\n\
+             [1018]\nParameterName=Identity object\nObjectType=0x9\n\
+             [1018sub1]\nParameterName=Vendor-ID\nDataType=0x0007\nAccessType=ro\n",
+            "drive.eds",
+        )
+        .unwrap();
+        let (i, s, t) = resolve("Statusword", 0, Some(&eds)).unwrap();
+        assert_eq!((i, s, t), (0x6041, 0, Some(DataType::Unsigned(2))));
+        assert_eq!(t.unwrap().format(&[0x37, 0x02]).unwrap(), "567");
+        let (i, s, _) = resolve("identity object.vendor-id", 0, Some(&eds)).unwrap();
+        assert_eq!((i, s), (0x1018, 1));
+        assert_eq!(
+            resolve("0x1018", 1, Some(&eds)).unwrap().2,
+            Some(DataType::Unsigned(4))
+        );
+        assert_eq!(resolve("0x2000", 1, None).unwrap(), (0x2000, 1, None));
+        let e = resolve("Statusword", 0, None).unwrap_err().to_string();
+        assert!(e.contains("needs --eds"), "{e}");
+        let e = resolve("Controlword", 0, Some(&eds))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no object named \"Controlword\""), "{e}");
+    }
 
     #[test]
     fn values_encode_and_decode_by_type() {

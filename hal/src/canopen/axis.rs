@@ -13,6 +13,7 @@
 //! configuration accepts for CANopen drives) makes the present position the home position
 //! by an offset kept here, exactly as CiA 402 methods 35/37 would.
 
+use super::bus_health::BusFault;
 use super::cia402::PowerRequest;
 use super::NodeId;
 use crate::axis::{
@@ -20,6 +21,7 @@ use crate::axis::{
     HomingParams, HomingStatus,
 };
 use crate::error::{Error, ErrorKind, ErrorType};
+use crate::socketcan::IfName;
 use core::fmt;
 use std::sync::atomic::{AtomicI32, AtomicU32, AtomicU64, AtomicU8, Ordering::Relaxed};
 use std::sync::Arc;
@@ -35,18 +37,56 @@ pub enum LinkCause {
     DriveFault,
     /// The drive booted again and lost its configuration.
     UnexpectedBootUp,
-    /// The interface failed (bus off, interface down, transmit queue full).
+    /// The controller of the interface went bus-off.
+    BusOff,
+    /// The interface reported error frames (error-passive, no acknowledge, protocol
+    /// errors, lost frames).
+    ErrorFrame,
+    /// The interface is down or gone.
+    InterfaceDown,
+    /// The interface's transmit queue was full: a frame was not sent.
+    TxQueueFull,
+    /// Any other failure of the interface.
     BusError,
 }
 
 impl LinkCause {
-    const ALL: [LinkCause; 5] = [
+    const ALL: [LinkCause; 9] = [
         LinkCause::HeartbeatLost,
         LinkCause::Emergency,
         LinkCause::DriveFault,
         LinkCause::UnexpectedBootUp,
+        LinkCause::BusOff,
+        LinkCause::ErrorFrame,
+        LinkCause::InterfaceDown,
+        LinkCause::TxQueueFull,
         LinkCause::BusError,
     ];
+
+    /// True for a fault of the interface as a whole (every drive on it has it): the
+    /// message names the interface, not the node.
+    pub fn is_bus(self) -> bool {
+        matches!(
+            self,
+            LinkCause::BusOff
+                | LinkCause::ErrorFrame
+                | LinkCause::InterfaceDown
+                | LinkCause::TxQueueFull
+                | LinkCause::BusError
+        )
+    }
+
+    /// The CiA 301 error code of a bus cause (0x8140 recovered from bus-off, 0x8120
+    /// error-passive, 0x8110 CAN overrun, 0x8100 communication); 0 for the others.
+    pub fn bus_code(self) -> u16 {
+        match self {
+            LinkCause::BusOff => 0x8140,
+            LinkCause::ErrorFrame => 0x8120,
+            LinkCause::TxQueueFull => 0x8110,
+            LinkCause::InterfaceDown | LinkCause::BusError => 0x8100,
+            _ => 0,
+        }
+    }
 
     /// Words for the cause.
     pub fn text(self) -> &'static str {
@@ -55,6 +95,10 @@ impl LinkCause {
             LinkCause::Emergency => "emergency",
             LinkCause::DriveFault => "drive fault",
             LinkCause::UnexpectedBootUp => "unexpected boot-up",
+            LinkCause::BusOff => "bus-off",
+            LinkCause::ErrorFrame => "error frame",
+            LinkCause::InterfaceDown => "interface down",
+            LinkCause::TxQueueFull => "transmit queue full",
             LinkCause::BusError => "CAN bus error",
         }
     }
@@ -74,6 +118,8 @@ pub struct LinkFault {
     pub cause: LinkCause,
     /// CiA 301 error code.
     pub code: u16,
+    /// The interface the drive is on (named by bus faults), if known.
+    pub iface: Option<IfName>,
 }
 
 impl LinkFault {
@@ -93,6 +139,7 @@ impl LinkFault {
             return None;
         }
         Some(LinkFault {
+            iface: None,
             node: (v >> 16) as u8,
             cause: LinkCause::ALL[((v >> 24) & 0xFF) as usize % LinkCause::ALL.len()],
             code: v as u16,
@@ -102,6 +149,19 @@ impl LinkFault {
 
 impl fmt::Display for LinkFault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.cause.is_bus() {
+            match &self.iface {
+                Some(i) => write!(f, "{i}: ")?,
+                None => write!(f, "CAN interface of node {}: ", self.node)?,
+            }
+            return write!(
+                f,
+                "{} (error code 0x{:04X}, {})",
+                self.cause.text(),
+                self.code,
+                super::emcy::error_class(self.code)
+            );
+        }
         write!(
             f,
             "CANopen node {}: {} (error code 0x{:04X}, {})",
@@ -119,6 +179,7 @@ impl fmt::Display for LinkFault {
 #[derive(Debug)]
 pub struct DriveLink {
     node: NodeId,
+    iface: Option<IfName>,
     statusword: AtomicU32,
     position: AtomicI32,
     velocity: AtomicI32,
@@ -131,8 +192,15 @@ pub struct DriveLink {
 impl DriveLink {
     /// The link of `node`, power request Disable, no data yet.
     pub fn new(node: NodeId) -> Arc<DriveLink> {
+        DriveLink::on_bus(node, "")
+    }
+
+    /// The link of `node` on interface `iface` (named by bus faults; an invalid name is
+    /// left out).
+    pub fn on_bus(node: NodeId, iface: &str) -> Arc<DriveLink> {
         Arc::new(DriveLink {
             node,
+            iface: IfName::new(iface),
             statusword: AtomicU32::new(0),
             position: AtomicI32::new(0),
             velocity: AtomicI32::new(0),
@@ -163,6 +231,7 @@ impl DriveLink {
             node: self.node.get(),
             cause,
             code,
+            iface: None,
         };
         let _ = self
             .fault
@@ -184,7 +253,16 @@ impl DriveLink {
 
     /// The recorded fault, if any.
     pub fn fault(&self) -> Option<LinkFault> {
-        LinkFault::unpack(self.fault.load(Relaxed))
+        LinkFault::unpack(self.fault.load(Relaxed)).map(|f| LinkFault {
+            iface: self.iface,
+            ..f
+        })
+    }
+
+    /// Rx: a failure of the interface, on this drive's link.
+    pub fn raise_bus(&self, cause: BusFault) {
+        let c = cause.link_cause();
+        self.raise(c, c.bus_code());
     }
 
     /// Last statusword received.

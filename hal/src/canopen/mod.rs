@@ -39,8 +39,10 @@ use crate::can::{CanFrame, CanId};
 use core::fmt;
 
 pub mod axis;
+pub mod bus_health;
 pub mod busload;
 pub mod cia402;
+pub mod eds;
 pub mod emcy;
 pub mod error;
 pub mod heartbeat;

@@ -13,6 +13,7 @@
 //! deterministic on the simulated clock.
 
 use super::axis::{DriveLink, LinkCause, LinkFault};
+use super::bus_health::BusErrorClass;
 use super::master::{CspMaster, MasterEvent};
 use super::pdo::CspLayout;
 use super::slave::{DriveSlave, OUTBOX};
@@ -58,7 +59,10 @@ pub struct BusRx<B: CanBus> {
     epoch: Option<Duration>,
 }
 
-impl<B: CanBus> BusRx<B> {
+impl<B: CanBus> BusRx<B>
+where
+    B::Error: BusErrorClass,
+{
     /// The rx half over `bus` for `drives`; heartbeats are watched from the first cycle.
     pub fn new(bus: B, drives: &[BusDrive]) -> Result<Self, CanOpenError> {
         Ok(BusRx {
@@ -96,8 +100,9 @@ impl<B: CanBus> BusRx<B> {
     }
 
     /// Start of the cycle: every frame received since the last one, then heartbeat and
-    /// drive-fault checks, then the fresh images to the links. A bus error raises a
-    /// [`LinkCause::BusError`] on every drive of the interface. Never allocates.
+    /// drive-fault checks, then the fresh images to the links. A bus error (error frame,
+    /// bus-off, interface down) raises its [`BusFault`](super::bus_health::BusFault) on
+    /// every drive of the interface. Never allocates.
     pub fn cycle_start(&mut self, now: Duration) {
         let now = now.saturating_sub(*self.epoch.get_or_insert(now));
         loop {
@@ -108,9 +113,10 @@ impl<B: CanBus> BusRx<B> {
                     }
                 }
                 Ok(None) => break,
-                Err(_) => {
+                Err(e) => {
+                    let fault = e.bus_fault();
                     for l in &self.links {
-                        l.raise(LinkCause::BusError, LinkFault::BUS_OFF_CODE);
+                        l.raise_bus(fault);
                     }
                     break;
                 }
@@ -137,7 +143,10 @@ pub struct BusTx<B: CanBus> {
     links: Vec<Arc<DriveLink>>,
 }
 
-impl<B: CanBus> BusTx<B> {
+impl<B: CanBus> BusTx<B>
+where
+    B::Error: BusErrorClass,
+{
     /// The tx half over `bus` for `drives`, sending `sync` every cycle.
     pub fn new(bus: B, drives: &[BusDrive], sync: SyncProducer) -> Result<Self, CanOpenError> {
         Ok(BusTx {
@@ -148,8 +157,8 @@ impl<B: CanBus> BusTx<B> {
     }
 
     /// End of the cycle: one RPDO per drive (controlword from its power state machine,
-    /// target), then SYNC. A send error raises a [`LinkCause::BusError`] on every drive.
-    /// Never allocates.
+    /// target), then SYNC. A send error (transmit queue full, bus-off, interface down)
+    /// raises its bus fault on every drive. Never allocates.
     pub fn cycle_end(&mut self) {
         for (i, l) in self.links.iter().enumerate() {
             if let Some(d) = self.master.drive_mut(i) {
@@ -158,9 +167,10 @@ impl<B: CanBus> BusTx<B> {
                 d.power.request(l.request());
             }
         }
-        if self.master.write(&mut self.bus).is_err() {
+        if let Err(e) = self.master.write(&mut self.bus) {
+            let fault = e.bus_fault();
             for l in &self.links {
-                l.raise(LinkCause::BusError, LinkFault::BUS_OFF_CODE);
+                l.raise_bus(fault);
             }
         }
     }

@@ -11,6 +11,8 @@ use super::sync::SyncProducer;
 use super::NodeId;
 use crate::axis::{AxisDrive, AxisFeedback, DriveState};
 use crate::sim::SimCanBus;
+use crate::sim::SimCanPort;
+use std::sync::Arc;
 use std::time::Duration;
 
 const MS: Duration = Duration::from_millis(1);
@@ -117,4 +119,109 @@ fn start_up_then_cycles_enable_a_drive_and_follow_targets_and_a_lost_heartbeat_n
     }
     let f = axis.link_fault().unwrap();
     assert_eq!((f.node, f.cause), (5, LinkCause::HeartbeatLost));
+}
+
+/// Two loopback drives started on an in-memory bus named `iface`, with the bus owner's
+/// halves and one axis per drive.
+struct Rig {
+    wire: SimCanBus,
+    sim: SimDrives<SimCanPort>,
+    rx: BusRx<SimCanPort>,
+    tx: BusTx<SimCanPort>,
+    links: Vec<Arc<DriveLink>>,
+    t: Duration,
+}
+
+impl Rig {
+    fn new(iface: &str) -> Rig {
+        let (wire, mut ports) = SimCanBus::new(4, 1024).unwrap();
+        let slaves = ports.pop().unwrap();
+        let mut cfg_port = ports.pop().unwrap();
+        let tx_port = ports.pop().unwrap();
+        let rx_port = ports.pop().unwrap();
+        let plans = [plan(1), plan(2)];
+        let mut sim = SimDrives::new(
+            slaves,
+            plans
+                .iter()
+                .map(|p| DriveSlave::new(p.node, SlaveConfig::default()))
+                .collect(),
+        );
+        let mut t = Duration::ZERO;
+        let mut pass = || {
+            t = sim.step_by(MS);
+            t
+        };
+        start_nodes(iface, &mut cfg_port, &plans, 200 * MS, &mut pass).unwrap();
+        let links: Vec<_> = plans
+            .iter()
+            .map(|p| DriveLink::on_bus(p.node, iface))
+            .collect();
+        let drives: Vec<_> = plans
+            .iter()
+            .zip(&links)
+            .map(|(p, l)| BusDrive {
+                link: l.clone(),
+                layout: p.layout,
+                heartbeat_timeout: Some(50 * MS),
+            })
+            .collect();
+        Rig {
+            rx: BusRx::new(rx_port, &drives).unwrap(),
+            tx: BusTx::new(tx_port, &drives, SyncProducer::new()).unwrap(),
+            wire,
+            sim,
+            links,
+            t,
+        }
+    }
+
+    fn cycles(&mut self, n: usize) {
+        for _ in 0..n {
+            self.t += MS;
+            self.rx.cycle_start(self.t);
+            self.tx.cycle_end();
+            self.sim.step(self.t);
+        }
+    }
+}
+
+#[test]
+fn each_bus_failure_is_a_fault_naming_the_interface_on_every_drive() {
+    type Inject = fn(&SimCanBus);
+    let cases: [(Inject, LinkCause, &str); 4] = [
+        (
+            |w| w.set_bus_off(true),
+            LinkCause::BusOff,
+            "can7: bus-off (error code 0x8140",
+        ),
+        (
+            |w| w.error_frame(),
+            LinkCause::ErrorFrame,
+            "can7: error frame (error code 0x8120",
+        ),
+        (
+            |w| w.set_interface_down(true),
+            LinkCause::InterfaceDown,
+            "can7: interface down (error code 0x8100",
+        ),
+        (
+            |w| w.set_tx_queue_full(true),
+            LinkCause::TxQueueFull,
+            "can7: transmit queue full (error code 0x8110",
+        ),
+    ];
+    for (inject, cause, text) in cases {
+        let mut rig = Rig::new("can7");
+        rig.cycles(20);
+        assert!(rig.links.iter().all(|l| l.fault().is_none()), "{text}");
+        inject(&rig.wire);
+        rig.cycles(2);
+        for l in &rig.links {
+            let f = l.fault().unwrap();
+            assert_eq!(f.cause, cause);
+            assert!(f.to_string().starts_with(text), "{f}");
+            assert!(!f.to_string().contains("node"), "names the interface: {f}");
+        }
+    }
 }

@@ -98,8 +98,19 @@ pub fn sdo_transfer<B: CanBus>(
                 SdoStep::Send(f) => bus
                     .try_send(&f)
                     .map_err(|e| SdoFailure::Bus(e.to_string()))?,
+                SdoStep::SendBlock(frames) => {
+                    for f in &frames {
+                        bus.try_send(f)
+                            .map_err(|e| SdoFailure::Bus(e.to_string()))?;
+                    }
+                }
                 SdoStep::Downloaded => return Ok(None),
                 SdoStep::Uploaded(v) => return Ok(Some(v)),
+                SdoStep::BlockUploaded { value, confirm } => {
+                    bus.try_send(&confirm)
+                        .map_err(|e| SdoFailure::Bus(e.to_string()))?;
+                    return Ok(Some(value));
+                }
                 SdoStep::Failed { error, abort } => {
                     if let Some(a) = abort {
                         let _ = bus.try_send(&a);

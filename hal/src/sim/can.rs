@@ -10,7 +10,9 @@
 //! allocated once at construction: sending and receiving never lock or allocate. A full
 //! receive queue drops the frame and counts it, like a controller overrun. The set of ports
 //! is fixed at construction, which is what keeps delivery lock-free (no registry to guard).
-//! [`SimCanBus::set_bus_off`] simulates the bus going away.
+//! [`SimCanBus::set_bus_off`] simulates the bus going away; [`SimCanBus::set_interface_down`],
+//! [`SimCanBus::set_tx_queue_full`] and [`SimCanBus::error_frame`] the other failures a
+//! SocketCAN interface reports.
 
 use crate::can::{CanBus, CanFrame};
 use crate::error::{Error, ErrorKind, ErrorType};
@@ -24,6 +26,15 @@ pub enum SimCanError {
     /// The bus is off (see [`SimCanBus::set_bus_off`]).
     #[error("simulated CAN bus is off")]
     BusOff,
+    /// The interface is down (see [`SimCanBus::set_interface_down`]).
+    #[error("simulated CAN interface is down")]
+    InterfaceDown,
+    /// The transmit queue is full (see [`SimCanBus::set_tx_queue_full`]).
+    #[error("simulated CAN interface: transmit queue full")]
+    TxQueueFull,
+    /// An error frame was received (see [`SimCanBus::error_frame`]).
+    #[error("simulated CAN interface: error frame")]
+    ErrorFrame,
     /// A bus needs at least two ports and queues of at least one frame.
     #[error("simulated CAN bus needs >= 2 ports and a queue capacity >= 1")]
     InvalidSize,
@@ -32,7 +43,9 @@ pub enum SimCanError {
 impl Error for SimCanError {
     fn kind(&self) -> ErrorKind {
         match self {
-            SimCanError::BusOff => ErrorKind::Disconnected,
+            SimCanError::BusOff | SimCanError::InterfaceDown => ErrorKind::Disconnected,
+            SimCanError::TxQueueFull => ErrorKind::WouldBlock,
+            SimCanError::ErrorFrame => ErrorKind::Other,
             SimCanError::InvalidSize => ErrorKind::InvalidArgument,
         }
     }
@@ -43,11 +56,17 @@ struct Shared {
     queues: Box<[ArrayQueue<CanFrame>]>,
     dropped: Box<[AtomicU64]>,
     bus_off: AtomicBool,
+    down: AtomicBool,
+    tx_full: AtomicBool,
+    /// Per port: an error frame waits to be reported by its next receive.
+    error_frame: Box<[AtomicBool]>,
 }
 
 impl Shared {
     fn link(&self) -> Result<(), SimCanError> {
-        if self.bus_off.load(Ordering::Acquire) {
+        if self.down.load(Ordering::Acquire) {
+            Err(SimCanError::InterfaceDown)
+        } else if self.bus_off.load(Ordering::Acquire) {
             Err(SimCanError::BusOff)
         } else {
             Ok(())
@@ -84,6 +103,9 @@ impl SimCanBus {
                 .collect(),
             dropped: (0..ports).map(|_| AtomicU64::new(0)).collect(),
             bus_off: AtomicBool::new(false),
+            down: AtomicBool::new(false),
+            tx_full: AtomicBool::new(false),
+            error_frame: (0..ports).map(|_| AtomicBool::new(false)).collect(),
         });
         let handles = (0..ports)
             .map(|index| SimCanPort {
@@ -98,6 +120,26 @@ impl SimCanBus {
     /// [`ErrorKind::Disconnected`]) or back on.
     pub fn set_bus_off(&self, off: bool) {
         self.shared.bus_off.store(off, Ordering::Release);
+    }
+
+    /// Takes the interface down (every send and receive fails with
+    /// [`SimCanError::InterfaceDown`]) or back up.
+    pub fn set_interface_down(&self, down: bool) {
+        self.shared.down.store(down, Ordering::Release);
+    }
+
+    /// Makes every send fail with [`SimCanError::TxQueueFull`] (or stops doing so).
+    pub fn set_tx_queue_full(&self, full: bool) {
+        self.shared.tx_full.store(full, Ordering::Release);
+    }
+
+    /// An error frame on the wire: the next receive of every port reports
+    /// [`SimCanError::ErrorFrame`] once, as every SocketCAN socket with an error mask
+    /// would.
+    pub fn error_frame(&self) {
+        for e in self.shared.error_frame.iter() {
+            e.store(true, Ordering::Release);
+        }
     }
 
     /// How many frames port `index` lost because its receive queue was full (0 for an index
@@ -124,6 +166,9 @@ impl ErrorType for SimCanPort {
 impl CanBus for SimCanPort {
     fn try_send(&mut self, frame: &CanFrame) -> Result<(), SimCanError> {
         self.shared.link()?;
+        if self.shared.tx_full.load(Ordering::Acquire) {
+            return Err(SimCanError::TxQueueFull);
+        }
         for (i, (queue, dropped)) in self
             .shared
             .queues
@@ -140,6 +185,14 @@ impl CanBus for SimCanPort {
 
     fn try_recv(&mut self) -> Result<Option<CanFrame>, SimCanError> {
         self.shared.link()?;
+        if self
+            .shared
+            .error_frame
+            .get(self.index)
+            .is_some_and(|e| e.swap(false, Ordering::AcqRel))
+        {
+            return Err(SimCanError::ErrorFrame);
+        }
         Ok(self.shared.queues.get(self.index).and_then(ArrayQueue::pop))
     }
 }

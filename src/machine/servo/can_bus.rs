@@ -14,6 +14,7 @@
 
 use crate::rt::prelude::*;
 use hytask_hal::can::CanBus;
+use hytask_hal::canopen::bus_health::BusErrorClass;
 use hytask_hal::canopen::owner::{BusRx, BusTx, SimDrives};
 use std::time::Duration;
 
@@ -29,13 +30,19 @@ pub trait TxHalf: Send {
     fn cycle_end(&mut self, now: Duration);
 }
 
-impl<B: CanBus + Send> RxHalf for BusRx<B> {
+impl<B: CanBus + Send> RxHalf for BusRx<B>
+where
+    B::Error: BusErrorClass,
+{
     fn cycle_start(&mut self, now: Duration) {
         BusRx::cycle_start(self, now);
     }
 }
 
-impl<B: CanBus + Send> TxHalf for BusTx<B> {
+impl<B: CanBus + Send> TxHalf for BusTx<B>
+where
+    B::Error: BusErrorClass,
+{
     fn cycle_end(&mut self, _now: Duration) {
         BusTx::cycle_end(self);
     }
@@ -49,7 +56,10 @@ pub struct SimTx<B: CanBus, D: CanBus> {
     pub drives: SimDrives<D>,
 }
 
-impl<B: CanBus + Send, D: CanBus + Send> TxHalf for SimTx<B, D> {
+impl<B: CanBus + Send, D: CanBus + Send> TxHalf for SimTx<B, D>
+where
+    B::Error: BusErrorClass,
+{
     fn cycle_end(&mut self, now: Duration) {
         self.tx.cycle_end();
         self.drives.step(now);

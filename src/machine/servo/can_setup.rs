@@ -265,7 +265,7 @@ fn build_bus(
             .map_err(|e| invalid(cfg, format!("{}.node_id", m.key), e.to_string()))?;
         let layout = CspLayout::new(node, m.co.velocity_pdo)
             .map_err(|e| invalid(cfg, format!("{}.velocity_pdo", m.key), e.to_string()))?;
-        let link = DriveLink::new(node);
+        let link = DriveLink::on_bus(node, iface);
         // 50 ms (at least 3 cycles) without process data is a lost drive; shorter gaps are
         // a drive answering SYNC late, and the last values stand.
         let missed = (50_000 / period_us.max(1)).max(3);

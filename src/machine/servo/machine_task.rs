@@ -567,7 +567,15 @@ impl MachineTask {
 
     fn on_trip(&mut self, trip: Trip, line: u32) {
         match self.mode.mode() {
-            Mode::Estop | Mode::Off => return,
+            Mode::Estop | Mode::Off => {
+                // Nothing moves to stop, but a fieldbus fault (EMCY, drive fault, heartbeat
+                // loss, bus failure) is still reported: the operator learns of it now, not
+                // from a refused machine-on.
+                if matches!(trip, Trip::Fieldbus { .. }) {
+                    self.report(trip, line);
+                }
+                return;
+            }
             Mode::Fault if self.stopping.is_some() => return,
             _ => {}
         }

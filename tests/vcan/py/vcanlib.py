@@ -140,6 +140,7 @@ def drive_od():
         var("Drive fault", 0x2000, 1, U16),
         var("Stop heartbeat", 0x2000, 2, U8),
         var("Send EMCY", 0x2000, 3, U16)]))
+    od.add_object(var("Domain", 0x2001, 0, odm.DOMAIN))
     od.add_object(var("Error code", 0x603F, 0, U16, "ro", pdo=True))
     od.add_object(var("Controlword", 0x6040, 0, U16, "rw", pdo=True))
     od.add_object(var("Statusword", 0x6041, 0, U16, "ro", pdo=True))
@@ -150,6 +151,17 @@ def drive_od():
     od.add_object(var("Velocity actual value", 0x606C, 0, I32, "ro", pdo=True))
     od.add_object(var("Target position", 0x607A, 0, I32, "rw", pdo=True))
     od.add_object(var("Homing method", 0x6098, 0, I8))
+    od.add_object(var("Home offset", 0x607C, 0, I32))
+    od.add_object(record("Homing speeds", 0x6099, [
+        var("Highest sub-index", 0x6099, 0, U8, "const"),
+        var("Speed during search for switch", 0x6099, 1, U32),
+        var("Speed during search for zero", 0x6099, 2, U32)]))
+    od.add_object(var("Homing acceleration", 0x609A, 0, U32))
+    od.add_object(record("Simulated switches", 0x2002, [
+        var("Highest sub-index", 0x2002, 0, U8, "const"),
+        var("Home switch", 0x2002, 1, I32),
+        var("Negative limit switch", 0x2002, 2, I32),
+        var("Positive limit switch", 0x2002, 3, I32)]))
     od.add_object(var("Target velocity", 0x60FF, 0, I32, "rw", pdo=True))
     od.add_object(var("Supported drive modes", 0x6502, 0, U32, "ro"))
     return od
@@ -159,3 +171,25 @@ def network():
     net = canopen.Network()
     net.connect(interface="socketcan", channel=IFACE)
     return net
+
+
+def domain_default():
+    """The initial value of the loopback drive's domain object 0x2001 (od::domain_default)."""
+    return bytes((i * 7 + 3) % 256 for i in range(1000))
+
+
+class SdoWatch:
+    """Records the command byte of every SDO request to `node` (COB 0x600 + node) and of
+    every response from it (0x580 + node) that another process put on the bus (python-can
+    does not receive its own frames), to tell which protocol a transfer used."""
+
+    def __init__(self, net, node):
+        self.req, self.resp = [], []
+        net.subscribe(0x600 + node, lambda _id, data, _ts: self.req.append(data[0]))
+        net.subscribe(0x580 + node, lambda _id, data, _ts: self.resp.append(data[0]))
+
+    def take(self):
+        """(requests, responses) since the last call."""
+        r = (self.req, self.resp)
+        self.req, self.resp = [], []
+        return r

@@ -10,12 +10,17 @@
 //! | initiate upload | 2 (`0x40`) | initiate upload | 2 (`0x40`, `n`, `e`, `s` as above) |
 //! | upload segment | 3 (`0x60`, `t` bit 4) | upload segment | 0 (`t`, `n`, `c` as above) |
 //! | abort | 4 (`0x80`) + index, sub, code | abort | 4 |
-//! | block download/upload | 6 / 5 | | not supported yet |
+//! | block download | 6 (`cc` bit 2, `s` bit 1, `cs` bit 0) | block download | 5 (`sc` bit 2, `ss` bits 1-0) |
+//! | block upload | 5 (`cc` bit 2, `cs` bits 1-0) | block upload | 6 (`sc`, `s`, `ss` bit 0) |
+//!
+//! Block transfer (module [`block`]): sub-blocks of up to 127 numbered segments, one
+//! acknowledgement per sub-block, an end frame with padding count and CRC-16.
 //!
 //! Expedited transfers carry up to 4 bytes in the initiate frame; larger values go in
 //! 7-byte segments whose toggle bit alternates, starting at 0.
 
 mod abort;
+pub mod block;
 mod client;
 mod server;
 

@@ -1,7 +1,10 @@
 //! The SDO server: answers one client on one node's channel from an object dictionary
-//! reached through [`ObjectAccess`]. Expedited and segmented, both directions; block
-//! requests are refused with abort 0x05040001 (block transfer is not implemented yet).
+//! reached through [`ObjectAccess`]. Expedited, segmented and block transfer, both
+//! directions. A block upload sends a whole sub-block per request: [`SdoServer::on_frame`]
+//! returns its first segment and [`SdoServer::next_burst`] the others, so the caller can
+//! pace them to its transmit queue.
 
+use super::block::{self, RxStep, SubBlockRx, SubBlockTx, BLKSIZE, CRC_SUPPORTED, END_CONFIRM};
 use super::{abort_frame, initiate, multiplexer, sdo_frame, SdoAbortCode, DEFAULT_TIMEOUT, TX};
 use crate::can::CanFrame;
 use crate::canopen::NodeId;
@@ -32,6 +35,30 @@ enum Phase {
         pos: usize,
         toggle: bool,
     },
+    BlkDown {
+        buf: Vec<u8>,
+        size: Option<usize>,
+        crc: bool,
+        rx: SubBlockRx,
+    },
+    BlkDownEnd {
+        buf: Vec<u8>,
+        size: Option<usize>,
+        crc: bool,
+    },
+    /// Block upload initiated, waiting for the client's start.
+    BlkUpInit {
+        data: Vec<u8>,
+        tx: SubBlockTx,
+    },
+    /// Sending (`next` is the next segment number of the sub-block) or waiting for the
+    /// acknowledgement of a sub-block.
+    BlkUp {
+        data: Vec<u8>,
+        tx: SubBlockTx,
+        next: u8,
+    },
+    BlkUpEnd,
 }
 
 /// An SDO server for the node `node`.
@@ -68,12 +95,110 @@ impl SdoServer {
         Some(sdo_frame(self.node, TX, data))
     }
 
-    /// A segmented transfer whose client went silent is aborted with 0x05040000.
+    /// A server for `node` that aborts a transfer whose client is silent for `timeout`.
+    pub fn with_timeout(node: NodeId, timeout: Duration) -> SdoServer {
+        SdoServer {
+            timeout,
+            ..SdoServer::new(node)
+        }
+    }
+
+    /// A segmented transfer whose client went silent is aborted with 0x05040000. While a
+    /// block upload's sub-block is still going out, the client is not late: the wait
+    /// for its acknowledgement counts from the last poll with segments left to send.
     pub fn poll(&mut self, now: Duration) -> Option<CanFrame> {
+        let sending = matches!(&self.phase, Phase::BlkUp { data, tx, next } if tx.segment(data, *next).is_some());
+        if sending {
+            self.deadline = now + self.timeout;
+        }
         if !matches!(self.phase, Phase::Idle) && now > self.deadline {
             return self.abort(SdoAbortCode::ProtocolTimedOut);
         }
         None
+    }
+
+    /// The next segment of a block upload's sub-block, until the sub-block is out. Call it
+    /// after [`SdoServer::on_frame`] (and again later if the transmit queue was full).
+    pub fn next_burst(&mut self) -> Option<CanFrame> {
+        let Phase::BlkUp { data, tx, next } = &mut self.phase else {
+            return None;
+        };
+        let seg = tx.segment(data, *next)?;
+        *next += 1;
+        Some(sdo_frame(self.node, TX, seg))
+    }
+
+    /// Frames of a running block transfer: `Some(reply)` when the frame belonged to it.
+    /// (In a block download every frame of the sub-block is a segment, whatever its first
+    /// byte.) The CRC is checked when the client announced it (this server always
+    /// computes it).
+    fn on_block_frame(
+        &mut self,
+        d: &[u8],
+        now: Duration,
+        od: &mut impl ObjectAccess,
+    ) -> Option<Option<CanFrame>> {
+        let cmd = d[0];
+        let reply = match core::mem::replace(&mut self.phase, Phase::Idle) {
+            Phase::BlkDown {
+                mut buf,
+                size,
+                crc,
+                mut rx,
+            } => {
+                let step = rx.on_segment(d, &mut buf);
+                if buf.len() > MAX_SEGMENTED + 7 {
+                    return Some(self.abort(SdoAbortCode::OutOfMemory));
+                }
+                let ack = matches!(step, RxStep::Ack(_));
+                self.phase = if rx.last && ack {
+                    Phase::BlkDownEnd { buf, size, crc }
+                } else {
+                    Phase::BlkDown { buf, size, crc, rx }
+                };
+                match step {
+                    RxStep::Ack(a) => self.reply(a, now),
+                    RxStep::More => {
+                        self.deadline = now + self.timeout;
+                        None
+                    }
+                }
+            }
+            Phase::BlkDownEnd { mut buf, size, crc } if cmd & 0xE1 == 0xC1 => {
+                if let Err(code) = block::finish(d, &mut buf, size, crc) {
+                    return Some(self.abort(code));
+                }
+                match od.write(self.index, self.sub, &buf) {
+                    Ok(()) => self.reply([END_CONFIRM, 0, 0, 0, 0, 0, 0, 0], now),
+                    Err(code) => self.abort(code),
+                }
+            }
+            Phase::BlkUpInit { data, tx } if cmd == 0xA3 => {
+                self.phase = Phase::BlkUp { data, tx, next: 1 };
+                self.deadline = now + self.timeout;
+                self.next_burst()
+            }
+            Phase::BlkUp { data, mut tx, .. } if cmd & 0xE3 == block::ACK => {
+                match tx.on_ack(d, &data) {
+                    Err(code) => self.abort(code),
+                    Ok(true) => {
+                        self.phase = Phase::BlkUpEnd;
+                        self.reply(block::end_frame(&data), now)
+                    }
+                    Ok(false) => {
+                        self.phase = Phase::BlkUp { data, tx, next: 1 };
+                        self.deadline = now + self.timeout;
+                        self.next_burst()
+                    }
+                }
+            }
+            Phase::BlkUpEnd if cmd == END_CONFIRM => None,
+            other => {
+                self.phase = other;
+                return None;
+            }
+        };
+        Some(reply)
     }
 
     /// Handles a frame; returns the response to send, if any.
@@ -91,6 +216,11 @@ impl SdoServer {
         }
         let d = f.data();
         let cmd = d[0];
+        if cmd != 0x80 {
+            if let Some(reply) = self.on_block_frame(d, now, od) {
+                return reply;
+            }
+        }
         let toggle_bit = cmd & 0x10 != 0;
         match cmd >> 5 {
             // Initiate download.
@@ -206,7 +336,62 @@ impl SdoServer {
                 self.phase = Phase::Idle;
                 None
             }
-            // Block upload/download (5, 6) and anything else.
+            // Block upload initiate (the other block frames came in a block phase).
+            5 if cmd & 0x03 == 0 => {
+                (self.index, self.sub) = multiplexer(d);
+                let (index, sub) = (self.index, self.sub);
+                let data = match od.read(index, sub) {
+                    Ok(v) => v,
+                    Err(code) => return self.abort(code),
+                };
+                let pst = usize::from(d[5]);
+                if pst > 0 && data.len() <= pst {
+                    // Protocol switch: a short value goes the normal way.
+                    self.phase = Phase::Idle;
+                    return self.on_frame(
+                        &sdo_frame(self.node, super::RX, initiate(0x40, index, sub, [0; 4])),
+                        now,
+                        od,
+                    );
+                }
+                let tx = match SubBlockTx::new(d[4]) {
+                    Ok(tx) => tx,
+                    Err(code) => return self.abort(code),
+                };
+                let Ok(size) = u32::try_from(data.len()) else {
+                    return self.abort(SdoAbortCode::OutOfMemory);
+                };
+                self.phase = Phase::BlkUpInit { data, tx };
+                let cmd = 0xC0 | CRC_SUPPORTED | 0x02;
+                self.reply(initiate(cmd, index, sub, size.to_le_bytes()), now)
+            }
+            // Block download initiate.
+            6 if cmd & 0x01 == 0 => {
+                (self.index, self.sub) = multiplexer(d);
+                let (index, sub) = (self.index, self.sub);
+                let size = (cmd & 0x02 != 0).then(|| {
+                    usize::try_from(u32::from_le_bytes([d[4], d[5], d[6], d[7]]))
+                        .unwrap_or(usize::MAX)
+                });
+                if size.is_some_and(|s| s > MAX_SEGMENTED) {
+                    return self.abort(SdoAbortCode::OutOfMemory);
+                }
+                self.phase = Phase::BlkDown {
+                    buf: Vec::with_capacity(size.unwrap_or(0) + 7),
+                    size,
+                    crc: cmd & CRC_SUPPORTED != 0,
+                    rx: SubBlockRx {
+                        seq: 0,
+                        last: false,
+                    },
+                };
+                let i = index.to_le_bytes();
+                self.reply(
+                    [0xA0 | CRC_SUPPORTED, i[0], i[1], sub, BLKSIZE, 0, 0, 0],
+                    now,
+                )
+            }
+            // Anything else.
             _ => {
                 (self.index, self.sub) = multiplexer(d);
                 self.abort(SdoAbortCode::InvalidCommandSpecifier)

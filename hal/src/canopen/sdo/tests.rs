@@ -41,15 +41,48 @@ fn run(
     od: &mut Od,
     first: CanFrame,
 ) -> (SdoStep, usize) {
-    let mut to_server = first;
+    exchange(client, server, od, first, |_| false)
+}
+
+/// [`run`] for every kind of transfer: frames go through a queue each way, a sub-block or
+/// a server's burst as a whole, and `lose` drops frames (in either direction) it returns
+/// true for. A block upload's end confirmation is delivered to the server too.
+fn exchange(
+    client: &mut SdoClient,
+    server: &mut SdoServer,
+    od: &mut Od,
+    first: CanFrame,
+    mut lose: impl FnMut(&CanFrame) -> bool,
+) -> (SdoStep, usize) {
     let t = Duration::ZERO;
-    for sent in 1..1000 {
-        let Some(reply) = server.on_frame(&to_server, t, od) else {
-            panic!("server did not answer {to_server:?}");
+    let mut to_server = std::collections::VecDeque::from([first]);
+    let mut sent = 1;
+    for _ in 0..100_000 {
+        let Some(f) = to_server.pop_front() else {
+            panic!("transfer stalled: no frame in flight")
         };
-        match client.on_frame(&reply, t) {
-            SdoStep::Send(f) => to_server = f,
-            other => return (other, sent),
+        if lose(&f) {
+            continue;
+        }
+        let mut replies: Vec<CanFrame> = server.on_frame(&f, t, od).into_iter().collect();
+        replies.extend(std::iter::from_fn(|| server.next_burst()));
+        for r in replies.iter().filter(|r| !lose(r)) {
+            match client.on_frame(r, t) {
+                SdoStep::Ignored => {}
+                SdoStep::Send(f) => {
+                    sent += 1;
+                    to_server.push_back(f);
+                }
+                SdoStep::SendBlock(frames) => {
+                    sent += frames.len();
+                    to_server.extend(frames);
+                }
+                SdoStep::BlockUploaded { value, confirm } => {
+                    assert_eq!(server.on_frame(&confirm, t, od), None);
+                    return (SdoStep::Uploaded(value), sent + 1);
+                }
+                other => return (other, sent),
+            }
         }
     }
     panic!("transfer did not end")
@@ -199,7 +232,7 @@ fn silent_server_times_out_with_abort_frame() {
 }
 
 #[test]
-fn server_times_out_a_stalled_segmented_transfer_and_refuses_block_transfer() {
+fn server_times_out_a_stalled_segmented_transfer_and_refuses_an_unknown_command() {
     let (mut s, mut od) = (SdoServer::new(node()), od());
     let mut c = SdoClient::new(node());
     let f = c.upload(0x1008, 0, Duration::ZERO).unwrap();
@@ -207,8 +240,8 @@ fn server_times_out_a_stalled_segmented_transfer_and_refuses_block_transfer() {
     assert_eq!(s.poll(DEFAULT_TIMEOUT), None);
     let a = s.poll(DEFAULT_TIMEOUT + Duration::from_millis(1)).unwrap();
     assert_eq!(&a.data()[4..], &0x0504_0000u32.to_le_bytes());
-    let block = sdo_frame(node(), RX, [0xC6, 0x08, 0x10, 0, 0, 0, 0, 0]);
-    let a = s.on_frame(&block, Duration::ZERO, &mut od).unwrap();
+    let unknown = sdo_frame(node(), RX, [0xE0, 0x08, 0x10, 0, 0, 0, 0, 0]);
+    let a = s.on_frame(&unknown, Duration::ZERO, &mut od).unwrap();
     assert_eq!(&a.data()[4..], &0x0504_0001u32.to_le_bytes());
 }
 
@@ -223,4 +256,256 @@ fn frames_for_other_nodes_are_ignored() {
     );
     assert_eq!(c.on_frame(&other, Duration::ZERO), SdoStep::Ignored);
     assert!(c.is_busy());
+}
+
+/// A server without block transfer, as python-canopen's and many drives': it answers
+/// every block request with abort 0x05040001.
+fn refuse_block(server: &mut SdoServer, f: &CanFrame, od: &mut Od) -> Option<CanFrame> {
+    let cmd = f.data()[0] >> 5;
+    if (cmd == 5 || cmd == 6) && f.id().raw() == node().cob(RX).raw() {
+        let (index, sub) = multiplexer(f.data());
+        return Some(abort_frame(
+            node(),
+            TX,
+            index,
+            sub,
+            SdoAbortCode::InvalidCommandSpecifier,
+        ));
+    }
+    server.on_frame(f, Duration::ZERO, od)
+}
+
+fn long_value(len: usize) -> Vec<u8> {
+    (0..len).map(|i| (i * 7 + 3) as u8).collect()
+}
+
+#[test]
+fn block_download_of_1000_bytes_takes_two_sub_blocks_with_crc() {
+    let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
+    let value = long_value(1000);
+    let f = c.download(0x2010, 2, &value, Duration::ZERO).unwrap();
+    assert_eq!(
+        f.data(),
+        &[0xC6, 0x10, 0x20, 2, 0xE8, 0x03, 0, 0],
+        "ccs 6, CRC, size 1000"
+    );
+    let (step, frames) = run(&mut c, &mut s, &mut od, f);
+    assert_eq!(step, SdoStep::Downloaded);
+    // initiate + 143 segments (127 + 16) + end.
+    assert_eq!(frames, 1 + 143 + 1);
+    assert_eq!(od.0[&(0x2010, 2)], value);
+    assert!(!c.block_refused());
+}
+
+#[test]
+fn block_upload_of_300_bytes_checks_the_crc() {
+    let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
+    let value = long_value(300);
+    od.0.insert((0x2011, 0), value.clone());
+    let f = c.upload_block(0x2011, 0, Duration::ZERO).unwrap();
+    assert_eq!(f.data(), &[0xA4, 0x11, 0x20, 0, 127, 32, 0, 0]);
+    // initiate, start, one acknowledgement, end confirmation.
+    assert_eq!(
+        run(&mut c, &mut s, &mut od, f),
+        (SdoStep::Uploaded(value.clone()), 4)
+    );
+    // A corrupted byte in flight (the server's CRC covers what it sent): CRC error.
+    let f = c.upload_block(0x2011, 0, Duration::ZERO).unwrap();
+    let mut s2 = SdoServer::new(node());
+    let _ = s2.on_frame(&f, Duration::ZERO, &mut od).unwrap();
+    let start = sdo_frame(node(), RX, [0xA3, 0, 0, 0, 0, 0, 0, 0]);
+    assert!(matches!(
+        c.on_frame(
+            &s2.on_frame(&f, Duration::ZERO, &mut od).unwrap(),
+            Duration::ZERO
+        ),
+        SdoStep::Send(_)
+    ));
+    let mut segs: Vec<CanFrame> = s2
+        .on_frame(&start, Duration::ZERO, &mut od)
+        .into_iter()
+        .collect();
+    segs.extend(std::iter::from_fn(|| s2.next_burst()));
+    assert_eq!(segs.len(), 43);
+    let mut bad = segs[5].data().to_vec();
+    bad[3] ^= 0x40;
+    segs[5] = sdo_frame(node(), TX, bad.try_into().unwrap());
+    let mut ack = None;
+    for g in &segs {
+        if let SdoStep::Send(a) = c.on_frame(g, Duration::ZERO) {
+            ack = Some(a);
+        }
+    }
+    let end = s2.on_frame(&ack.unwrap(), Duration::ZERO, &mut od).unwrap();
+    assert_eq!(
+        end.data()[0],
+        0xC1 | (1 << 2),
+        "300 = 42 * 7 + 6: one byte of padding"
+    );
+    let SdoStep::Failed {
+        error,
+        abort: Some(a),
+    } = c.on_frame(&end, Duration::ZERO)
+    else {
+        panic!()
+    };
+    assert!(matches!(
+        error,
+        CanOpenError::SdoAbort {
+            abort: SdoAbortCode::CrcError,
+            ..
+        }
+    ));
+    assert_eq!(&a.data()[4..], &0x0504_0004u32.to_le_bytes());
+}
+
+#[test]
+fn block_upload_of_a_short_value_switches_to_the_normal_protocol() {
+    let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
+    let f = c.upload_block(0x1008, 0, Duration::ZERO).unwrap();
+    // 21 bytes <= pst 32: the server answers a segmented upload.
+    assert_eq!(
+        run(&mut c, &mut s, &mut od, f),
+        (SdoStep::Uploaded(b"hytask loopback drive".to_vec()), 4)
+    );
+    let f = c.upload_block(0x1000, 0, Duration::ZERO).unwrap();
+    assert_eq!(
+        run(&mut c, &mut s, &mut od, f).0,
+        SdoStep::Uploaded(vec![0x92, 0x01, 0x02, 0x00])
+    );
+}
+
+#[test]
+fn lost_segments_are_resent_from_the_acknowledged_one() {
+    let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
+    let value = long_value(200);
+    // Download: the first time segment 5 of a sub-block goes out, it is lost.
+    let mut lost = false;
+    let f = c.download(0x2012, 0, &value, Duration::ZERO).unwrap();
+    let lose = |f: &CanFrame| {
+        let hit = !lost && f.id().raw() == 0x605 && f.data()[0] == 5;
+        lost |= hit;
+        hit
+    };
+    let (step, frames) = exchange(&mut c, &mut s, &mut od, f, lose);
+    assert_eq!(step, SdoStep::Downloaded);
+    // 29 segments, of which 25 (5..=29) went twice.
+    assert_eq!(frames, 1 + 29 + 25 + 1);
+    assert_eq!(od.0[&(0x2012, 0)], value);
+    // Upload: segment 10 from the server is lost once.
+    let mut lost = false;
+    let f = c.upload_block(0x2012, 0, Duration::ZERO).unwrap();
+    let lose = |f: &CanFrame| {
+        let hit = !lost && f.id().raw() == 0x585 && f.data()[0] == 10;
+        lost |= hit;
+        hit
+    };
+    let (step, frames) = exchange(&mut c, &mut s, &mut od, f, lose);
+    assert_eq!(step, SdoStep::Uploaded(value));
+    assert_eq!(
+        frames, 5,
+        "initiate, start, two acknowledgements, confirmation"
+    );
+}
+
+#[test]
+fn a_server_without_block_transfer_gets_the_transfer_segmented() {
+    let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
+    let value = long_value(40);
+    let first = c.download(0x2013, 0, &value, Duration::ZERO).unwrap();
+    assert_eq!(first.data()[0] >> 5, 6, "block download tried first");
+    let abort = refuse_block(&mut s, &first, &mut od).unwrap();
+    let SdoStep::Send(segmented) = c.on_frame(&abort, Duration::ZERO) else {
+        panic!("no fallback")
+    };
+    assert_eq!(segmented.data(), &[0x21, 0x13, 0x20, 0, 40, 0, 0, 0]);
+    assert!(c.block_refused());
+    assert_eq!(
+        run(&mut c, &mut s, &mut od, segmented).0,
+        SdoStep::Downloaded
+    );
+    assert_eq!(od.0[&(0x2013, 0)], value);
+    // Later transfers go segmented straight away.
+    let f = c.download(0x2013, 0, &value, Duration::ZERO).unwrap();
+    assert_eq!(f.data()[0], 0x21);
+    assert_eq!(run(&mut c, &mut s, &mut od, f).0, SdoStep::Downloaded);
+    let f = c.upload_block(0x2013, 0, Duration::ZERO).unwrap();
+    assert_eq!(f.data()[0], 0x40);
+    // Upload fallback on a fresh client.
+    let mut c = SdoClient::new(node());
+    let first = c.upload_block(0x2013, 0, Duration::ZERO).unwrap();
+    let abort = refuse_block(&mut s, &first, &mut od).unwrap();
+    let SdoStep::Send(normal) = c.on_frame(&abort, Duration::ZERO) else {
+        panic!("no fallback")
+    };
+    assert_eq!(normal.data()[0], 0x40);
+    assert_eq!(
+        run(&mut c, &mut s, &mut od, normal).0,
+        SdoStep::Uploaded(value)
+    );
+    // Another abort is still an error, and block can be switched off.
+    let mut c = SdoClient::new(node()).with_block_threshold(None);
+    let f = c
+        .download(0x2013, 0, &long_value(40), Duration::ZERO)
+        .unwrap();
+    assert_eq!(f.data()[0], 0x21);
+}
+
+#[test]
+fn server_checks_the_crc_and_the_size_of_a_block_download() {
+    let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
+    let value = long_value(50);
+    let f = c.download(0x2014, 0, &value, Duration::ZERO).unwrap();
+    let r = s.on_frame(&f, Duration::ZERO, &mut od).unwrap();
+    assert_eq!(r.data()[..5], [0xA4, 0x14, 0x20, 0, 127]);
+    let SdoStep::SendBlock(segs) = c.on_frame(&r, Duration::ZERO) else {
+        panic!()
+    };
+    assert_eq!(segs.len(), 8);
+    let mut ack = None;
+    for g in &segs {
+        ack = s.on_frame(g, Duration::ZERO, &mut od).or(ack);
+    }
+    let SdoStep::Send(end) = c.on_frame(&ack.unwrap(), Duration::ZERO) else {
+        panic!()
+    };
+    let mut bad = end.data().to_vec();
+    bad[1] ^= 1;
+    let a = s
+        .on_frame(
+            &sdo_frame(node(), RX, bad.try_into().unwrap()),
+            Duration::ZERO,
+            &mut od,
+        )
+        .unwrap();
+    assert_eq!(&a.data()[4..], &0x0504_0004u32.to_le_bytes());
+    assert!(!od.0.contains_key(&(0x2014, 0)), "nothing stored");
+}
+
+#[test]
+fn a_block_upload_still_going_out_is_not_a_silent_client() {
+    let (mut c, mut s, mut od) = (SdoClient::new(node()), SdoServer::new(node()), od());
+    od.0.insert((0x2011, 0), long_value(500));
+    let t = Duration::ZERO;
+    let init = s
+        .on_frame(&c.upload_block(0x2011, 0, t).unwrap(), t, &mut od)
+        .unwrap();
+    let SdoStep::Send(start) = c.on_frame(&init, t) else {
+        panic!()
+    };
+    assert!(s.on_frame(&start, t, &mut od).is_some(), "first segment");
+    // The caller's transmit queue holds the rest back for a long while.
+    let late = DEFAULT_TIMEOUT * 3;
+    assert_eq!(s.poll(late), None, "segments left to send: no timeout");
+    let rest = std::iter::from_fn(|| s.next_burst()).count();
+    assert_eq!(rest, 71, "72 segments of 7 bytes");
+    assert_eq!(s.poll(late + DEFAULT_TIMEOUT), None);
+    let a = s
+        .poll(late + DEFAULT_TIMEOUT + Duration::from_millis(1))
+        .unwrap();
+    assert_eq!(
+        &a.data()[4..],
+        &0x0504_0000u32.to_le_bytes(),
+        "then the ack is late"
+    );
 }

@@ -17,6 +17,29 @@ pub(crate) const MODE_PP: i8 = 1;
 pub(crate) const MODE_HM: i8 = 6;
 pub(crate) const MODE_CSP: i8 = 8;
 
+/// The loopback drive's simulated switches, in motor counts (the motor's own coordinate,
+/// which homing does not move): set through object 0x2002.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Switches {
+    /// The home switch is active at and above this position (methods 19/20) or at and below
+    /// it (21/22).
+    pub(crate) home: i32,
+    /// The negative limit switch is active at and below this position (method 17).
+    pub(crate) negative_limit: i32,
+    /// The positive limit switch is active at and above this position (method 18).
+    pub(crate) positive_limit: i32,
+}
+
+/// A homing run in progress: which switch, and whether it is still searching for the
+/// switch (fast, 0x6099:1) or backing off it to the edge (slow, 0x6099:2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct HomingRun {
+    /// Direction of the search: +1 or -1.
+    dir: f64,
+    /// True once the switch was found: moving back (-dir) until it releases.
+    backing: bool,
+}
+
 #[derive(Debug, Clone)]
 pub(crate) struct Drive {
     pub(crate) state: State402,
@@ -25,6 +48,16 @@ pub(crate) struct Drive {
     pub(crate) target_position: i32,
     pub(crate) target_velocity: i32,
     pub(crate) homing_method: i8,
+    /// 0x6099:1 speed during search for switch, :2 during search for zero (counts/s).
+    pub(crate) homing_speeds: [u32; 2],
+    /// 0x609A homing acceleration (counts/s²; 0: the drive's own limit).
+    pub(crate) homing_acceleration: u32,
+    /// 0x607C home offset: the position the home point takes after homing.
+    pub(crate) home_offset: i32,
+    pub(crate) switches: Switches,
+    /// Position minus motor counts: homing sets the position without moving the motor.
+    shift: f64,
+    homing: Option<HomingRun>,
     pub(crate) following_window: u32,
     pub(crate) error_code: u16,
     pub(crate) error_register: u8,
@@ -47,6 +80,16 @@ impl Drive {
             target_position: 0,
             target_velocity: 0,
             homing_method: 0,
+            homing_speeds: [20_000, 2_000],
+            homing_acceleration: 0,
+            home_offset: 0,
+            switches: Switches {
+                home: 10_000,
+                negative_limit: -200_000,
+                positive_limit: 200_000,
+            },
+            shift: 0.0,
+            homing: None,
             following_window: 0,
             error_code: 0,
             error_register: 0,
@@ -63,10 +106,42 @@ impl Drive {
     /// Application reset (NMT reset node): state machine and set-points back to power-on,
     /// the physical position stays where the motor is.
     pub(crate) fn reset(&mut self) {
-        let (p, v) = (self.position, self.velocity);
+        let (p, v, shift, sw) = (self.position, self.velocity, self.shift, self.switches);
         *self = Drive::new();
         self.position = p;
         self.velocity = v;
+        self.shift = shift;
+        self.switches = sw;
+    }
+
+    /// The motor position in counts (where the switches are).
+    fn motor(&self) -> f64 {
+        self.position - self.shift
+    }
+
+    /// Whether the switch of homing method `method` is active at the motor's position.
+    fn switch_active(&self, method: i8) -> Option<bool> {
+        let m = self.motor();
+        let s = self.switches;
+        Some(match method {
+            17 => m <= f64::from(s.negative_limit),
+            18 => m >= f64::from(s.positive_limit),
+            19 | 20 => m >= f64::from(s.home),
+            21 | 22 => m <= f64::from(s.home),
+            _ => return None,
+        })
+    }
+
+    /// The position becomes the home offset here, without moving the motor.
+    fn set_home_here(&mut self) {
+        let home = f64::from(self.home_offset);
+        self.shift += home - self.position;
+        self.position = home;
+        self.pp_target = home;
+        self.target_position = self.home_offset;
+        self.last_target = self.home_offset;
+        self.homing = None;
+        self.homing_attained = true;
     }
 
     pub(crate) fn position_actual(&self) -> i32 {
@@ -111,8 +186,12 @@ impl Drive {
                 }
             }
             MODE_HM => {
+                // Bit 12 homing attained, bit 10 target reached once at rest (or halted).
                 if self.homing_attained {
-                    sw |= SW_OP_MODE_12 | SW_TARGET_REACHED;
+                    sw |= SW_OP_MODE_12;
+                }
+                if self.homing.is_none() && self.velocity == 0.0 {
+                    sw |= SW_TARGET_REACHED;
                 }
                 if self.homing_error {
                     sw |= SW_OP_MODE_13;
@@ -173,20 +252,57 @@ impl Drive {
         was_fault && self.state == State402::SwitchOnDisabled
     }
 
+    /// Starts homing (controlword bit 4 rising in homing mode) with method 0x6098.
     fn home(&mut self) {
         self.homing_attained = false;
         self.homing_error = false;
-        match self.homing_method {
-            // 35 (old) and 37: the current position is the home position (offset 0).
-            35 | 37 => {
-                self.position = 0.0;
-                self.pp_target = 0.0;
-                self.target_position = 0;
-                self.last_target = 0;
-                self.homing_attained = true;
+        let method = self.homing_method;
+        // Which way the search goes: toward the limit switch (17/18), toward the home
+        // switch's active side (19/20 above, 21/22 below).
+        let dir = match method {
+            // 35 (old) and 37: the current position is the home position.
+            35 | 37 => return self.set_home_here(),
+            17 | 21 | 22 => -1.0,
+            18..=20 => 1.0,
+            _ => {
+                self.homing_error = true;
+                return;
             }
-            // Switch-based methods need switches the loopback drive does not model yet.
-            _ => self.homing_error = true,
+        };
+        // Already on the switch: only the slow move off it to its edge remains.
+        let backing = self.switch_active(method) == Some(true);
+        self.homing = Some(HomingRun { dir, backing });
+    }
+
+    /// One cycle of a homing run: the velocity demand, and the edge found.
+    fn homing_demand(&mut self) -> f64 {
+        let Some(run) = self.homing else { return 0.0 };
+        let active = self.switch_active(self.homing_method) == Some(true);
+        let [search, zero] = self.homing_speeds.map(f64::from);
+        if !run.backing && active {
+            self.homing = Some(HomingRun {
+                backing: true,
+                ..run
+            });
+            return -run.dir * zero;
+        }
+        if run.backing && !active {
+            self.set_home_here();
+            return 0.0;
+        }
+        let m = self.motor();
+        let s = self.switches;
+        let beyond = m < f64::from(s.negative_limit) - 1.0 || m > f64::from(s.positive_limit) + 1.0;
+        if beyond && !matches!(self.homing_method, 17 | 18) {
+            // A limit switch before the home switch: homing error, stop.
+            self.homing = None;
+            self.homing_error = true;
+            return 0.0;
+        }
+        if run.backing {
+            -run.dir * zero
+        } else {
+            run.dir * search
         }
     }
 
@@ -228,6 +344,13 @@ impl Drive {
                         amax,
                     )
                 }
+                MODE_HM => {
+                    let acc = match self.homing_acceleration {
+                        0 => amax,
+                        a => f64::from(a),
+                    };
+                    (self.homing_demand(), acc)
+                }
                 _ => (0.0, amax),
             },
             State402::QuickStopActive | State402::FaultReactionActive => (0.0, qs),
@@ -236,7 +359,13 @@ impl Drive {
                 return None;
             }
         };
-        self.velocity = motor::ramp(self.velocity, demand, amax, decel, dt);
+        // Homing ramps with its own acceleration (0x609A) both ways.
+        let accel = if self.mode == MODE_HM && self.state == State402::OperationEnabled {
+            decel
+        } else {
+            amax
+        };
+        self.velocity = motor::ramp(self.velocity, demand, accel, decel, dt);
         self.position += self.velocity * dt;
         if self.state == State402::FaultReactionActive && self.velocity == 0.0 {
             self.state = State402::Fault;

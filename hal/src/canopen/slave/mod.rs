@@ -6,15 +6,19 @@
 //! [`DriveSlave::poll`] does both over any [`CanBus`]. What it implements:
 //!
 //! * NMT (start, stop, pre-operational, reset node, reset communication) with boot-up;
-//! * an SDO server (expedited, segmented) on its object dictionary: 0x1000, 0x1001, 0x1008,
+//! * an SDO server (expedited, segmented, block) on its object dictionary: 0x1000, 0x1001, 0x1008,
 //!   0x1017, 0x1018, 0x1400-3/0x1600-3, 0x1800-3/0x1A00-3, 0x603F, 0x6040, 0x6041, 0x6060,
-//!   0x6061, 0x6064, 0x6065, 0x606C, 0x607A, 0x6098, 0x60FF, 0x6502, and the fault injection
-//!   object [`od::INJECT`] (0x2000: drive fault, stop heartbeat, EMCY);
+//!   0x6061, 0x6064, 0x6065, 0x606C, 0x607A, 0x607C, 0x6098, 0x6099, 0x609A, 0x60FF, 0x6502,
+//!   the simulated switches [`od::SWITCHES`] (0x2002), and the fault injection
+//!   object [`od::INJECT`] (0x2000: drive fault, stop heartbeat, EMCY) and a domain for
+//!   block transfers, [`od::DOMAIN`] (0x2001);
 //! * PDOs by their mapping (RPDOs with a synchronous transmission type take effect at the
 //!   next SYNC, TPDOs with type n go out every n-th SYNC);
 //! * the heartbeat producer (0x1017), EMCY on faults (and 0x0000 on fault reset);
 //! * the CiA 402 state machine, CSP following the target each SYNC with the simulated
-//!   axis's motor model, PP moves and homing on the current position (methods 35/37).
+//!   axis's motor model, PP moves and homing mode: methods 35/37 (current position), 17/18
+//!   (limit switch) and 19-22 (home switch) with the speeds 0x6099, acceleration 0x609A and
+//!   home offset 0x607C; statusword bit 12 homing attained, 10 target reached, 13 error.
 //!
 //! Motion advances one cycle per SYNC; without SYNCs (a master doing only SDO, or PP moves)
 //! it free-runs on [`tick`](DriveSlave::tick) at the configured cycle.
@@ -35,6 +39,10 @@ use super::{NodeId, Outbox};
 use crate::can::{CanBus, CanFrame};
 use od::Core;
 use std::time::Duration;
+
+/// The SDO server's wait for a silent client: generous, since the loopback drive's
+/// clients include python-canopen under software emulation on a loaded host.
+pub const SDO_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// How many frames one call may produce (SDO reply, EMCYs, up to 4 TPDOs, heartbeat).
 pub const OUTBOX: usize = 16;
@@ -91,7 +99,7 @@ impl DriveSlave {
         DriveSlave {
             node,
             nmt: None,
-            sdo: SdoServer::new(node),
+            sdo: SdoServer::with_timeout(node, SDO_TIMEOUT),
             heartbeat: HeartbeatProducer::new(node, Duration::ZERO),
             core: Core::new(node, cfg),
             rpdo_latched: [None; 4],
@@ -130,7 +138,7 @@ impl DriveSlave {
 
     fn boot(&mut self, out: &mut Outbox<OUTBOX>, now: Duration) {
         self.nmt = Some(NmtState::PreOperational);
-        self.sdo = SdoServer::new(self.node);
+        self.sdo = SdoServer::with_timeout(self.node, SDO_TIMEOUT);
         self.rpdo_latched = [None; 4];
         out.push(NmtState::BootUp.heartbeat_frame(self.node));
         self.core.heartbeat_changed = true;
@@ -146,6 +154,17 @@ impl DriveSlave {
             };
             self.heartbeat
                 .set_period(Duration::from_millis(u64::from(ms)), now);
+        }
+    }
+
+    /// Segments of a block upload's sub-block, as many as leave room in `out` for the
+    /// frames of a cycle (EMCY, TPDOs, heartbeat); the rest go on the next calls.
+    fn push_burst(&mut self, out: &mut Outbox<OUTBOX>) {
+        while out.len() + 8 < OUTBOX {
+            match self.sdo.next_burst() {
+                Some(f) => out.push(f),
+                None => break,
+            }
         }
     }
 
@@ -181,6 +200,7 @@ impl DriveSlave {
         }
         if let Some(reply) = self.sdo.on_frame(f, now, &mut self.core) {
             out.push(reply);
+            self.push_burst(out);
             self.flush_pending(out);
             self.apply_heartbeat(now);
             return;
@@ -281,6 +301,7 @@ impl DriveSlave {
         if let Some(f) = self.sdo.poll(now) {
             out.push(f);
         }
+        self.push_burst(out);
         let cycle = self.core.cfg.cycle;
         let sync_alive = self
             .last_sync

@@ -13,6 +13,24 @@ use super::SlaveConfig;
 /// with it; sub 2 = write 1 to stop the heartbeat, 0 to resume; sub 3 = write an error code
 /// to send an EMCY without a fault.
 pub const INJECT: u16 = 0x2000;
+/// A read/write domain (manufacturer area) for block transfers: any length up to
+/// [`DOMAIN_MAX`]; initially [`domain_default`].
+pub const DOMAIN: u16 = 0x2001;
+/// The longest value [`DOMAIN`] stores.
+pub const DOMAIN_MAX: usize = 4096;
+
+/// The initial content of [`DOMAIN`]: 1000 bytes, `i * 7 + 3` (mod 256), so a reader can
+/// check every byte without knowing more.
+pub fn domain_default() -> Vec<u8> {
+    // Cannot truncate: the value is taken mod 256 on purpose.
+    (0..1000usize).map(|i| (i * 7 + 3) as u8).collect()
+}
+
+/// The simulated switches, motor counts (i32): sub 1 = home switch (active at and above it
+/// for homing methods 19/20, at and below for 21/22), sub 2 = negative limit switch
+/// (method 17), sub 3 = positive limit switch (method 18).
+pub const SWITCHES: u16 = 0x2002;
+
 /// Device name (0x1008), long enough to need a segmented upload.
 pub const DEVICE_NAME: &str = "hytask loopback CiA 402 drive";
 /// Device type 0x1000: CiA 402 profile, servo drive.
@@ -90,6 +108,8 @@ pub(crate) struct Core {
     pub(crate) tpdo: [PdoParams; 4],
     /// Frames produced by object writes (EMCY), sent by the slave after the write.
     pub(crate) pending: Outbox<8>,
+    /// The value of [`DOMAIN`].
+    pub(crate) domain: Vec<u8>,
 }
 
 impl Core {
@@ -104,6 +124,7 @@ impl Core {
             rpdo: [PdoParams::new(0, 0, None); 4],
             tpdo: [PdoParams::new(0, 0, None); 4],
             pending: Outbox::default(),
+            domain: domain_default(),
         };
         c.reset_communication();
         c
@@ -300,6 +321,7 @@ impl ObjectAccess for Core {
             (0x1A00..=0x1A03, _) => {
                 Self::pdo_read(&self.tpdo[usize::from(index - 0x1A00)], false, true, sub)?
             }
+            (DOMAIN, 0) => self.domain.clone(),
             (INJECT, 0) => vec![3],
             (INJECT, 1) => d.error_code.to_le_bytes().to_vec(),
             (INJECT, 2) => vec![u8::from(self.heartbeat_stopped)],
@@ -314,14 +336,28 @@ impl ObjectAccess for Core {
             (0x606C, 0) => d.velocity_actual().to_le_bytes().to_vec(),
             (0x607A, 0) => d.target_position.to_le_bytes().to_vec(),
             (0x6098, 0) => d.homing_method.to_le_bytes().to_vec(),
+            (0x607C, 0) => d.home_offset.to_le_bytes().to_vec(),
+            (0x6099, 0) | (SWITCHES, 0) => vec![if index == SWITCHES { 3 } else { 2 }],
+            (0x6099, s @ 1..=2) => d.homing_speeds[usize::from(s - 1)].to_le_bytes().to_vec(),
+            (0x609A, 0) => d.homing_acceleration.to_le_bytes().to_vec(),
+            (SWITCHES, 1) => d.switches.home.to_le_bytes().to_vec(),
+            (SWITCHES, 2) => d.switches.negative_limit.to_le_bytes().to_vec(),
+            (SWITCHES, 3) => d.switches.positive_limit.to_le_bytes().to_vec(),
             (0x60FF, 0) => d.target_velocity.to_le_bytes().to_vec(),
             // Supported drive modes: PP (bit 0), HM (bit 5), CSP (bit 7).
             (0x6502, 0) => 0x0000_00A1u32.to_le_bytes().to_vec(),
-            (0x1000 | 0x1001 | 0x1008 | 0x1017 | 0x1018 | INJECT | 0x603F..=0x6502, _)
-                if self.exists(index) =>
-            {
-                return Err(NoSub)
-            }
+            (
+                0x1000
+                | 0x1001
+                | 0x1008
+                | 0x1017
+                | 0x1018
+                | INJECT
+                | DOMAIN
+                | SWITCHES
+                | 0x603F..=0x6502,
+                _,
+            ) if self.exists(index) => return Err(NoSub),
             _ => return Err(NoObj),
         };
         Ok(v)
@@ -362,6 +398,12 @@ impl ObjectAccess for Core {
                 sub,
                 data,
             )?,
+            (DOMAIN, 0) => {
+                if data.len() > DOMAIN_MAX {
+                    return Err(A::LengthTooHigh);
+                }
+                self.domain = data.to_vec();
+            }
             (INJECT, 1) => {
                 let code = u16_of(data)?;
                 if code == 0 {
@@ -396,6 +438,12 @@ impl ObjectAccess for Core {
             (0x6065, 0) => self.drive.following_window = u32_of(data)?,
             (0x607A, 0) => self.drive.target_position = u32_of(data)? as i32,
             (0x6098, 0) => self.drive.homing_method = u8_of(data)? as i8,
+            (0x607C, 0) => self.drive.home_offset = u32_of(data)? as i32,
+            (0x6099, s @ 1..=2) => self.drive.homing_speeds[usize::from(s - 1)] = u32_of(data)?,
+            (0x609A, 0) => self.drive.homing_acceleration = u32_of(data)?,
+            (SWITCHES, 1) => self.drive.switches.home = u32_of(data)? as i32,
+            (SWITCHES, 2) => self.drive.switches.negative_limit = u32_of(data)? as i32,
+            (SWITCHES, 3) => self.drive.switches.positive_limit = u32_of(data)? as i32,
             (0x60FF, 0) => self.drive.target_velocity = u32_of(data)? as i32,
             _ => {
                 // Distinguish read-only, missing sub-index and missing object.
@@ -419,6 +467,8 @@ impl Core {
                 | 0x1017
                 | 0x1018
                 | INJECT
+                | DOMAIN
+                | SWITCHES
                 | 0x603F
                 | 0x6040
                 | 0x6041
@@ -428,7 +478,10 @@ impl Core {
                 | 0x6065
                 | 0x606C
                 | 0x607A
+                | 0x607C
                 | 0x6098
+                | 0x6099
+                | 0x609A
                 | 0x60FF
                 | 0x6502
         )

@@ -327,11 +327,139 @@ fn profile_position_and_homing_on_current_position() {
         t.s.statusword() & crate::canopen::cia402::SW_OP_MODE_12 != 0,
         "homing attained"
     );
-    t.write(0x6098, 0, &[19]).unwrap();
+    t.write(0x6098, 0, &[1]).unwrap();
     t.write(0x6040, 0, &0x0Fu16.to_le_bytes()).unwrap();
     t.write(0x6040, 0, &0x1Fu16.to_le_bytes()).unwrap();
     assert!(
         t.s.statusword() & crate::canopen::cia402::SW_OP_MODE_13 != 0,
-        "switch homing not modelled: homing error"
+        "method 1 (index pulse) is not modelled: homing error"
     );
+}
+
+impl T {
+    /// Homing mode, method `method` with home offset `offset`, started by a rising bit 4;
+    /// free-runs (no SYNC) until homing attained or error. Returns the statusword.
+    fn home(&mut self, method: i8, offset: i32) -> u16 {
+        use crate::canopen::cia402::{SW_OP_MODE_12, SW_OP_MODE_13, SW_TARGET_REACHED};
+        self.write(0x6060, 0, &[6]).unwrap();
+        assert_eq!(self.read(0x6061, 0).unwrap(), vec![6], "mode confirmed");
+        self.write(0x6098, 0, &[method as u8]).unwrap();
+        self.write(0x607C, 0, &offset.to_le_bytes()).unwrap();
+        self.write(0x6040, 0, &0x0Fu16.to_le_bytes()).unwrap();
+        self.write(0x6040, 0, &0x1Fu16.to_le_bytes()).unwrap();
+        for _ in 0..20_000 {
+            let sw = self.s.statusword();
+            let done = sw & SW_OP_MODE_12 != 0 && sw & SW_TARGET_REACHED != 0;
+            if done || sw & SW_OP_MODE_13 != 0 {
+                return sw;
+            }
+            self.now += MS;
+            let mut out = Outbox::default();
+            self.s.tick(self.now, &mut out);
+        }
+        panic!("homing method {method} did not end")
+    }
+}
+
+#[test]
+fn homing_on_the_home_switch_and_the_limit_switches_with_speeds_and_offset() {
+    use crate::canopen::cia402::SW_OP_MODE_13;
+    let mut t = T::new(SlaveConfig::default());
+    t.start();
+    t.enable(6);
+    // Home switch at motor count 5000, active above; search 50000/s, back-off 1000/s.
+    t.write(od::SWITCHES, 1, &5000i32.to_le_bytes()).unwrap();
+    t.write(0x6099, 1, &50_000u32.to_le_bytes()).unwrap();
+    t.write(0x6099, 2, &1000u32.to_le_bytes()).unwrap();
+    t.write(0x609A, 0, &1_000_000u32.to_le_bytes()).unwrap();
+    assert_eq!(t.read(0x6099, 0).unwrap(), vec![2]);
+    let sw = t.home(19, 100);
+    assert_eq!(sw & SW_OP_MODE_13, 0, "no homing error");
+    // Home = the switch edge (motor 5000) is position 100 now; the drive stopped within
+    // its back-off deceleration of the edge.
+    let p = t.s.position();
+    assert!((p - 100).abs() <= 2, "at {p}");
+    // Method 21 (switch active below) homes on the same edge from the other side.
+    let sw = t.home(21, -7);
+    assert_eq!(sw & SW_OP_MODE_13, 0);
+    assert!((t.s.position() + 7).abs() <= 2, "at {}", t.s.position());
+    // Method 17: the negative limit switch at motor -20000.
+    t.write(od::SWITCHES, 2, &(-20_000i32).to_le_bytes())
+        .unwrap();
+    let sw = t.home(17, 0);
+    assert_eq!(sw & SW_OP_MODE_13, 0);
+    assert!(t.s.position().abs() <= 2);
+    // Method 18 with the positive limit beyond reach of a home switch search: method 20
+    // (home switch) with the switch outside the limits runs into the limit: homing error.
+    t.write(od::SWITCHES, 1, &300_000i32.to_le_bytes()).unwrap();
+    t.write(od::SWITCHES, 3, &30_000i32.to_le_bytes()).unwrap();
+    let sw = t.home(20, 0);
+    assert_ne!(sw & SW_OP_MODE_13, 0, "limit switch before the home switch");
+    let sw = t.home(18, 0);
+    assert_eq!(sw & SW_OP_MODE_13, 0, "method 18 homes on that limit");
+}
+
+impl T {
+    /// A transfer of any kind to its end: frames to the drive one per call, time passing
+    /// (a tick per ms) when none is queued, so a block upload's sub-block goes out over
+    /// several calls as the outbox allows. Returns the final step and the largest number
+    /// of frames one call produced.
+    fn transfer(&mut self, first: CanFrame) -> (SdoStep, usize) {
+        let mut to_slave = std::collections::VecDeque::from([first]);
+        let mut widest = 0;
+        let mut done = None;
+        for _ in 0..10_000 {
+            let mut out = Outbox::default();
+            match to_slave.pop_front() {
+                Some(f) => self.s.on_frame(&f, self.now, &mut out),
+                None if done.is_some() => return (done.unwrap_or(SdoStep::Ignored), widest),
+                None => {
+                    self.now += MS;
+                    self.s.tick(self.now, &mut out);
+                }
+            }
+            widest = widest.max(out.len());
+            for r in out.iter().filter(|r| r.id().raw() == 0x581) {
+                match self.c.on_frame(r, self.now) {
+                    SdoStep::Ignored => {}
+                    SdoStep::Send(f) => to_slave.push_back(f),
+                    SdoStep::SendBlock(v) => to_slave.extend(v),
+                    SdoStep::BlockUploaded { value, confirm } => {
+                        to_slave.push_back(confirm);
+                        done = Some(SdoStep::Uploaded(value));
+                    }
+                    other => done = Some(other),
+                }
+            }
+        }
+        panic!("transfer did not end")
+    }
+}
+
+#[test]
+fn the_domain_object_goes_by_block_transfer_both_ways() {
+    let mut t = T::new(SlaveConfig::default());
+    let f = t.c.upload_block(od::DOMAIN, 0, t.now).unwrap();
+    let (step, widest) = t.transfer(f);
+    assert_eq!(step, SdoStep::Uploaded(od::domain_default()));
+    assert!(
+        widest < OUTBOX,
+        "the burst is paced: {widest} frames in one call"
+    );
+    let value: Vec<u8> = (0..2000u32).map(|i| (i % 251) as u8).collect();
+    let f = t.c.download(od::DOMAIN, 0, &value, t.now).unwrap();
+    assert_eq!(f.data()[0] >> 5, 6, "block download");
+    assert_eq!(t.transfer(f).0, SdoStep::Downloaded);
+    assert_eq!(t.read(od::DOMAIN, 0).unwrap(), value, "read back segmented");
+    let f = t.c.download(od::DOMAIN, 0, &[0; 5000], t.now).unwrap();
+    assert!(matches!(
+        t.transfer(f).0,
+        SdoStep::Failed {
+            error: crate::canopen::CanOpenError::SdoAbort {
+                abort: SdoAbortCode::LengthTooHigh,
+                ..
+            },
+            ..
+        }
+    ));
 }
