@@ -10,6 +10,7 @@
 //! - [`config`]: the TOML machine description, validated with errors that name the key.
 //! - [`motion`]: lookahead planner, kinematics and the realtime interpolator.
 //! - [`plc`]: IEC 61131-3 Structured Text: compiler and allocation-free scan.
+//! - [`cell`]: the pick-and-place cell of the seed paper on simulated hardware.
 //! - [`gcode`]: RS274/NGC (LinuxCNC dialect) front end: text in, canonical commands out.
 //! - [`rt`]: the reusable realtime task model: activities, data objects, buffers, events,
 //!   commands, lifecycle, timing statistics. It knows nothing of machines.
@@ -23,6 +24,8 @@ pub mod config;
 pub mod control;
 #[cfg(not(loom))]
 pub mod daemon;
+#[cfg(not(loom))]
+pub mod cell;
 pub mod gcode;
 #[cfg(not(loom))]
 pub mod machine;

@@ -1,0 +1,1 @@
+//! Serving the cell on the control socket (filled below).
