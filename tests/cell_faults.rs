@@ -28,7 +28,11 @@ fn robot_state(rig: &mut Rig) -> RobotStatus {
 /// standing still, then recovers with `stop`.
 fn expect_error_then_recover(rig: &mut Rig, run: &CommandHandle, why: &str) {
     let n = rig.run_until(60 * SECOND, |_| run.status().is_final());
-    assert_eq!(run.status(), CommandStatus::Failed("error detected"), "after {n} cycles");
+    assert_eq!(
+        run.status(),
+        CommandStatus::Failed("error detected"),
+        "after {n} cycles"
+    );
     let s = rig.state();
     assert_eq!(s.state, SelectionState::ErrorDetected);
     assert!(s.error.is_some_and(|e| e.contains(why)), "{:?}", s.error);
@@ -39,9 +43,16 @@ fn expect_error_then_recover(rig: &mut Rig, run: &CommandHandle, why: &str) {
     let r1 = robot_state(rig);
     assert_eq!(r1.position_mm, r0.position_mm, "and stands still");
     // A move is refused while stopped.
-    let m = rig.robot.send(RobotCmd::MoveTo([100.0, 100.0, 100.0])).unwrap();
+    let m = rig
+        .robot
+        .send(RobotCmd::MoveTo([100.0, 100.0, 100.0]))
+        .unwrap();
     rig.rt.run_cycles(5);
-    assert!(matches!(m.status(), CommandStatus::Rejected(_)), "{:?}", m.status());
+    assert!(
+        matches!(m.status(), CommandStatus::Rejected(_)),
+        "{:?}",
+        m.status()
+    );
 
     let stop = rig.cell_selection.send(SelectionCmd::Stop).unwrap();
     rig.run_until(20 * SECOND, |_| stop.status().is_final());
@@ -58,7 +69,11 @@ fn object_lost_while_moving_goes_to_error_detected_and_stops_the_robot() {
     rig.until_homed();
     let run = rig.cell_selection.send(SelectionCmd::Run(5)).unwrap();
     expect_error_then_recover(&mut rig, &run, "object lost");
-    assert_eq!(rig.state().runs_done, 2, "the first two objects were sorted");
+    assert_eq!(
+        rig.state().runs_done,
+        2,
+        "the first two objects were sorted"
+    );
     let t = rig.tally();
     assert_eq!((t.on_floor, t.in_container.iter().sum::<u32>()), (1, 2));
 
@@ -73,7 +88,9 @@ fn drop_object_injected_on_demand_is_detected() {
     let mut rig = Rig::start(&CellConfig::with_seed(5));
     rig.until_homed();
     let run = rig.cell_selection.send(SelectionCmd::Run(3)).unwrap();
-    let n = rig.run_until(20 * SECOND, |r| r.state().state == SelectionState::MovingWithObject);
+    let n = rig.run_until(20 * SECOND, |r| {
+        r.state().state == SelectionState::MovingWithObject
+    });
     assert!(n < 20 * SECOND);
     rig.rt.run_cycles(50);
     let drop = rig.hw.send(HwCmd::DropObject).unwrap();
@@ -87,7 +104,9 @@ fn emergency_stop_operation_stops_robot_and_selection() {
     let mut rig = Rig::start(&CellConfig::with_seed(9));
     rig.until_homed();
     let run = rig.cell_selection.send(SelectionCmd::Run(3)).unwrap();
-    rig.run_until(20 * SECOND, |r| r.state().state == SelectionState::MovingWithoutObject);
+    rig.run_until(20 * SECOND, |r| {
+        r.state().state == SelectionState::MovingWithoutObject
+    });
     rig.rt.run_cycles(150);
     assert_eq!(robot_state(&mut rig).state, RobotState::Moving);
     let e = rig.robot.send(RobotCmd::EmergencyStop).unwrap();
@@ -102,7 +121,9 @@ fn estop_button_stops_the_robot_and_blocks_recovery_until_released() {
     let mut rig = Rig::start(&CellConfig::with_seed(11));
     rig.until_homed();
     let run = rig.cell_selection.send(SelectionCmd::Run(3)).unwrap();
-    rig.run_until(20 * SECOND, |r| r.state().state == SelectionState::MovingWithObject);
+    rig.run_until(20 * SECOND, |r| {
+        r.state().state == SelectionState::MovingWithObject
+    });
     rig.hw.send(HwCmd::PressEstop).unwrap();
     rig.run_until(10 * SECOND, |_| run.status().is_final());
     assert_eq!(run.status(), CommandStatus::Failed("error detected"));
@@ -148,5 +169,11 @@ fn tracking_error_faults_the_robot_and_the_selection_detects_it() {
     assert_eq!(run.status(), CommandStatus::Failed("error detected"));
     assert!(tracking.pop().is_some(), "pid.tracking_error was raised");
     assert_eq!(robot_state(&mut rig).state, RobotState::EmergencyStop);
-    assert!(rig.state().error.is_some_and(|e| e.contains("robot stopped")), "{:?}", rig.state());
+    assert!(
+        rig.state()
+            .error
+            .is_some_and(|e| e.contains("robot stopped")),
+        "{:?}",
+        rig.state()
+    );
 }

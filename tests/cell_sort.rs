@@ -31,12 +31,21 @@ fn twenty_runs_sort_the_seeded_sequence() {
             (1..=20).collect::<Vec<_>>()
         );
         let t = rig.tally();
-        assert_eq!(t.in_container, want, "seed {seed}: objects in the containers");
+        assert_eq!(
+            t.in_container, want,
+            "seed {seed}: objects in the containers"
+        );
         assert_eq!((t.missorted, t.on_floor), (0, 0), "seed {seed}");
         let s = rig.state();
-        assert_eq!((s.state, s.runs_done, s.error), (SelectionState::Homed, 20, None));
+        assert_eq!(
+            (s.state, s.runs_done, s.error),
+            (SelectionState::Homed, 20, None)
+        );
         // Every run took a plausible time (pick to release), not zero and not a stall.
-        assert!(runs.iter().all(|r| (300..5_000).contains(&r.cycle_ms)), "{runs:?}");
+        assert!(
+            runs.iter().all(|r| (300..5_000).contains(&r.cycle_ms)),
+            "{runs:?}"
+        );
     }
 }
 
@@ -46,7 +55,10 @@ fn run_is_rejected_while_busy_and_with_zero() {
     rig.until_homed();
     let zero = rig.cell_selection.send(SelectionCmd::Run(0)).unwrap();
     rig.rt.run_cycles(20);
-    assert!(matches!(zero.status(), CommandStatus::Rejected(RejectReason::BadParameters(_))));
+    assert!(matches!(
+        zero.status(),
+        CommandStatus::Rejected(RejectReason::BadParameters(_))
+    ));
     let first = rig.cell_selection.send(SelectionCmd::Run(2)).unwrap();
     rig.rt.run_cycles(20);
     let second = rig.cell_selection.send(SelectionCmd::Run(1)).unwrap();

@@ -116,7 +116,10 @@ const MIN_BLOB_PIXELS: u32 = 200;
 enum Phase {
     Idle,
     /// Filtering row `next_row`; result due at `due_ns`.
-    Processing { next_row: usize, due_ns: u64 },
+    Processing {
+        next_row: usize,
+        due_ns: u64,
+    },
     /// Result emitted; the command completes.
     Done,
 }

@@ -150,7 +150,10 @@ impl CellConfig {
         }
         let positive = [
             ("cell.robot.max_velocity_mm_s", self.robot.max_velocity_mm_s),
-            ("cell.robot.max_acceleration_mm_s2", self.robot.max_acceleration_mm_s2),
+            (
+                "cell.robot.max_acceleration_mm_s2",
+                self.robot.max_acceleration_mm_s2,
+            ),
             ("cell.world.mass_kg", self.world.mass_kg),
             ("cell.pid.max_force_n", self.pid.max_force_n),
         ];

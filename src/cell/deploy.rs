@@ -35,7 +35,10 @@ pub fn deploy(cfg: &CellConfig) -> Result<Cell, DeployError> {
     let mut app = Deployment::new();
     let servo = cfg.threads.servo.schedule();
     let (lo, hi) = (cfg.robot.min_mm, cfg.robot.max_mm);
-    let sensor = Sensor::new(lo.map(|v| v - RANGE_MARGIN_MM), hi.map(|v| v + RANGE_MARGIN_MM));
+    let sensor = Sensor::new(
+        lo.map(|v| v - RANGE_MARGIN_MM),
+        hi.map(|v| v + RANGE_MARGIN_MM),
+    );
     app.add_periodic(names::SENSOR, sensor, servo)?;
     let robot = app.add_periodic(names::ROBOT, Robot::new(cfg.robot), servo)?;
     app.add_periodic(names::PID, Pid::new(cfg.pid), servo)?;

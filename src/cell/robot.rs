@@ -22,7 +22,9 @@
 
 use super::names;
 use super::profile::LineMove;
-use super::types::{distance, Feedback, RangeError, RobotState, RobotStatus, Setpoint, TrackingError, Vec3};
+use super::types::{
+    distance, Feedback, RangeError, RobotState, RobotStatus, Setpoint, TrackingError, Vec3,
+};
 use crate::rt::prelude::*;
 
 /// Motion limits and tolerances of the robot.
@@ -136,17 +138,41 @@ const XYZ: &[ParamDescriptor] = &[
 ];
 
 const OPS: &[OperationDescriptor] = &[
-    op("switch_on", "Close the position loop and enable the amplifiers.", &[]),
-    op("switch_off", "Brake and disable the amplifiers; a running move fails.", &[]),
+    op(
+        "switch_on",
+        "Close the position loop and enable the amplifiers.",
+        &[],
+    ),
+    op(
+        "switch_off",
+        "Brake and disable the amplifiers; a running move fails.",
+        &[],
+    ),
     op(
         "move_to",
         "Straight move to (x, y, z); done when the position is reached and settled.",
         XYZ,
     ),
-    op("reset", "Clear a fault or an emergency stop; the robot is off afterwards.", &[]),
-    op("open_gripper", "Open the gripper; done on its open switch.", &[]),
-    op("close_gripper", "Close the gripper; done on its closed switch.", &[]),
-    op("emergency_stop", "Brake and disable at once; reset to recover.", &[]),
+    op(
+        "reset",
+        "Clear a fault or an emergency stop; the robot is off afterwards.",
+        &[],
+    ),
+    op(
+        "open_gripper",
+        "Open the gripper; done on its open switch.",
+        &[],
+    ),
+    op(
+        "close_gripper",
+        "Close the gripper; done on its closed switch.",
+        &[],
+    ),
+    op(
+        "emergency_stop",
+        "Brake and disable at once; reset to recover.",
+        &[],
+    ),
 ];
 
 impl Commands for RobotCmd {
@@ -407,7 +433,8 @@ impl Task for Robot {
                     return Progress::Failed("the robot stopped before reaching the target");
                 }
                 let finished = self.motion.is_some_and(|m| m.finished());
-                if finished && distance(&self.sensed.position_mm, &target) <= self.cfg.tolerance_mm {
+                if finished && distance(&self.sensed.position_mm, &target) <= self.cfg.tolerance_mm
+                {
                     self.settled += 1;
                 } else {
                     self.settled = 0;

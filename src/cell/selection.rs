@@ -84,6 +84,8 @@ pub struct SelectionStatus {
     pub runs_asked: u32,
     /// Why `error_detected` was entered.
     pub error: Option<&'static str>,
+    /// The state's entry actions are done (in `homed`: at home and ready for `run`).
+    pub entered: bool,
 }
 
 /// Timeouts of the selection.
@@ -410,6 +412,7 @@ impl Selection {
                 runs_done: self.runs_done,
                 runs_asked: self.runs_asked,
                 error: self.error,
+                entered: self.entered,
             });
         }
     }
@@ -453,16 +456,24 @@ impl Task for Selection {
     /// The state machine, after the inputs were read (the runner's step 3).
     fn state_machines(&mut self, ctx: &StepContext) {
         use SelectionState as S;
-        if self.state == S::Initial && !self.entered && self.pending.is_none() && self.plan.next == 0
+        if self.state == S::Initial
+            && !self.entered
+            && self.pending.is_none()
+            && self.plan.next == 0
         {
             self.enter(S::Initial, ctx);
         }
         // Precondition of "moving with object": the object is grabbed.
         if self.state == S::MovingWithObject && !self.robot.object_present {
-            self.fail("object lost while moving (precondition 'object grabbed' violated)", ctx);
+            self.fail(
+                "object lost while moving (precondition 'object grabbed' violated)",
+                ctx,
+            );
         }
-        if matches!(self.robot.state, RobotState::Fault | RobotState::EmergencyStop)
-            && !matches!(self.state, S::ErrorDetected | S::Initial)
+        if matches!(
+            self.robot.state,
+            RobotState::Fault | RobotState::EmergencyStop
+        ) && !matches!(self.state, S::ErrorDetected | S::Initial)
         {
             self.fail("the robot stopped (fault or emergency stop)", ctx);
         }

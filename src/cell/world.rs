@@ -286,8 +286,8 @@ impl World {
 
     /// What the camera sees.
     pub fn scene(&self) -> CameraScene {
-        let in_view = distance(&self.position_mm, &self.layout.camera_mm)
-            <= self.cfg.camera_radius_mm;
+        let in_view =
+            distance(&self.position_mm, &self.layout.camera_mm) <= self.cfg.camera_radius_mm;
         CameraScene {
             object: if in_view { self.held } else { None },
         }

@@ -77,12 +77,10 @@ impl Rig {
     /// Waits until the selection is homed and idle.
     pub fn until_homed(&mut self) {
         let n = self.run_until(10 * SECOND, |r| {
-            r.state().state == SelectionState::Homed
-                && r.cell_selection.info().state() == TaskState::Running
+            let s = r.state();
+            s.state == SelectionState::Homed && s.entered
         });
         assert!(n < 10 * SECOND, "not homed: {:?}", self.state());
-        // One more selection cycle so that the entry actions of homed are done.
-        self.rt.run_cycles(50);
     }
 }
 
