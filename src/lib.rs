@@ -18,14 +18,14 @@
 // Under `--cfg loom` (model checking of rt's lock-free primitives) tokio compiles out its
 // networking and signals, so the modules built on them are left out of that build.
 #[cfg(not(loom))]
+pub mod cell;
+#[cfg(not(loom))]
 pub mod cli;
 pub mod config;
 #[cfg(not(loom))]
 pub mod control;
 #[cfg(not(loom))]
 pub mod daemon;
-#[cfg(not(loom))]
-pub mod cell;
 pub mod gcode;
 #[cfg(not(loom))]
 pub mod machine;
