@@ -34,3 +34,4 @@ pub mod modbus;
 pub mod motion;
 pub mod plc;
 pub mod rt;
+pub mod script;

@@ -339,5 +339,8 @@ fn print_tasks(v: &Value) {
         for p in t["ports"].as_array().into_iter().flatten() {
             println!("  port {}", p.as_str().unwrap_or(""));
         }
+        for s in t["scripts"].as_array().into_iter().flatten() {
+            println!("  script {}", super::script::describe(s));
+        }
     }
 }

@@ -15,6 +15,7 @@ mod plc;
 mod plot;
 mod run;
 mod run_cell;
+mod script;
 mod serve;
 mod sim_drive;
 
@@ -57,6 +58,9 @@ pub enum Command {
     ModbusSim(modbus_sim::ModbusSimArgs),
     /// PLC tools: compile-check or run a Structured Text program offline.
     Plc(plc::PlcArgs),
+    /// Scripts (programs and state machines): check offline; load, start, pause, step,
+    /// stop, unload and list on a running daemon.
+    Script(script::ScriptArgs),
 }
 
 /// Entry point of the binary.
@@ -76,6 +80,7 @@ pub fn main() -> ExitCode {
         Command::Canopen(a) => canopen_tool::run(a),
         Command::ModbusSim(a) => modbus_sim::run(a),
         Command::Plc(a) => plc::run(a),
+        Command::Script(a) => script::run(a),
     };
     match result {
         Ok(code) => code,

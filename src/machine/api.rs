@@ -379,6 +379,10 @@ pub trait MachineApi: Send + Sync + 'static {
     fn sim_fault(&self, fault: &SimFault) -> Result<(), ApiError>;
     /// A receiver of machine events (for `subscribe`).
     fn subscribe(&self) -> tokio::sync::broadcast::Receiver<MachineEvent>;
+    /// The machine's script hosts (programs and state machines), if it deploys any.
+    fn scripts(&self) -> Option<&crate::script::ScriptHosts> {
+        None
+    }
     /// Reads object `index:sub` of CANopen drive `drive` by SDO (non-realtime path).
     fn sdo_read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, ApiError> {
         let _ = (index, sub);

@@ -17,6 +17,8 @@ use super::vm::{Cmp, Op};
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
+pub(crate) mod fragment;
+
 /// Compiler options.
 #[derive(Debug, Clone, Copy)]
 pub struct Options {
@@ -237,6 +239,17 @@ impl<'u> Compiler<'u> {
     }
 
     fn run(&mut self, file: &str, opts: Options) -> Option<Program> {
+        let instances = self.declare();
+        if instances.is_empty() && self.diags.is_empty() {
+            self.err(Span { line: 1, col: 1 }, "no PROGRAM in the file");
+        }
+        let mut programs = self.bodies(&instances);
+        self.finish(file, opts, &mut programs, &instances, &mut [])
+    }
+
+    /// Declares every name, type, global, block and function, and lays out one instance of
+    /// every PROGRAM: (POU index, component, base address) per PROGRAM.
+    pub(crate) fn declare(&mut self) -> Vec<(usize, u32, u32)> {
         let unit = self.unit;
         // Names first, so declarations can refer to types and blocks declared later.
         for (i, t) in unit.types.iter().enumerate() {
@@ -277,7 +290,6 @@ impl<'u> Compiler<'u> {
                 PouKind::Program => {}
             }
         }
-        let mut programs = Vec::new();
         let mut instances = Vec::new();
         for (i, p) in unit.pous.iter().enumerate() {
             if p.kind == PouKind::Program {
@@ -296,9 +308,13 @@ impl<'u> Compiler<'u> {
                 instances.push((i, cid, base));
             }
         }
-        if instances.is_empty() && self.diags.is_empty() {
-            self.err(Span { line: 1, col: 1 }, "no PROGRAM in the file");
-        }
+        instances
+    }
+
+    /// Compiles every body; returns (entry, base) of each PROGRAM.
+    fn bodies(&mut self, instances: &[(usize, u32, u32)]) -> Vec<(u32, u32)> {
+        let unit = self.unit;
+        let mut programs = Vec::new();
         // Bodies.
         for (i, p) in unit.pous.iter().enumerate() {
             let members = match &p.kind {
@@ -321,6 +337,21 @@ impl<'u> Compiler<'u> {
                 programs.push((entry, base));
             }
         }
+        programs
+    }
+
+    /// Patches calls, checks recursion, builds the variable table, optimises and sizes the
+    /// stack. `extra` are further entry points (script fragments) remapped by the peephole
+    /// pass like the POUs' entries.
+    pub(crate) fn finish(
+        &mut self,
+        file: &str,
+        opts: Options,
+        programs: &mut [(u32, u32)],
+        instances: &[(usize, u32, u32)],
+        extra: &mut [u32],
+    ) -> Option<Program> {
+        let unit = self.unit;
         for &(at, pou) in &self.patches {
             let e = self.entries.get(&pou).copied().unwrap_or(0);
             if let Op::Call { entry, .. } | Op::CallInd(entry) = &mut self.ops[at] {
@@ -343,7 +374,7 @@ impl<'u> Compiler<'u> {
                 &mut vars,
             );
         }
-        for &(pou, cid, base) in &instances {
+        for &(pou, cid, base) in instances {
             let pname = unit.pous[pou].name.name.clone();
             for m in self.comps[cid as usize].members.clone() {
                 let kind = match m.section {
@@ -369,9 +400,13 @@ impl<'u> Compiler<'u> {
         {
             let mut entries: Vec<&mut u32> = programs.iter_mut().map(|(e, _)| e).collect();
             entries.extend(self.entries.values_mut());
+            entries.extend(extra.iter_mut());
             super::peephole::optimize(&mut self.ops, &mut self.spans, &mut entries);
         }
-        let stack = super::stack::max_depth(&self.ops, self.entries.values().copied());
+        let stack = super::stack::max_depth(
+            &self.ops,
+            self.entries.values().chain(extra.iter()).copied(),
+        );
         let depth = unit.pous.len() + 2;
         Some(Program::new(
             Arc::from(file),
@@ -380,7 +415,7 @@ impl<'u> Compiler<'u> {
             std::mem::take(&mut self.init),
             stack * depth + 8,
             depth,
-            programs,
+            programs.to_vec(),
             vars,
             self.enums.clone(),
             std::mem::take(&mut self.interface),
@@ -1092,6 +1127,15 @@ impl<'u> Compiler<'u> {
 
     fn body(&mut self, pou: usize, members: &[Member]) -> u32 {
         let p = &self.unit.pous[pou];
+        self.enter_scope(pou, members);
+        let entry = self.here();
+        self.stmts(&p.body);
+        self.emit(Op::Ret, p.name.span);
+        entry
+    }
+
+    /// Makes the members of POU `pou` the local symbols of the code emitted next.
+    fn enter_scope(&mut self, pou: usize, members: &[Member]) {
         self.cur_pou = pou;
         self.locals.clear();
         self.peek_cache.clear();
@@ -1105,10 +1149,6 @@ impl<'u> Compiler<'u> {
             };
             self.locals.insert(m.name.to_ascii_uppercase(), sym);
         }
-        let entry = self.here();
-        self.stmts(&p.body);
-        self.emit(Op::Ret, p.name.span);
-        entry
     }
 
     fn stmts(&mut self, list: &[Stmt]) {

@@ -93,7 +93,7 @@ impl Parser {
         u
     }
 
-    fn pou(&mut self, tag: PouKindTag) -> Pou {
+    pub(crate) fn pou(&mut self, tag: PouKindTag) -> Pou {
         self.bump();
         let name = self.ident().unwrap_or_else(|| super::expr::Ident {
             name: "?".into(),
@@ -128,7 +128,7 @@ impl Parser {
         }
     }
 
-    fn var_block(&mut self) -> Option<VarBlock> {
+    pub(crate) fn var_block(&mut self) -> Option<VarBlock> {
         let section = match self.bump() {
             Tok::Kw("VAR") => Section::Var,
             Tok::Kw("VAR_INPUT") => Section::Input,
@@ -288,7 +288,7 @@ impl Parser {
         Some(Init::Expr(self.expr()?))
     }
 
-    fn types(&mut self, out: &mut Vec<TypeDecl>) {
+    pub(crate) fn types(&mut self, out: &mut Vec<TypeDecl>) {
         self.bump();
         while !self.is_kw("END_TYPE") && !self.at_eof() && !self.at_kw_in(TOP_LEVEL) {
             let start = self.pos();
@@ -373,7 +373,7 @@ impl Parser {
         self.expect_p(";").then_some(())
     }
 
-    fn stmt(&mut self) -> Option<Stmt> {
+    pub(crate) fn stmt(&mut self) -> Option<Stmt> {
         let span = self.span();
         let kind = match self.peek().clone() {
             Tok::Kw("IF") => {
@@ -553,7 +553,7 @@ impl Parser {
     }
 }
 
-enum PouKindTag {
+pub(crate) enum PouKindTag {
     Program,
     Fb,
     Function,

@@ -25,7 +25,7 @@ use super::buffer::{unsized_buffer, BufferReader, BufferWriter, FullPolicy};
 use super::clock::SimClock;
 use super::command::{command_queue, CommandHandle, CommandSender, Commands, SendError};
 use super::data_object::{DataObject, DataObjectError, DataReader, DataWriter};
-use super::event::{Event, EventReceiver, EventSource};
+use super::event::{Event, EventCounter, EventReceiver, EventSource};
 use super::interface::{EventDescriptor, PortDescriptor, PortDirection, PortKind, TaskInterface};
 use super::runner::{Runnable, TaskInfo, TaskRunner, TaskShared};
 use super::stats::TimingStats;
@@ -259,6 +259,8 @@ struct BufferEntry {
 
 struct EventEntry {
     handle: Box<dyn Any + Send + Sync>,
+    /// The same event, type-erased (scripts look events up by name only).
+    counter: super::event::EventCounter,
     type_name: &'static str,
     emitters: Vec<String>,
     subscribers: Vec<String>,
@@ -345,15 +347,16 @@ impl Registry {
     }
 
     fn event<T: Clone + Send + 'static>(&mut self, name: &str) -> Result<Event<T>, &'static str> {
-        let e = self
-            .events
-            .entry(name.to_owned())
-            .or_insert_with(|| EventEntry {
-                handle: Box::new(Event::<T>::new(name)),
+        let e = self.events.entry(name.to_owned()).or_insert_with(|| {
+            let ev = Event::<T>::new(name);
+            EventEntry {
+                counter: ev.counter(),
+                handle: Box::new(ev),
                 type_name: std::any::type_name::<T>(),
                 emitters: Vec::new(),
                 subscribers: Vec::new(),
-            });
+            }
+        });
         e.handle
             .downcast_ref::<Event<T>>()
             .cloned()
@@ -461,6 +464,18 @@ impl Registry {
                 type_name: std::any::type_name::<T>(),
             })?;
         Ok(obj.reader()?)
+    }
+
+    /// Event `name` as an emission counter, whatever its data type.
+    fn event_counter(&self, name: &str) -> Result<EventCounter, DeployError> {
+        self.events
+            .get(name)
+            .map(|e| e.counter.clone())
+            .ok_or_else(|| DeployError::NotFound {
+                kind: "event",
+                name: name.to_owned(),
+                type_name: "any",
+            })
     }
 
     fn find_event<T: Clone + Send + 'static>(&self, name: &str) -> Result<Event<T>, DeployError> {
@@ -1008,6 +1023,10 @@ impl Deployment {
     pub fn event<T: Clone + Send + 'static>(&self, name: &str) -> Result<Event<T>, DeployError> {
         self.reg.find_event(name)
     }
+    /// Event `name` as a type-erased emission counter (scripts wait for events by name).
+    pub fn event_counter(&self, name: &str) -> Result<EventCounter, DeployError> {
+        self.reg.event_counter(name)
+    }
 
     fn start_groups(&mut self) -> Result<(), DeployError> {
         if !self.configured {
@@ -1233,6 +1252,10 @@ impl Runtime {
     pub fn event<T: Clone + Send + 'static>(&self, name: &str) -> Result<Event<T>, DeployError> {
         self.core.reg.find_event(name)
     }
+    /// Event `name` as a type-erased emission counter (scripts wait for events by name).
+    pub fn event_counter(&self, name: &str) -> Result<EventCounter, DeployError> {
+        self.core.reg.event_counter(name)
+    }
     /// Stops every thread (tasks' `stop` hooks run on their threads) and returns the
     /// configured deployment, which can be started again or cleaned up.
     pub fn stop(self) -> Deployment {
@@ -1322,6 +1345,10 @@ impl SteppedRuntime {
     /// Event `name`.
     pub fn event<T: Clone + Send + 'static>(&self, name: &str) -> Result<Event<T>, DeployError> {
         self.core.reg.find_event(name)
+    }
+    /// Event `name` as a type-erased emission counter (scripts wait for events by name).
+    pub fn event_counter(&self, name: &str) -> Result<EventCounter, DeployError> {
+        self.core.reg.event_counter(name)
     }
     /// Stops every task and returns the deployment.
     pub fn stop(self) -> Deployment {

@@ -151,6 +151,54 @@ impl<T: Clone + Send + 'static> Event<T> {
     pub fn lost(&self) -> u64 {
         self.shared.lost.load(Ordering::Relaxed)
     }
+
+    /// A type-erased view of this event's emission count, for consumers that react to the
+    /// fact of an emission and not its data (scripts waiting for an event by name).
+    pub fn counter(&self) -> EventCounter {
+        EventCounter(self.shared.clone())
+    }
+}
+
+trait Emitted: Send + Sync {
+    fn emitted(&self) -> u64;
+    fn name(&self) -> &str;
+}
+
+impl<T: Send> Emitted for Shared<T> {
+    fn emitted(&self) -> u64 {
+        self.emitted.load(Ordering::Acquire)
+    }
+    fn name(&self) -> &str {
+        &self.name
+    }
+}
+
+/// How many times an event was emitted, readable from any thread without knowing the
+/// event's data type: one atomic load, wait-free, no subscription (so nothing can be lost
+/// and the emitter does no extra work). A consumer remembers the count it has seen and
+/// compares.
+#[derive(Clone)]
+pub struct EventCounter(Arc<dyn Emitted>);
+
+impl EventCounter {
+    /// Emissions so far.
+    #[inline]
+    pub fn count(&self) -> u64 {
+        self.0.emitted()
+    }
+    /// The event's name.
+    pub fn name(&self) -> &str {
+        self.0.name()
+    }
+}
+
+impl std::fmt::Debug for EventCounter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EventCounter")
+            .field("name", &self.name())
+            .field("count", &self.count())
+            .finish()
+    }
 }
 
 /// The emitting side of an event. Owned by the emitting task.
@@ -187,7 +235,7 @@ impl<T: Clone + Send + 'static> EventSource<T> {
                 w.store(true, Ordering::Release);
             }
         }
-        self.shared.emitted.fetch_add(1, Ordering::Relaxed);
+        self.shared.emitted.fetch_add(1, Ordering::Release);
     }
 
     #[cold]
@@ -261,6 +309,17 @@ mod tests {
         assert_eq!(seen.load(Ordering::Relaxed), 7);
         assert_eq!((rx.pop(), rx.pop(), rx.pop()), (Some(3), Some(4), None));
         assert_eq!(ev.emitted(), 2);
+    }
+
+    #[test]
+    fn counter_sees_emissions_without_the_type() {
+        let ev = Event::<(u32, f64)>::new("t.e");
+        let c = ev.counter();
+        assert_eq!((c.count(), c.name()), (0, "t.e"));
+        let mut src = ev.source().unwrap();
+        src.emit((1, 2.0));
+        src.emit((3, 4.0));
+        assert_eq!(c.count(), 2);
     }
 
     #[test]

@@ -129,7 +129,7 @@ pub mod prelude {
     };
     pub use super::data_object::{DataObject, DataReader, DataWriter, FlowStatus};
     pub use super::deploy::{Configure, DeployError, Deployment, Schedule, TaskHandle};
-    pub use super::event::{Event, EventReceiver, EventSource};
+    pub use super::event::{Event, EventCounter, EventReceiver, EventSource};
     pub use super::runner::TaskInfo;
     pub use super::task::{StepContext, Task, TaskError, TaskState};
 }

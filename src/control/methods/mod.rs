@@ -17,6 +17,7 @@ mod jog;
 mod machine_power;
 mod mdi;
 mod overrides;
+mod script;
 mod sim_input;
 mod status;
 mod tasks;
@@ -48,6 +49,14 @@ pub const METHODS: &[&str] = &[
     "sim.fault",
     "drive.sdo_read",
     "drive.sdo_write",
+    "script.load",
+    "script.start",
+    "script.pause",
+    "script.resume",
+    "script.step",
+    "script.stop",
+    "script.unload",
+    "script.list",
 ];
 
 /// Runs one method against the machine.
@@ -76,6 +85,7 @@ pub fn dispatch(m: &dyn MachineApi, method: &str, params: Value) -> Result<Value
         "sim.fault" => sim_input::handle_fault(m, params),
         "drive.sdo_read" => drive::handle_read(m, params),
         "drive.sdo_write" => drive::handle_write(m, params),
+        other if other.starts_with("script.") => script::handle(m, &other[7..], params),
         other => Err(ControlError::new(
             ErrorCode::MethodNotFound,
             format!("unknown method '{other}' (methods: {})", METHODS.join(", ")),
