@@ -262,19 +262,13 @@ pub fn parse(text: &str, origin: &str) -> Result<CellFile, CellConfigError> {
     Ok(file)
 }
 
-/// Reads a cell file; a relative selection script path becomes relative to the file.
+/// Reads and checks a cell file.
 pub fn load(path: &Path) -> Result<CellFile, CellConfigError> {
     let text = std::fs::read_to_string(path).map_err(|source| CellConfigError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    let mut file = parse(&text, &path.display().to_string())?;
-    if let (Some(s), Some(dir)) = (&mut file.cell.selection.script, path.parent()) {
-        if s.is_relative() {
-            *s = dir.join(&*s);
-        }
-    }
-    Ok(file)
+    parse(&text, &path.display().to_string())
 }
 
 #[cfg(test)]

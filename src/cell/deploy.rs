@@ -47,7 +47,7 @@ pub fn deploy(cfg: &CellConfig) -> Result<Cell, DeployError> {
     let hw = app.add_periodic(names::HW, Hardware::new(world), servo)?;
     let selection = app.add_periodic(
         names::SELECTION,
-        Selection::new(cfg.selection.clone(), cfg.layout),
+        Selection::new(cfg.selection, cfg.layout),
         cfg.threads.selection.schedule(),
     )?;
     let camera = app.add_non_periodic(

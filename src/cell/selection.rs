@@ -1,11 +1,13 @@
 //! The selection task: the pick-and-place sequence as a state machine over the paper's states
 //! (section VII), written as plain Rust.
 //!
-//! This is the **fallback** the issue allows while the script engine is not usable: the same
-//! states, transitions and precondition as `config/scripts/selection.st`, which is what the
-//! cell runs once the script language can express it (see the cell's module doc for which
-//! one a deployment uses). Keeping both honest: the tests drive the cell through the task's
-//! operations and events only, so they hold for either implementation.
+//! This is the **fallback** the issue allows: the cell deploys this Rust state machine.
+//! The same machine is written in the script language in `config/scripts/selection.st`
+//! (compiled and bound to the cell's tasks by `tests/cell_script.rs`), but no task hosts it
+//! yet: the script engine landed late, and hosting it needs a selection task that embeds a
+//! `script::ScriptHost`, mirrors `grabbed` / `robot_ok` / `detected` into its globals every
+//! step and maps its EMITs to `operation_n_done` / `error_detected`. The tests drive the cell
+//! through the task's operations and events only, so they will hold for either.
 //!
 //! States and transitions (entry actions are robot / camera commands, done in order, each
 //! waited for through its completion condition; a rejected or failed one is an error):
@@ -89,7 +91,7 @@ pub struct SelectionStatus {
 }
 
 /// Timeouts of the selection.
-#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SelectionConfig {
     /// Longest wait for "object grabbed" after the gripper closed, ms.
@@ -98,10 +100,6 @@ pub struct SelectionConfig {
     /// Longest wait for a detection event, ms.
     #[serde(default = "default_detect_timeout")]
     pub detection_timeout_ms: u64,
-    /// Script with the selection state machine, relative to the config file. When absent
-    /// (or while the script engine cannot run it) the built-in Rust state machine runs.
-    #[serde(default)]
-    pub script: Option<std::path::PathBuf>,
 }
 
 fn default_grab_timeout() -> u64 {
@@ -116,7 +114,6 @@ impl Default for SelectionConfig {
         Self {
             grab_timeout_ms: default_grab_timeout(),
             detection_timeout_ms: default_detect_timeout(),
-            script: None,
         }
     }
 }
