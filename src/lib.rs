@@ -12,12 +12,15 @@
 //! - [`plc`]: IEC 61131-3 Structured Text: compiler and allocation-free scan.
 //! - [`script`]: programs and state machines in the PLC's Structured Text plus script
 //!   statements (DO, WAIT, TRY, states and transitions), run step by step inside a task.
+//! - [`cell`]: the pick-and-place cell of the seed paper on simulated hardware.
 //! - [`gcode`]: RS274/NGC (LinuxCNC dialect) front end: text in, canonical commands out.
 //! - [`rt`]: the reusable realtime task model: activities, data objects, buffers, events,
 //!   commands, lifecycle, timing statistics. It knows nothing of machines.
 
 // Under `--cfg loom` (model checking of rt's lock-free primitives) tokio compiles out its
 // networking and signals, so the modules built on them are left out of that build.
+#[cfg(not(loom))]
+pub mod cell;
 #[cfg(not(loom))]
 pub mod cli;
 pub mod config;

@@ -15,6 +15,7 @@ mod plan;
 mod plc;
 mod plot;
 mod run;
+mod run_cell;
 mod script;
 mod serve;
 mod sim_drive;
@@ -36,6 +37,8 @@ pub enum Command {
     Serve(serve::ServeArgs),
     /// Run a G-code job (on the daemon, or on an embedded simulated machine if none runs).
     Run(run::RunArgs),
+    /// Run the pick-and-place cell (on an embedded daemon, or `--socket`) and report.
+    RunCell(run_cell::RunCellArgs),
     /// Talk to a running daemon: status, estop, home, jog, mdi, ...
     #[command(flatten)]
     Client(client::ClientCommand),
@@ -68,6 +71,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Serve(a) => serve::run(a),
         Command::Run(a) => run::run(a),
+        Command::RunCell(a) => run_cell::run(a),
         Command::Client(a) => client::run(a),
         Command::Check(a) => check::run(a),
         Command::Latency(a) => latency::run(a),

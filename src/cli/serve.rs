@@ -7,7 +7,8 @@ use std::process::ExitCode;
 /// Arguments of `hytask serve`.
 #[derive(Debug, clap::Args)]
 pub struct ServeArgs {
-    /// Machine description (TOML). Default: the built-in simulated mill.
+    /// Machine description (TOML), or a cell (a file with a `[cell]` table, e.g.
+    /// config/pickplace.toml). Default: the built-in simulated mill.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Control socket path; overrides `[control] socket` of the config.
@@ -19,6 +20,13 @@ pub struct ServeArgs {
 pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
     use crate::control::{listen, server::ServerOptions};
     init_logging();
+    if let Some(cell) = args
+        .config
+        .as_deref()
+        .filter(|p| crate::cell::config::is_cell_file(p))
+    {
+        return super::run_cell::serve(cell, args.socket);
+    }
     let config = crate::machine::load_config(args.config.as_deref())?;
     let socket = listen::SocketOptions::from_config(&config.control, args.socket);
     let options = ServerOptions::from_config(&config.control)?;

@@ -160,7 +160,16 @@ impl Embedded {
     /// Starts the machine described by `config` (default: the built-in sim mill).
     pub fn start(config: Option<&Path>) -> anyhow::Result<Embedded> {
         let cfg = crate::machine::load_config(config)?;
-        let options = ServerOptions::from_config(&cfg.control)?;
+        Self::start_with(&cfg.control, || Ok(crate::machine::deploy_from(config)?))
+    }
+
+    /// Starts what `deploy` deploys (a machine, a cell), served with the options of
+    /// `control` on a private socket.
+    pub fn start_with(
+        control: &crate::config::ControlConfig,
+        deploy: impl FnOnce() -> anyhow::Result<Arc<dyn Deployed>>,
+    ) -> anyhow::Result<Embedded> {
+        let options = ServerOptions::from_config(control)?;
         let dir = tempdir::Dir::new()?;
         let socket = dir.path().join("control.sock");
         // The path is claimed before the machine is deployed, as `hytask serve` does.
@@ -169,7 +178,7 @@ impl Embedded {
             mode: 0o600,
             group: None,
         })?;
-        let machine = crate::machine::deploy_from(config)?;
+        let machine = deploy()?;
         let listener = claim.bind()?;
         let (tx, rx) = tokio::sync::oneshot::channel::<()>();
         let m = machine.clone();

@@ -12,6 +12,7 @@ pub mod probing;
 pub mod runtime;
 pub mod safety;
 pub mod servo;
+pub mod task_api;
 
 pub use runtime::{DeployError, Machine};
 

@@ -31,8 +31,8 @@ use crate::gcode::{InterpOptions, SourceLoc, NUM_AXES};
 use crate::motion::{self, MotionConfig, AXIS_NAMES};
 use crate::rt::deploy::Runtime;
 use crate::rt::prelude::{
-    buffer, ArgValue, BufferWriter, CommandHandle, CommandStatus, DataReader, Deployment,
-    EventReceiver, FullPolicy, OverrunPolicy, Schedule, TaskHandle,
+    buffer, BufferWriter, CommandHandle, CommandStatus, DataReader, Deployment, EventReceiver,
+    FullPolicy, OverrunPolicy, Schedule, TaskHandle,
 };
 use hytask_hal::sim::{SimAxisHandle, SimIoHandle};
 use serde_json::{json, Value};
@@ -776,32 +776,7 @@ impl MachineApi for Machine {
             .collect();
         let threads = lock(&self.runtime)
             .as_ref()
-            .map(|rt| {
-                rt.threads()
-                    .iter()
-                    .map(|t| {
-                        let s = t.stats.summary();
-                        let us = |ns: u64| ns as f64 / 1000.0;
-                        ThreadTiming {
-                            name: t.spec.name.clone(),
-                            period_us: t.spec.period_ns / 1000,
-                            priority: t.spec.priority,
-                            cycles: s.wakeup.count,
-                            latency_us: MinAvgMax {
-                                min: us(s.wakeup.min_ns),
-                                avg: us(s.wakeup.avg_ns),
-                                max: us(s.wakeup.max_ns),
-                            },
-                            exec_us: MinAvgMax {
-                                min: us(s.exec.min_ns),
-                                avg: us(s.exec.avg_ns),
-                                max: us(s.exec.max_ns),
-                            },
-                            overruns: s.overruns,
-                        }
-                    })
-                    .collect()
-            })
+            .map(|rt| super::task_api::thread_timings(&rt.threads()))
             .unwrap_or_default();
         let (inputs, outputs) = (st.inputs, st.outputs);
         let map = &self.io_map;
@@ -1053,56 +1028,10 @@ impl MachineApi for Machine {
     }
 
     fn tasks(&self) -> Vec<TaskInfo> {
-        let rt = lock(&self.runtime);
-        let Some(rt) = rt.as_ref() else {
-            return Vec::new();
-        };
-        rt.tasks()
-            .iter()
-            .map(|t| {
-                let i = t.interface();
-                let timing = t.timing();
-                let us = |ns: u64| ns as f64 / 1000.0;
-                TaskInfo {
-                    exec_us: MinAvgMax {
-                        min: us(timing.exec.min_ns),
-                        avg: us(timing.exec.avg_ns),
-                        max: us(timing.exec.max_ns),
-                    },
-                    name: t.name().to_string(),
-                    state: format!("{:?}", t.state()).to_lowercase(),
-                    thread: t.thread().to_string(),
-                    operations: i
-                        .operations
-                        .iter()
-                        .map(|o| OperationInfo {
-                            name: o.name.into(),
-                            doc: o.doc.into(),
-                            params: o
-                                .params
-                                .iter()
-                                .map(|p| format!("{}: {:?}", p.name, p.ty).to_lowercase())
-                                .collect(),
-                        })
-                        .collect(),
-                    events: i.emits.iter().map(|e| e.name.clone()).collect(),
-                    ports: i
-                        .ports
-                        .iter()
-                        .map(|p| {
-                            use crate::rt::interface::{PortDirection as D, PortKind as K};
-                            let dir = match (p.direction, p.kind) {
-                                (D::Input, K::Data) => "in",
-                                (D::Output, K::Data) => "out",
-                                (D::Input, K::Buffer) => "in (buffer)",
-                                (D::Output, K::Buffer) => "out (buffer)",
-                            };
-                            format!("{dir} {}", p.object)
-                        })
-                        .collect(),
-                }
-            })
-            .collect()
+        lock(&self.runtime)
+            .as_ref()
+            .map(|rt| super::task_api::task_infos(rt.tasks()))
+            .unwrap_or_default()
     }
 
     fn sdo_read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, ApiError> {
@@ -1127,46 +1056,9 @@ impl MachineApi for Machine {
             let rt = rt
                 .as_ref()
                 .ok_or_else(|| ApiError::Rejected("the machine is stopped".into()))?;
-            let t = rt
-                .task(task)
-                .ok_or_else(|| ApiError::InvalidParams(format!("no task '{task}'")))?;
-            let op = t
-                .commands()
-                .operations()
-                .iter()
-                .find(|o| o.name == operation)
-                .ok_or_else(|| {
-                    ApiError::InvalidParams(format!("task '{task}' has no operation '{operation}'"))
-                })?;
-            let values: Vec<Value> = match args {
-                Value::Null => Vec::new(),
-                Value::Array(a) => a.clone(),
-                Value::Object(o) => op
-                    .params
-                    .iter()
-                    .map(|p| o.get(p.name).cloned().unwrap_or(Value::Null))
-                    .collect(),
-                other => vec![other.clone()],
-            };
-            let parsed: Vec<ArgValue> = values
-                .into_iter()
-                .map(serde_json::from_value)
-                .collect::<Result<_, _>>()
-                .map_err(|e| ApiError::InvalidParams(format!("arguments: {e}")))?;
-            t.commands()
-                .send_args(operation, &parsed)
-                .map_err(|e| ApiError::InvalidParams(e.to_string()))?
+            super::task_api::send_call(rt.tasks(), task, operation, args)?
         };
-        let status = handle.wait(Duration::from_secs(5));
-        match status {
-            CommandStatus::Rejected(r) => Err(ApiError::Rejected(r.to_string())),
-            CommandStatus::Failed(why) => Err(ApiError::Failed(why.into())),
-            CommandStatus::Done => Ok(json!({"status": "done"})),
-            CommandStatus::Accepted => Ok(json!({"status": "accepted"})),
-            CommandStatus::Pending => Err(ApiError::Timeout(format!(
-                "task '{task}' did not take the command"
-            ))),
-        }
+        super::task_api::call_reply(&handle, task)
     }
 
     fn set_sim_input(&self, name: &str, value: f64) -> Result<(), ApiError> {
