@@ -233,3 +233,34 @@ fn call_refuses_the_job_machinerys_own_operations() {
     assert!(m.status().optional_stop);
     shutdown(&m);
 }
+
+/// Benchmark defect: about one `mdi M8` / `mdi M9` in 250 hung in `running` without
+/// applying its M-code. Many alternating coolant lines, each sent as soon as the previous
+/// one's coil is seen (retrying while the machine is still busy with the last one), as the
+/// Modbus latency benchmark does; each must apply its output and end `done`.
+#[test]
+fn many_mdi_coolant_lines_each_apply_their_output_and_end() {
+    let (m, _dir) = sim_machine();
+    ready(&m);
+    for k in 0..600 {
+        let on = k % 2 == 0;
+        let line = if on { "M8" } else { "M9" };
+        let t0 = Instant::now();
+        loop {
+            match m.mdi(line) {
+                Ok(()) => break,
+                Err(ApiError::Rejected(_)) => {
+                    assert!(t0.elapsed() < Duration::from_secs(60), "mdi {k} refused");
+                    std::thread::yield_now();
+                }
+                Err(e) => panic!("mdi {k} {line}: {e}"),
+            }
+        }
+        let level = f64::from(u8::from(on));
+        let what = format!("mdi {k} {line} applied");
+        wait(&m, &what, |s| s.outputs["coolant_flood"] == level);
+    }
+    let s = wait(&m, "the last mdi done", |s| s.job.state != "running");
+    assert_eq!(s.job.state, "done");
+    shutdown(&m);
+}

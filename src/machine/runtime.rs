@@ -576,6 +576,14 @@ impl Machine {
     /// Starts a prepared job (or jog/MDI) as job `id`: feeder first, then the `run` command.
     fn start_job(&self, job: Arc<PreparedJob>, manual: bool) -> Result<(), ApiError> {
         self.check_can_run(manual)?;
+        // The end of the previous job may still wait in the event queue (the machine task
+        // emits it in the cycle whose snapshot said idle). Job events carry no job id: left
+        // there, the bridge applied it to this job once installed below, took it out of the
+        // book and cancelled its feeder before it queued its items, and the machine waited
+        // in `running` for items that never came (the benchmark's hung `mdi M8`, status
+        // `running` at progress 1.0). Applying it now, while the old job is still the
+        // active one, ends that one.
+        self.pump_events();
         probing::check_probe_start(&job, self.probe_active())?;
         let pose = self.actual_pose();
         for &(c, i) in self.axes().iter() {
