@@ -282,6 +282,7 @@ impl MachineApi for CellDaemon {
             outputs,
             probe: ProbeStatus::default(),
             optional_stop: false,
+            plc: None,
         }
     }
     fn estop(&self) -> Result<(), ApiError> {

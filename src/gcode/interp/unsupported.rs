@@ -5,6 +5,9 @@
 /// The message for an unsupported G code (tenths), or None if hytask implements it.
 pub(crate) fn g_code(g: u16) -> Option<&'static str> {
     Some(match g {
+        700 => "G70 (lathe finishing cycle) is not supported by hytask",
+        710 | 711 => "G71/G71.1 (lathe roughing cycle) is not supported by hytask",
+        720 | 721 => "G72/G72.1 (lathe facing cycle) is not supported by hytask",
         870 => "G87 (back boring cycle) is not supported by hytask",
         _ => return None,
     })
