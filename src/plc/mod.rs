@@ -13,13 +13,16 @@
 //!   machine's signals, the data exchanged with the machine task, the realtime scan task.
 
 pub mod ast;
+#[cfg(not(loom))]
 pub mod bind;
 mod builtins;
 pub mod compile;
+#[cfg(not(loom))]
 pub mod deploy;
 pub mod diag;
 pub mod expr;
 pub mod lexer;
+#[cfg(not(loom))]
 pub mod link;
 pub mod parser;
 mod peephole;
@@ -27,6 +30,7 @@ pub mod program;
 pub mod retain;
 mod stack;
 pub mod stdfb;
+#[cfg(not(loom))]
 pub mod task;
 pub mod types;
 pub mod value;
