@@ -268,7 +268,14 @@ pub fn load(path: &Path) -> Result<CellFile, CellConfigError> {
         path: path.to_path_buf(),
         source,
     })?;
-    parse(&text, &path.display().to_string())
+    let mut file = parse(&text, &path.display().to_string())?;
+    // The selection script is named relative to the configuration file.
+    if let Some(s) = &mut file.cell.selection.script {
+        if s.is_relative() {
+            *s = path.parent().unwrap_or(Path::new("")).join(&*s);
+        }
+    }
+    Ok(file)
 }
 
 #[cfg(test)]

@@ -1,13 +1,11 @@
 //! The selection task: the pick-and-place sequence as a state machine over the paper's states
 //! (section VII), written as plain Rust.
 //!
-//! This is the **fallback** the issue allows: the cell deploys this Rust state machine.
-//! The same machine is written in the script language in `config/scripts/selection.st`
-//! (compiled and bound to the cell's tasks by `tests/cell_script.rs`), but no task hosts it
-//! yet: the script engine landed late, and hosting it needs a selection task that embeds a
-//! `script::ScriptHost`, mirrors `grabbed` / `robot_ok` / `detected` into its globals every
-//! step and maps its EMITs to `operation_n_done` / `error_detected`. The tests drive the cell
-//! through the task's operations and events only, so they will hold for either.
+//! The cell deploys the same machine written in the script language by default
+//! (`config/scripts/selection.st`, hosted by [`super::scripted`]); this Rust one is the
+//! reference, selected with `[cell.selection] kind = "rust"`, and `tests/cell_sort.rs` runs
+//! both on the same seed. The tests drive the cell through the task's operations and events
+//! only, so they hold for either.
 //!
 //! States and transitions (entry actions are robot / camera commands, done in order, each
 //! waited for through its completion condition; a rejected or failed one is an error):
@@ -90,10 +88,30 @@ pub struct SelectionStatus {
     pub entered: bool,
 }
 
-/// Timeouts of the selection.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+/// Which implementation runs the selection.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SelectionKind {
+    /// The state machine in the script language (`config/scripts/selection.st`), hosted by
+    /// [`super::scripted::ScriptedSelection`]: the cell's default, as the paper has it.
+    #[default]
+    Script,
+    /// This module's plain-Rust machine, kept as a reference for side-by-side tests.
+    Rust,
+}
+
+/// `[cell.selection]`: implementation, script and timeouts.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SelectionConfig {
+    /// `script` (default) or `rust`.
+    #[serde(default)]
+    pub kind: SelectionKind,
+    /// The script's file; a relative path is relative to the configuration file. Absent:
+    /// the shipped `config/scripts/selection.st`, built into the binary so a minimal cell
+    /// file works from any directory.
+    #[serde(default)]
+    pub script: Option<std::path::PathBuf>,
     /// Longest wait for "object grabbed" after the gripper closed, ms.
     #[serde(default = "default_grab_timeout")]
     pub grab_timeout_ms: u64,
@@ -112,6 +130,8 @@ fn default_detect_timeout() -> u64 {
 impl Default for SelectionConfig {
     fn default() -> Self {
         Self {
+            kind: SelectionKind::default(),
+            script: None,
             grab_timeout_ms: default_grab_timeout(),
             detection_timeout_ms: default_detect_timeout(),
         }
