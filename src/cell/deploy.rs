@@ -85,7 +85,14 @@ pub fn deploy(cfg: &CellConfig) -> Result<Cell, CellDeployError> {
         // Bound after configure: the bindings name the deployed peers and events.
         let (done, error) = source.flags();
         let b = scripted::bindings(&app, robot.info(), camera.info(), done, error)?;
-        scripted::bind(&source.file, &source.src, &control, &b, &cfg.layout)?;
+        scripted::bind(
+            &source.file,
+            &source.src,
+            &control,
+            &b,
+            &cfg.layout,
+            &cfg.selection,
+        )?;
         control.attach(selection.info().clone());
         let b = scripted::bindings(&app, robot.info(), camera.info(), done, error)?;
         scripts.add(Arc::new(control), b);

@@ -18,7 +18,7 @@
 //! script list|pause|step|...` and `hytask tasks` show and drive the running machine.
 
 use super::names;
-use super::selection::{SelectionCmd, SelectionState, SelectionStatus};
+use super::selection::{SelectionCmd, SelectionConfig, SelectionState, SelectionStatus};
 use super::types::{Container, RobotState, RobotStatus, RunDone};
 use super::world::Layout;
 use crate::plc::{Value, VarId};
@@ -190,6 +190,8 @@ impl ScriptedSelection {
             "the robot stopped (fault or emergency stop)"
         } else if before == SelectionState::TakingObject {
             "no object grabbed"
+        } else if before == SelectionState::DetectingObject {
+            "no detection result"
         } else {
             "a command failed"
         }
@@ -484,13 +486,14 @@ impl Source {
 }
 
 /// Binds the script to the configured deployment and queues it (with the layout's
-/// positions in its globals) on `control`; the task runs it from its first step.
+/// positions and the timeouts in its globals) on `control`; the task runs it from its first step.
 pub fn bind(
     file: &str,
     src: &str,
     control: &ScriptControl,
     b: &Bindings,
     layout: &Layout,
+    timeouts: &SelectionConfig,
 ) -> Result<(), ScriptLoadError> {
     let err = |e: crate::script::ControlError| ScriptLoadError::Compile(e.to_string());
     let slot = control.load(file, src, b).map_err(err)?;
@@ -518,5 +521,13 @@ pub fn bind(
     control
         .set(slot, "travel_z", Value::Real(layout.travel_z_mm))
         .map_err(err)?;
+    let ns = |ms: u64| Value::Time(i64::try_from(ms.saturating_mul(1_000_000)).unwrap_or(i64::MAX));
+    let t = [
+        ("grab_timeout", timeouts.grab_timeout_ms),
+        ("detection_timeout", timeouts.detection_timeout_ms),
+    ];
+    for (name, ms) in t {
+        control.set(slot, name, ns(ms)).map_err(err)?;
+    }
     Ok(())
 }
