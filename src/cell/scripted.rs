@@ -18,7 +18,10 @@
 //! script list|pause|step|...` and `hytask tasks` show and drive the running machine.
 
 use super::names;
-use super::selection::{SelectionCmd, SelectionConfig, SelectionState, SelectionStatus};
+use super::selection::{
+    check_run, op_progress, CommonPorts, SelectionCmd, SelectionConfig, SelectionState,
+    SelectionStatus,
+};
 use super::types::{Container, RobotState, RobotStatus, RunDone};
 use super::world::Layout;
 use crate::plc::{Value, VarId};
@@ -103,7 +106,7 @@ pub struct ScriptedSelection {
     host: ScriptHost,
     prepared: Option<Prepared>,
     slot: usize,
-    ports: Ports,
+    ports: CommonPorts,
     robot: RobotStatus,
     /// Camera verdict: 0 none yet, 1 A, 2 B, 3 reject.
     detected: i64,
@@ -125,21 +128,6 @@ pub struct ScriptedSelection {
     run_started_ns: u64,
 }
 
-#[derive(Default)]
-struct Ports {
-    status_in: Option<DataReader<RobotStatus>>,
-    status_out: Option<DataWriter<SelectionStatus>>,
-    a: Option<EventReceiver<u32>>,
-    b: Option<EventReceiver<u32>>,
-    none: Option<EventReceiver<u32>>,
-    done: Option<EventSource<RunDone>>,
-    error: Option<EventSource<()>>,
-}
-
-fn drained<T: Send>(r: &mut Option<EventReceiver<T>>) -> bool {
-    r.as_mut().is_some_and(|r| r.drain(|_| {}) > 0)
-}
-
 impl ScriptedSelection {
     /// The task running `source` and the control half of its script host (the script is
     /// bound and queued by [`bind`] once the deployment is configured).
@@ -156,7 +144,7 @@ impl ScriptedSelection {
             host,
             prepared: Some(prepared),
             slot: 0,
-            ports: Ports::default(),
+            ports: CommonPorts::default(),
             robot: RobotStatus::default(),
             detected: 0,
             runs_asked: 0,
@@ -298,14 +286,7 @@ impl ScriptedSelection {
 impl Task for ScriptedSelection {
     type Command = SelectionCmd;
     fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
-        let p = &mut self.ports;
-        p.status_in = Some(ctx.input(names::ROBOT_STATUS));
-        p.status_out = Some(ctx.output(names::SELECTION_STATUS));
-        p.a = Some(ctx.subscribe(names::A_DETECTED_EVENT, 8));
-        p.b = Some(ctx.subscribe(names::B_DETECTED_EVENT, 8));
-        p.none = Some(ctx.subscribe(names::NONE_DETECTED_EVENT, 8));
-        p.done = Some(ctx.event("operation_n_done"));
-        p.error = Some(ctx.event("error_detected"));
+        self.ports.configure(ctx);
         Ok(())
     }
     fn start(&mut self) -> Result<(), TaskError> {
@@ -349,12 +330,7 @@ impl Task for ScriptedSelection {
     fn accept(&mut self, c: &SelectionCmd, _: &StepContext) -> Result<(), RejectReason> {
         match *c {
             SelectionCmd::Run(n) => {
-                if n == 0 {
-                    return Err(RejectReason::BadParameters("n must be at least 1"));
-                }
-                if !self.idle_at_home() {
-                    return Err(RejectReason::Busy);
-                }
+                check_run(n, self.idle_at_home())?;
                 self.runs_asked = n;
                 self.reset_runs = true;
                 self.run_pending = true;
@@ -374,24 +350,21 @@ impl Task for ScriptedSelection {
         Ok(())
     }
     fn progress(&mut self, c: &SelectionCmd, _: &StepContext) -> Progress {
-        match *c {
-            SelectionCmd::Run(_) if self.errors != self.run_errors_at_start => {
-                Progress::Failed("error detected")
-            }
-            _ if self.idle_at_home() => Progress::Done,
-            _ => Progress::Running,
-        }
+        op_progress(
+            c,
+            self.errors != self.run_errors_at_start,
+            self.idle_at_home(),
+        )
     }
     fn process_events(&mut self, _: &StepContext) {
-        let detected = [
-            (drained(&mut self.ports.a), 1),
-            (drained(&mut self.ports.b), 2),
-            (drained(&mut self.ports.none), 3),
-        ];
-        if self.state == SelectionState::DetectingObject {
-            if let Some((_, d)) = detected.into_iter().find(|(seen, _)| *seen) {
-                self.detected = d;
-            }
+        let verdict = self.ports.verdict();
+        if let (SelectionState::DetectingObject, Some(c)) = (self.state, verdict) {
+            // The script's encoding: 1 A, 2 B, 3 reject.
+            self.detected = match c {
+                Container::A => 1,
+                Container::B => 2,
+                Container::Reject => 3,
+            };
         }
     }
 }
