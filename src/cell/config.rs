@@ -298,4 +298,30 @@ mod tests {
         .unwrap_err();
         assert!(e.to_string().contains("cell.layout.home_mm"), "{e}");
     }
+
+    #[test]
+    fn selection_script_is_relative_to_the_file_and_script_is_the_default() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cell.toml");
+        let text = "[cell.world]\nseed = 5\n[cell.selection]\nscript = \"scripts/s.st\"\n";
+        std::fs::write(&path, text).unwrap();
+        let f = load(&path).unwrap();
+        assert_eq!(
+            f.cell.selection.script,
+            Some(dir.path().join("scripts/s.st"))
+        );
+        assert_eq!(
+            f.cell.selection.kind,
+            super::super::selection::SelectionKind::Script
+        );
+        let f = parse(
+            "[cell.world]\nseed = 5\n[cell.selection]\nkind = \"rust\"\n",
+            "t",
+        )
+        .unwrap();
+        assert_eq!(
+            f.cell.selection.kind,
+            super::super::selection::SelectionKind::Rust
+        );
+    }
 }
