@@ -16,6 +16,9 @@
 //! The script is compiled ([`read`]) and bound ([`bind`]) at deploy: errors name `file:line:col` and
 //! refuse the deployment. Its [`ScriptControl`] is registered as a script host, so `hytask
 //! script list|pause|step|...` and `hytask tasks` show and drive the running machine.
+//! The task drives slot 0 with the globals resolved from the script read at deploy: after
+//! `hytask script unload`, loading a script with other globals there is not supported
+//! (restart the cell with the new file instead).
 
 use super::names;
 use super::selection::{
