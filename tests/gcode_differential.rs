@@ -24,11 +24,13 @@ enum Allowed {
 }
 
 /// Per-file deliberate differences, with the reason (see DIFFERENCES.md).
-const ALLOWED: &[(&str, Allowed, &str)] = &[(
-    "ocode_do_after_break",
-    Allowed::Rs274Bug,
-    "rs274 runs a do/while loop only once after a while loop left by break",
-)];
+const ALLOWED: &[(&str, Allowed, &str)] = &[
+    (
+        "ocode_do_after_break",
+        Allowed::Rs274Bug,
+        "rs274 runs a do/while loop only once after a while loop left by break",
+    ),
+];
 
 fn corpus() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gcode/corpus")
