@@ -28,6 +28,14 @@ fn fast_config(dir: &Path, extra: &str) -> PathBuf {
         "world seed changed"
     );
     let text = text.replace("# sim_speed = 10.0", &format!("sim_speed = 20.0\n{extra}"));
+    // The copy lives elsewhere: name the shipped script by its absolute path.
+    let script = std::fs::canonicalize("config/scripts/selection.st").unwrap();
+    let relative = "script = \"scripts/selection.st\"";
+    assert!(text.contains(relative), "config/pickplace.toml changed");
+    let text = text.replace(
+        relative,
+        &format!("script = {:?}", script.display().to_string()),
+    );
     let path = dir.join("pickplace-fast.toml");
     std::fs::write(&path, text).unwrap();
     path
@@ -71,6 +79,23 @@ fn daemon_serves_the_cell_and_sorts_through_socket_calls() {
             "camera"
         ]
     );
+    // The selection is the script's state machine, visible as a script host.
+    let selection = &tasks[5];
+    let machine = &selection["scripts"][0];
+    assert_eq!(
+        (&machine["name"], &machine["kind"], &machine["status"]),
+        (
+            &json!("selection"),
+            &json!("state_machine"),
+            &json!("running")
+        ),
+        "{selection}"
+    );
+    assert_eq!(machine["state"], json!("homed"), "{machine}");
+    assert!(machine["file"]
+        .as_str()
+        .unwrap()
+        .ends_with("config/scripts/selection.st"));
     let r = ok(
         &mut c,
         "call",
@@ -104,6 +129,13 @@ fn daemon_serves_the_cell_and_sorts_through_socket_calls() {
         ]
     );
     assert_eq!(s["job"]["line"], json!(5));
+    let list = ok(&mut c, "script.list", Value::Null);
+    let m = &list[0];
+    assert_eq!(
+        (&m["task"], &m["state"]),
+        (&json!("selection"), &json!("homed"))
+    );
+    assert!(m["transitions"].as_u64().unwrap() > 5 * 6, "{m}");
     assert_eq!(s["mode"], json!("idle"));
     // A robot operation by name: the e-stop stops the robot; the selection is idle so the
     // mode says e-stop.

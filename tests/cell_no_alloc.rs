@@ -1,5 +1,6 @@
 //! Zero allocation in the cell's realtime steps: the servo chain (sensor, robot, PID,
-//! effector, simulated hardware), the selection state machine and the camera's detection,
+//! effector, simulated hardware), the selection state machine (the script, the default) and
+//! the camera's detection,
 //! counted by the counting allocator over whole pick-and-place runs on simulated time.
 #![allow(clippy::unwrap_used)]
 

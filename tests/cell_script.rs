@@ -1,6 +1,7 @@
 //! The selection state machine shipped as a script (config/scripts/selection.st) compiles
 //! with the script engine and binds to the cell's deployed robot and camera tasks and their
-//! events: every operation and event name it uses exists.
+//! events: every operation and event name it uses exists; a broken one refuses the cell's
+//! deployment with its file:line:col.
 #![allow(clippy::unwrap_used)]
 
 use hytask::cell::config::CellConfig;
@@ -32,4 +33,32 @@ fn shipped_selection_script_compiles_and_binds_to_the_cell() {
     if let Err(e) = script.bind(&b) {
         panic!("{e}");
     }
+}
+
+/// A selection script with an error refuses the cell's deployment, naming file:line:col.
+#[test]
+fn a_broken_selection_script_refuses_the_deployment_with_its_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("broken.st");
+    let src = std::fs::read_to_string("config/scripts/selection.st")
+        .unwrap()
+        .replace(
+            "DO camera.start_detection();",
+            "DO camera.start_detecting();",
+        );
+    std::fs::write(&path, &src).unwrap();
+    let line = src
+        .lines()
+        .position(|l| l.contains("start_detecting"))
+        .unwrap()
+        + 1;
+    let mut cfg = CellConfig::with_seed(1);
+    cfg.selection.script = Some(path.clone());
+    let e = match deploy(&cfg) {
+        Ok(_) => panic!("deployed a broken script"),
+        Err(e) => e.to_string(),
+    };
+    let place = format!("{}:{line}:", path.display());
+    assert!(e.contains(&place), "{e}");
+    assert!(e.contains("start_detecting"), "{e}");
 }

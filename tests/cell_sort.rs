@@ -6,7 +6,7 @@ mod cell_support;
 
 use cell_support::{container_counts, expected_counts, Rig, SECOND};
 use hytask::cell::config::CellConfig;
-use hytask::cell::selection::{SelectionCmd, SelectionState};
+use hytask::cell::selection::{SelectionCmd, SelectionKind, SelectionState};
 use hytask::rt::prelude::*;
 
 #[test]
@@ -66,4 +66,31 @@ fn run_is_rejected_while_busy_and_with_zero() {
     assert_eq!(second.status(), CommandStatus::Rejected(RejectReason::Busy));
     rig.run_until(30 * SECOND, |_| first.status().is_final());
     assert_eq!(first.status(), CommandStatus::Done);
+}
+
+/// The script selection (the default) and the Rust reference sort the same seeded sequence
+/// into the same containers, run by run.
+#[test]
+fn script_and_rust_selections_sort_the_same_seed_identically() {
+    let sorted = |kind: SelectionKind| {
+        let mut cfg = CellConfig::with_seed(13);
+        cfg.selection.kind = kind;
+        let mut rig = Rig::start(&cfg);
+        rig.until_homed();
+        let run = rig.cell_selection.send(SelectionCmd::Run(12)).unwrap();
+        rig.run_until(200 * SECOND, |_| run.status().is_final());
+        assert_eq!(run.status(), CommandStatus::Done, "{kind:?}");
+        let (counts, runs) = container_counts(&mut rig.done);
+        let containers: Vec<_> = runs.iter().map(|r| r.container).collect();
+        (counts, containers, rig.tally().in_container)
+    };
+    let script = sorted(SelectionKind::Script);
+    let rust = sorted(SelectionKind::Rust);
+    assert_eq!(script, rust);
+    assert_eq!(script.0, expected_counts(13, 12));
+    assert!(
+        script.0.iter().all(|&n| n > 0),
+        "every container used: {:?}",
+        script.0
+    );
 }

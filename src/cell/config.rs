@@ -268,7 +268,14 @@ pub fn load(path: &Path) -> Result<CellFile, CellConfigError> {
         path: path.to_path_buf(),
         source,
     })?;
-    parse(&text, &path.display().to_string())
+    let mut file = parse(&text, &path.display().to_string())?;
+    // The selection script is named relative to the configuration file.
+    if let Some(s) = &mut file.cell.selection.script {
+        if s.is_relative() {
+            *s = path.parent().unwrap_or(Path::new("")).join(&*s);
+        }
+    }
+    Ok(file)
 }
 
 #[cfg(test)]
@@ -290,5 +297,31 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("cell.layout.home_mm"), "{e}");
+    }
+
+    #[test]
+    fn selection_script_is_relative_to_the_file_and_script_is_the_default() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cell.toml");
+        let text = "[cell.world]\nseed = 5\n[cell.selection]\nscript = \"scripts/s.st\"\n";
+        std::fs::write(&path, text).unwrap();
+        let f = load(&path).unwrap();
+        assert_eq!(
+            f.cell.selection.script,
+            Some(dir.path().join("scripts/s.st"))
+        );
+        assert_eq!(
+            f.cell.selection.kind,
+            super::super::selection::SelectionKind::Script
+        );
+        let f = parse(
+            "[cell.world]\nseed = 5\n[cell.selection]\nkind = \"rust\"\n",
+            "t",
+        )
+        .unwrap();
+        assert_eq!(
+            f.cell.selection.kind,
+            super::super::selection::SelectionKind::Rust
+        );
     }
 }

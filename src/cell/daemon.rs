@@ -47,6 +47,8 @@ pub struct CellDaemon {
     events: broadcast::Sender<MachineEvent>,
     stop_bridge: Arc<AtomicBool>,
     bridge: Mutex<Option<std::thread::JoinHandle<()>>>,
+    /// The selection task's script host (empty with the Rust selection).
+    scripts: crate::script::ScriptHosts,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -163,6 +165,7 @@ impl CellDaemon {
             events,
             stop_bridge,
             bridge: Mutex::new(Some(thread)),
+            scripts: cell.scripts,
         }))
     }
 
@@ -284,6 +287,9 @@ impl MachineApi for CellDaemon {
             optional_stop: false,
             plc: None,
         }
+    }
+    fn scripts(&self) -> Option<&crate::script::ScriptHosts> {
+        Some(&self.scripts)
     }
     fn estop(&self) -> Result<(), ApiError> {
         self.robot_call(RobotCmd::EmergencyStop)

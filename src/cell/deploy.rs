@@ -7,10 +7,13 @@ use super::hw::{Hardware, HwCmd};
 use super::names;
 use super::pid::{Effector, Pid};
 use super::robot::{Robot, RobotCmd};
-use super::selection::{Selection, SelectionCmd};
+use super::scripted::{self, ScriptLoadError, ScriptedSelection};
+use super::selection::{Selection, SelectionCmd, SelectionKind};
 use super::sensor::Sensor;
 use super::world::World;
 use crate::rt::prelude::*;
+use crate::script::ScriptHosts;
+use std::sync::Arc;
 
 /// A configured (not started) cell and its typed command senders.
 pub struct Cell {
@@ -24,6 +27,19 @@ pub struct Cell {
     pub camera: TaskHandle<CameraCmd>,
     /// The simulated hardware (fault injection).
     pub hw: TaskHandle<HwCmd>,
+    /// The script hosts: the selection task when it runs the script (the default).
+    pub scripts: ScriptHosts,
+}
+
+/// Errors deploying the cell.
+#[derive(Debug, thiserror::Error)]
+pub enum CellDeployError {
+    /// The deployment refused.
+    #[error(transparent)]
+    Deploy(#[from] DeployError),
+    /// The selection script failed to load (`file:line:col: ...`).
+    #[error(transparent)]
+    Script(#[from] ScriptLoadError),
 }
 
 /// Margin of the sensor's valid range beyond the workspace, mm: a setpoint inside the
@@ -31,7 +47,7 @@ pub struct Cell {
 pub const RANGE_MARGIN_MM: f64 = 5.0;
 
 /// Adds the cell's tasks to a new deployment and configures it.
-pub fn deploy(cfg: &CellConfig) -> Result<Cell, DeployError> {
+pub fn deploy(cfg: &CellConfig) -> Result<Cell, CellDeployError> {
     let mut app = Deployment::new();
     let servo = cfg.threads.servo.schedule();
     let (lo, hi) = (cfg.robot.min_mm, cfg.robot.max_mm);
@@ -45,22 +61,48 @@ pub fn deploy(cfg: &CellConfig) -> Result<Cell, DeployError> {
     app.add_periodic(names::EFFECTOR, Effector::new(cfg.pid.max_force_n), servo)?;
     let world = World::new(cfg.world, cfg.layout);
     let hw = app.add_periodic(names::HW, Hardware::new(world), servo)?;
-    let selection = app.add_periodic(
-        names::SELECTION,
-        Selection::new(cfg.selection, cfg.layout),
-        cfg.threads.selection.schedule(),
-    )?;
+    let sel_sched = cfg.threads.selection.schedule();
+    let (selection, script) = match cfg.selection.kind {
+        SelectionKind::Rust => {
+            let task = Selection::new(cfg.selection.clone(), cfg.layout);
+            (app.add_periodic(names::SELECTION, task, sel_sched)?, None)
+        }
+        SelectionKind::Script => {
+            let mut source = scripted::read(cfg.selection.script.as_deref())?;
+            let (task, control) = ScriptedSelection::new(&mut source);
+            let handle = app.add_periodic(names::SELECTION, task, sel_sched)?;
+            (handle, Some((source, control)))
+        }
+    };
     let camera = app.add_non_periodic(
         names::CAMERA,
         Camera::new(cfg.camera),
         cfg.threads.selection.priority,
     )?;
     app.configure()?;
+    let mut scripts = ScriptHosts::default();
+    if let Some((source, control)) = script {
+        // Bound after configure: the bindings name the deployed peers and events.
+        let (done, error) = source.flags();
+        let b = scripted::bindings(&app, robot.info(), camera.info(), done, error)?;
+        scripted::bind(
+            &source.file,
+            &source.src,
+            &control,
+            &b,
+            &cfg.layout,
+            &cfg.selection,
+        )?;
+        control.attach(selection.info().clone());
+        let b = scripted::bindings(&app, robot.info(), camera.info(), done, error)?;
+        scripts.add(Arc::new(control), b);
+    }
     Ok(Cell {
         deployment: app,
         selection,
         robot,
         camera,
         hw,
+        scripts,
     })
 }

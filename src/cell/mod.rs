@@ -17,7 +17,7 @@
 //! | `pid` | servo | position loop → `cell.force`; `tracking_error` |
 //! | `effector` | servo | force limits, enable, gripper output → `cell.drive` |
 //! | `hw` | servo | the simulated world ([`world`]) → `cell.feedback`, `cell.scene`, `cell.world` |
-//! | `selection` | selection (10 ms) | the state machine ([`selection`]) |
+//! | `selection` | selection (10 ms) | the state machine: the script ([`scripted`]) or the Rust reference ([`selection`]) |
 //! | `camera` | selection (non-periodic, after the selection) | `start_detection` → detection events |
 //!
 //! [`deploy`] builds it from a [`config::CellConfig`]; [`daemon`] serves it on the control
@@ -33,6 +33,7 @@ pub mod pid;
 pub mod profile;
 pub mod rng;
 pub mod robot;
+pub mod scripted;
 pub mod selection;
 pub mod sensor;
 pub mod types;

@@ -1,13 +1,11 @@
 //! The selection task: the pick-and-place sequence as a state machine over the paper's states
 //! (section VII), written as plain Rust.
 //!
-//! This is the **fallback** the issue allows: the cell deploys this Rust state machine.
-//! The same machine is written in the script language in `config/scripts/selection.st`
-//! (compiled and bound to the cell's tasks by `tests/cell_script.rs`), but no task hosts it
-//! yet: the script engine landed late, and hosting it needs a selection task that embeds a
-//! `script::ScriptHost`, mirrors `grabbed` / `robot_ok` / `detected` into its globals every
-//! step and maps its EMITs to `operation_n_done` / `error_detected`. The tests drive the cell
-//! through the task's operations and events only, so they will hold for either.
+//! The cell deploys the same machine written in the script language by default
+//! (`config/scripts/selection.st`, hosted by [`super::scripted`]); this Rust one is the
+//! reference, selected with `[cell.selection] kind = "rust"`, and `tests/cell_sort.rs` runs
+//! both on the same seed. The tests drive the cell through the task's operations and events
+//! only, so they hold for either.
 //!
 //! States and transitions (entry actions are robot / camera commands, done in order, each
 //! waited for through its completion condition; a rejected or failed one is an error):
@@ -90,10 +88,30 @@ pub struct SelectionStatus {
     pub entered: bool,
 }
 
-/// Timeouts of the selection.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+/// Which implementation runs the selection.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SelectionKind {
+    /// The state machine in the script language (`config/scripts/selection.st`), hosted by
+    /// [`super::scripted::ScriptedSelection`]: the cell's default, as the paper has it.
+    #[default]
+    Script,
+    /// This module's plain-Rust machine, kept as a reference for side-by-side tests.
+    Rust,
+}
+
+/// `[cell.selection]`: implementation, script and timeouts.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SelectionConfig {
+    /// `script` (default) or `rust`.
+    #[serde(default)]
+    pub kind: SelectionKind,
+    /// The script's file; a relative path is relative to the configuration file. Absent:
+    /// the shipped `config/scripts/selection.st`, built into the binary so a minimal cell
+    /// file works from any directory.
+    #[serde(default)]
+    pub script: Option<std::path::PathBuf>,
     /// Longest wait for "object grabbed" after the gripper closed, ms.
     #[serde(default = "default_grab_timeout")]
     pub grab_timeout_ms: u64,
@@ -112,6 +130,8 @@ fn default_detect_timeout() -> u64 {
 impl Default for SelectionConfig {
     fn default() -> Self {
         Self {
+            kind: SelectionKind::default(),
+            script: None,
             grab_timeout_ms: default_grab_timeout(),
             detection_timeout_ms: default_detect_timeout(),
         }
@@ -193,22 +213,73 @@ impl Plan {
     }
 }
 
+/// The ports of both selections (this one and the script's host): the robot's status in,
+/// the selection's status out, the camera's verdicts and the task's two events.
+#[derive(Default)]
+pub(super) struct CommonPorts {
+    pub(super) status_in: Option<DataReader<RobotStatus>>,
+    pub(super) status_out: Option<DataWriter<SelectionStatus>>,
+    a: Option<EventReceiver<u32>>,
+    b: Option<EventReceiver<u32>>,
+    none: Option<EventReceiver<u32>>,
+    pub(super) done: Option<EventSource<RunDone>>,
+    pub(super) error: Option<EventSource<()>>,
+}
+
+impl CommonPorts {
+    pub(super) fn configure(&mut self, ctx: &mut Configure<'_>) {
+        self.status_in = Some(ctx.input(names::ROBOT_STATUS));
+        self.status_out = Some(ctx.output(names::SELECTION_STATUS));
+        self.a = Some(ctx.subscribe(names::A_DETECTED_EVENT, 8));
+        self.b = Some(ctx.subscribe(names::B_DETECTED_EVENT, 8));
+        self.none = Some(ctx.subscribe(names::NONE_DETECTED_EVENT, 8));
+        self.done = Some(ctx.event("operation_n_done"));
+        self.error = Some(ctx.event("error_detected"));
+    }
+
+    /// The camera's verdict since the last call, if any (every detection event is drained
+    /// so none piles up).
+    pub(super) fn verdict(&mut self) -> Option<Container> {
+        let seen = [
+            (drained(&mut self.a), Container::A),
+            (drained(&mut self.b), Container::B),
+            (drained(&mut self.none), Container::Reject),
+        ];
+        seen.into_iter().find(|(s, _)| *s).map(|(_, c)| c)
+    }
+}
+
+/// Whether `run(n)` can be accepted (both selections).
+pub(super) fn check_run(n: u32, idle_at_home: bool) -> Result<(), RejectReason> {
+    if n == 0 {
+        return Err(RejectReason::BadParameters("n must be at least 1"));
+    }
+    if !idle_at_home {
+        return Err(RejectReason::Busy);
+    }
+    Ok(())
+}
+
+/// Progress of `run` (fails once an error was detected after it started) and `stop`
+/// (both done when idle at home), for both selections.
+pub(super) fn op_progress(c: &SelectionCmd, error_since_run: bool, idle_at_home: bool) -> Progress {
+    match *c {
+        SelectionCmd::Run(_) if error_since_run => Progress::Failed("error detected"),
+        _ if idle_at_home => Progress::Done,
+        _ => Progress::Running,
+    }
+}
+
 #[derive(Default)]
 struct Ports {
     robot: Option<CommandSender<RobotCmd>>,
     camera: Option<CommandSender<CameraCmd>>,
-    status_in: Option<DataReader<RobotStatus>>,
-    status_out: Option<DataWriter<SelectionStatus>>,
     grabbed: Option<EventReceiver<()>>,
     estop: Option<EventReceiver<()>>,
-    a: Option<EventReceiver<u32>>,
-    b: Option<EventReceiver<u32>>,
-    none: Option<EventReceiver<u32>>,
-    done: Option<EventSource<RunDone>>,
-    error: Option<EventSource<()>>,
+    common: CommonPorts,
 }
 
-fn drained<T: Send>(r: &mut Option<EventReceiver<T>>) -> bool {
+pub(super) fn drained<T: Send>(r: &mut Option<EventReceiver<T>>) -> bool {
     r.as_mut().is_some_and(|r| r.drain(|_| {}) > 0)
 }
 
@@ -302,7 +373,7 @@ impl Selection {
             }
             SelectionState::ErrorDetected => {
                 self.errors += 1;
-                if let Some(e) = &mut self.ports.error {
+                if let Some(e) = &mut self.ports.common.error {
                     e.emit(());
                 }
                 Plan::of(&[R(RobotCmd::EmergencyStop)])
@@ -384,7 +455,7 @@ impl Selection {
             }
             S::ReleasingObject => {
                 self.runs_done += 1;
-                if let Some(e) = &mut self.ports.done {
+                if let Some(e) = &mut self.ports.common.done {
                     e.emit(RunDone {
                         run: self.runs_done,
                         of: self.runs_asked,
@@ -403,7 +474,7 @@ impl Selection {
     }
 
     fn publish(&mut self) {
-        if let Some(o) = &mut self.ports.status_out {
+        if let Some(o) = &mut self.ports.common.status_out {
             o.set(SelectionStatus {
                 state: self.state,
                 runs_done: self.runs_done,
@@ -425,15 +496,9 @@ impl Task for Selection {
         let p = &mut self.ports;
         p.robot = ctx.peer_commands(names::ROBOT);
         p.camera = ctx.peer_commands(names::CAMERA);
-        p.status_in = Some(ctx.input(names::ROBOT_STATUS));
-        p.status_out = Some(ctx.output(names::SELECTION_STATUS));
         p.grabbed = Some(ctx.subscribe(names::OBJECT_GRABBED_EVENT, 8));
         p.estop = Some(ctx.subscribe(names::ROBOT_ESTOP_EVENT, 8));
-        p.a = Some(ctx.subscribe(names::A_DETECTED_EVENT, 8));
-        p.b = Some(ctx.subscribe(names::B_DETECTED_EVENT, 8));
-        p.none = Some(ctx.subscribe(names::NONE_DETECTED_EVENT, 8));
-        p.done = Some(ctx.event("operation_n_done"));
-        p.error = Some(ctx.event("error_detected"));
+        p.common.configure(ctx);
         Ok(())
     }
     fn start(&mut self) -> Result<(), TaskError> {
@@ -443,7 +508,7 @@ impl Task for Selection {
         Ok(())
     }
     fn read_inputs(&mut self, _: &StepContext) {
-        if let Some(r) = &mut self.ports.status_in {
+        if let Some(r) = &mut self.ports.common.status_in {
             r.get(&mut self.robot);
         }
     }
@@ -497,12 +562,7 @@ impl Task for Selection {
     fn accept(&mut self, c: &SelectionCmd, ctx: &StepContext) -> Result<(), RejectReason> {
         match *c {
             SelectionCmd::Run(n) => {
-                if n == 0 {
-                    return Err(RejectReason::BadParameters("n must be at least 1"));
-                }
-                if !self.idle_at_home() {
-                    return Err(RejectReason::Busy);
-                }
+                check_run(n, self.idle_at_home())?;
                 self.runs_asked = n;
                 self.runs_done = 0;
                 self.stop_requested = false;
@@ -520,13 +580,11 @@ impl Task for Selection {
         Ok(())
     }
     fn progress(&mut self, c: &SelectionCmd, _: &StepContext) -> Progress {
-        match *c {
-            SelectionCmd::Run(_) if self.errors != self.run_errors_at_start => {
-                Progress::Failed("error detected")
-            }
-            _ if self.idle_at_home() => Progress::Done,
-            _ => Progress::Running,
-        }
+        op_progress(
+            c,
+            self.errors != self.run_errors_at_start,
+            self.idle_at_home(),
+        )
     }
     fn process_events(&mut self, ctx: &StepContext) {
         // "object grabbed" is also visible in the robot's status; the event is drained so it
@@ -535,15 +593,9 @@ impl Task for Selection {
         if drained(&mut self.ports.estop) {
             self.fail("emergency stop", ctx);
         }
-        let detected = [
-            (drained(&mut self.ports.a), Container::A),
-            (drained(&mut self.ports.b), Container::B),
-            (drained(&mut self.ports.none), Container::Reject),
-        ];
-        if self.state == SelectionState::DetectingObject {
-            if let Some((_, c)) = detected.into_iter().find(|(seen, _)| *seen) {
-                self.destination = Some(c);
-            }
+        let verdict = self.ports.common.verdict();
+        if self.state == SelectionState::DetectingObject && verdict.is_some() {
+            self.destination = verdict;
         }
     }
 }

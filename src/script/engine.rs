@@ -790,6 +790,15 @@ impl Engine {
         Some(l.script.program.get(id))
     }
 
+    /// Run status, current state index and whether that state's ENTRY has finished, of
+    /// item `i` of `slot`: for a host task that mirrors its machine's state every step
+    /// (realtime safe, unlike [`Engine::status`]).
+    pub fn machine_state(&self, slot: usize, i: usize) -> Option<(RunStatus, u32, bool)> {
+        let inst = self.slots.get(slot)?.as_deref()?.insts.get(i)?;
+        let entered = matches!(inst.phase, Phase::In | Phase::Run | Phase::Exit);
+        Some((inst.status, inst.state, entered))
+    }
+
     /// Status of every item of a script.
     pub fn status(&self, slot: usize) -> Result<Vec<Status>, EngineError> {
         let l = self
