@@ -340,3 +340,39 @@ fn unload_frees_the_slot() {
     assert!(c.control.status().is_empty());
     assert_eq!(c.load("PROGRAM q\nEND_PROGRAM\n"), slot);
 }
+
+/// Several state machines of one task run in parallel: each takes its step in the same task
+/// step, so the shorter one finishes while the longer one is still running.
+#[test]
+fn state_machines_of_one_task_run_in_parallel() {
+    let mut c = cell();
+    let slot = c.load(
+        r#"VAR_GLOBAL a : INT; b : INT; END_VAR
+STATE_MACHINE long
+  INITIAL STATE counting
+    RUN a := a + 1; END_RUN
+    TRANSITION WHEN a >= 30 TO done;
+  END_STATE
+  FINAL STATE done
+  END_STATE
+END_STATE_MACHINE
+STATE_MACHINE short
+  INITIAL STATE counting
+    RUN b := b + 1; END_RUN
+    TRANSITION WHEN b >= 3 TO done;
+  END_STATE
+  FINAL STATE done
+  END_STATE
+END_STATE_MACHINE
+"#,
+    );
+    c.control.control(slot, "long", Ctl::Start).unwrap();
+    c.control.control(slot, "short", Ctl::Start).unwrap();
+    c.rt.run_cycles(10);
+    assert_eq!(c.status("short").status, "finished");
+    assert_eq!(c.status("long").status, "running");
+    assert_eq!(c.status("long").state.as_deref(), Some("counting"));
+    c.rt.run_cycles(60);
+    assert_eq!(c.status("long").status, "finished");
+    assert_eq!(c.status("long").state.as_deref(), Some("done"));
+}
