@@ -25,7 +25,9 @@ use super::servo::io_task::{IoTask, SimPlate, SimSpindle};
 use super::servo::machine_task::{MachineCmd, MachineSetup, MachineTask, SpindleIo};
 use super::servo::monitor_task::MonitorTask;
 use super::servo::status::StatusSnapshot;
-use super::servo::{ports, FaultEvent, JobEvent, MachineSnapshot, ModeEvent, QueueItem, Setpoints};
+use super::servo::{
+    ports, FaultEvent, JobEvent, JobNews, MachineSnapshot, ModeEvent, QueueItem, Setpoints,
+};
 use crate::config::{ConfigError, IoKind, MachineConfig};
 use crate::gcode::{InterpOptions, SourceLoc, NUM_AXES};
 use crate::motion::{self, MotionConfig, AXIS_NAMES};
@@ -395,7 +397,7 @@ impl Machine {
             tracing::warn!("topology: {w}");
         }
         let mode_rx = app.event::<ModeEvent>("machine.mode")?.subscribe(256);
-        let job_rx = app.event::<JobEvent>("machine.job")?.subscribe(1024);
+        let job_rx = app.event::<JobNews>("machine.job")?.subscribe(1024);
         let fault_rx = app.event::<FaultEvent>("machine.fault")?.subscribe(256);
         let plc_rx = match plc_stats {
             Some(_) => Some(
@@ -577,12 +579,10 @@ impl Machine {
     fn start_job(&self, job: Arc<PreparedJob>, manual: bool) -> Result<(), ApiError> {
         self.check_can_run(manual)?;
         // The end of the previous job may still wait in the event queue (the machine task
-        // emits it in the cycle whose snapshot said idle). Job events carry no job id: left
-        // there, the bridge applied it to this job once installed below, took it out of the
-        // book and cancelled its feeder before it queued its items, and the machine waited
-        // in `running` for items that never came (the benchmark's hung `mdi M8`, status
-        // `running` at progress 1.0). Applying it now, while the old job is still the
-        // active one, ends that one.
+        // emits it in the cycle whose snapshot said idle). Applying it now, while that job
+        // is still the active one, publishes its end and joins its feeder before this job
+        // replaces it. (Events carry their job id, so a late one could not end this job
+        // either: that was the benchmark's hung `mdi M8`.)
         self.pump_events();
         probing::check_probe_start(&job, self.probe_active())?;
         let pose = self.actual_pose();

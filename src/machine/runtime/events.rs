@@ -64,7 +64,7 @@ fn trip_json(trip: &Trip, line: u32) -> Value {
 /// The realtime side's event receivers, drained by the bridge thread and by `status`.
 pub(super) struct Receivers {
     pub(super) mode: EventReceiver<ModeEvent>,
-    pub(super) job: EventReceiver<JobEvent>,
+    pub(super) job: EventReceiver<JobNews>,
     pub(super) fault: EventReceiver<FaultEvent>,
     /// The PLC task's faults (`None` without `[plc]`).
     pub(super) plc: Option<EventReceiver<crate::plc::task::PlcFault>>,
@@ -175,8 +175,13 @@ pub(super) fn internal_operation(task: &str, operation: &str) -> Option<&'static
     }
 }
 
-fn handle_job_event(m: &Machine, e: JobEvent) {
+fn handle_job_event(m: &Machine, news: JobNews) {
     let mut book = lock(&m.book);
+    // News of an earlier job (drained after the next one started) must not touch this one.
+    if book.active.as_ref().is_some_and(|a| a.id != news.job) {
+        return;
+    }
+    let e = news.event;
     let (state, reason, end) = match e {
         JobEvent::Started => ("running", None, false),
         JobEvent::Held { line } => {

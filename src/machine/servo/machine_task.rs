@@ -16,8 +16,8 @@
 
 use super::plc_link::{PlcLink, PlcLinkSetup};
 use super::{
-    ports, AxisFeedback, DriveControl, FaultEvent, Inputs, JobError, JobEvent, MachineSnapshot,
-    ModeEvent, MonitorSnapshot, MotionControl, Outputs, Setpoints,
+    ports, AxisFeedback, DriveControl, FaultEvent, Inputs, JobError, JobEvent, JobNews,
+    MachineSnapshot, ModeEvent, MonitorSnapshot, MotionControl, Outputs, Setpoints,
 };
 use crate::gcode::canon::{InputKind, SpindleDir, WaitKind};
 use crate::gcode::NUM_AXES;
@@ -373,7 +373,7 @@ pub struct MachineTask {
     faults_in: Option<EventReceiver<FaultEvent>>,
     overruns_in: Option<EventReceiver<Overrun>>,
     mode_ev: Option<EventSource<ModeEvent>>,
-    job_ev: Option<EventSource<JobEvent>>,
+    job_ev: Option<EventSource<JobNews>>,
     fault_ev: Option<EventSource<FaultEvent>>,
     // working copies
     inputs: Inputs,
@@ -510,7 +510,10 @@ impl MachineTask {
             self.ended = Some((self.job_id, e));
         }
         if let Some(ev) = &mut self.job_ev {
-            ev.emit(e);
+            ev.emit(JobNews {
+                job: self.job_id,
+                event: e,
+            });
         }
     }
 

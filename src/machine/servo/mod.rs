@@ -359,7 +359,19 @@ pub struct FaultEvent {
     pub line: u32,
 }
 
-/// Job life, from the machine task (event `machine.job`).
+/// One job's news on event `machine.job`: the event and the id of the job it belongs to.
+///
+/// Why the id: the API applies these events to its active job when it drains them, which can
+/// be after the next job started; a job's end must never end another job.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JobNews {
+    /// Id of the job (as in `MachineCmd::Run`).
+    pub job: u32,
+    /// What happened.
+    pub event: JobEvent,
+}
+
+/// Job life, from the machine task.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum JobEvent {
     /// Motion started.

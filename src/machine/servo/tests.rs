@@ -4,7 +4,7 @@
 //! within every axis' velocity and acceleration limit.
 
 use super::machine_task::MachineCmd;
-use super::{ports, AxisFeedback, JobEvent, MachineSnapshot, QueueItem, Setpoints};
+use super::{ports, AxisFeedback, JobEvent, JobNews, MachineSnapshot, QueueItem, Setpoints};
 use crate::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
 use crate::machine::api::Mode;
 use crate::machine::runtime::{build, Built};
@@ -25,7 +25,7 @@ pub(super) struct Rig {
     pub(super) sp: DataReader<Setpoints>,
     fb: Vec<DataReader<AxisFeedback>>,
     /// The machine task's `job` events.
-    pub(super) jobs: EventReceiver<JobEvent>,
+    pub(super) jobs: EventReceiver<JobNews>,
     /// E-stop requests to the machine task (what `Machine::estop` increments).
     pub(super) estop_request: Arc<std::sync::atomic::AtomicU32>,
 }
@@ -55,7 +55,7 @@ impl Rig {
         } = build(cfg).expect("build");
         app.configure().expect("topology");
         let jobs = app
-            .event::<JobEvent>("machine.job")
+            .event::<JobNews>("machine.job")
             .expect("job event")
             .subscribe(1024);
         let rt = app.start_stepped(SimClock::new(0)).expect("start");
@@ -371,8 +371,8 @@ fn a_feed_hold_holds_the_job_and_resume_runs_it_again() {
     r.start_move(1, [250.0, 200.0, -20.0], 3000.0);
     r.rt.run_cycles(300);
     let mut events = Vec::new();
-    while let Some(e) = r.jobs.pop() {
-        events.push(e);
+    while let Some(n) = r.jobs.pop() {
+        events.push(n.event);
     }
     assert_eq!(events, [JobEvent::Started]);
     r.send_until_done(MachineCmd::Pause, 2000);
@@ -380,8 +380,8 @@ fn a_feed_hold_holds_the_job_and_resume_runs_it_again() {
     // A second pause while held is no second hold.
     r.send_until_done(MachineCmd::Pause, 10);
     r.send_until_done(MachineCmd::Resume, 10);
-    while let Some(e) = r.jobs.pop() {
-        events.push(e);
+    while let Some(n) = r.jobs.pop() {
+        events.push(n.event);
     }
     assert_eq!(
         events,
