@@ -13,7 +13,7 @@ use super::selection::SelectionConfig;
 use super::world::{Layout, WorldConfig};
 use crate::config::ControlConfig;
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Scheduling of one of the cell's threads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
@@ -202,24 +202,10 @@ pub struct CellFile {
 /// Errors loading a cell file.
 #[derive(Debug, thiserror::Error)]
 pub enum CellConfigError {
-    /// The file cannot be read.
-    #[error("cannot read {path}: {source}")]
-    Io {
-        /// File.
-        path: PathBuf,
-        /// Cause.
-        source: std::io::Error,
-    },
-    /// Malformed TOML, unknown or missing key, wrong type.
-    #[error("{origin}: {key}: {message}")]
-    Parse {
-        /// File.
-        origin: String,
-        /// Key path.
-        key: String,
-        /// What is wrong.
-        message: String,
-    },
+    /// The file cannot be read, or a key is malformed, unknown, missing or mistyped (the
+    /// machine configuration's errors, naming file and key the same way).
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
     /// Values out of range.
     #[error("{origin}: invalid cell:\n  {}", .issues.join("\n  "))]
     Invalid {
@@ -243,15 +229,7 @@ pub fn is_cell_file(path: &Path) -> bool {
 
 /// Parses and validates a cell file's text. `origin` names it in messages.
 pub fn parse(text: &str, origin: &str) -> Result<CellFile, CellConfigError> {
-    let de = toml::Deserializer::new(text);
-    let file: CellFile = serde_path_to_error::deserialize(de).map_err(|e| {
-        let key = e.path().to_string();
-        CellConfigError::Parse {
-            origin: origin.into(),
-            key: if key == "." { "(root)".into() } else { key },
-            message: e.into_inner().to_string().trim_end().to_string(),
-        }
-    })?;
+    let file: CellFile = crate::config::deserialize(text, origin)?;
     let issues = file.cell.validate();
     if !issues.is_empty() {
         return Err(CellConfigError::Invalid {
@@ -264,10 +242,7 @@ pub fn parse(text: &str, origin: &str) -> Result<CellFile, CellConfigError> {
 
 /// Reads and checks a cell file.
 pub fn load(path: &Path) -> Result<CellFile, CellConfigError> {
-    let text = std::fs::read_to_string(path).map_err(|source| CellConfigError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::config::read(path)?;
     let mut file = parse(&text, &path.display().to_string())?;
     // The selection script is named relative to the configuration file.
     if let Some(s) = &mut file.cell.selection.script {

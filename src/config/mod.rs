@@ -71,18 +71,36 @@ pub const BUILTIN_SIM_TOML: &str = include_str!("../../config/sim.toml");
 /// The text of `config/plc/mill.st`, the built-in machine's PLC program.
 pub const BUILTIN_MILL_ST: &str = include_str!("../../config/plc/mill.st");
 
-/// Parses and validates a machine description. `origin` names the text in messages (a
-/// path, or "built-in sim"). Relative paths inside are left as written.
-pub fn parse(text: &str, origin: &str) -> Result<MachineConfig, ConfigError> {
+/// Deserialises TOML `text` into `T`; a malformed document, or an unknown, missing or
+/// mistyped key, is a [`ConfigError::Parse`] naming `origin` and the key's path. Shared by
+/// every file hytask reads (machines, cells) so they all name keys the same way.
+pub fn deserialize<T: serde::de::DeserializeOwned>(
+    text: &str,
+    origin: &str,
+) -> Result<T, ConfigError> {
     let de = toml::Deserializer::new(text);
-    let mut config: MachineConfig = serde_path_to_error::deserialize(de).map_err(|e| {
+    serde_path_to_error::deserialize(de).map_err(|e| {
         let key = e.path().to_string();
         ConfigError::Parse {
             origin: origin.to_string(),
             key: if key == "." { "(root)".into() } else { key },
             message: e.into_inner().to_string().trim_end().to_string(),
         }
-    })?;
+    })
+}
+
+/// Reads a configuration file's text; failure is a [`ConfigError::Io`] naming the file.
+pub fn read(path: &Path) -> Result<String, ConfigError> {
+    std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Parses and validates a machine description. `origin` names the text in messages (a
+/// path, or "built-in sim"). Relative paths inside are left as written.
+pub fn parse(text: &str, origin: &str) -> Result<MachineConfig, ConfigError> {
+    let mut config: MachineConfig = deserialize(text, origin)?;
     let issues = config.validate();
     if !issues.is_empty() {
         return Err(ConfigError::Invalid {
@@ -97,10 +115,7 @@ pub fn parse(text: &str, origin: &str) -> Result<MachineConfig, ConfigError> {
 /// Reads, parses and validates a machine file. A relative `tool_table.path` is made
 /// relative to the file's directory (and `[plc]` paths are resolved against it).
 pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = read(path)?;
     let mut config = parse(&text, &path.display().to_string())?;
     if let (Some(t), Some(dir)) = (&mut config.tool_table, path.parent()) {
         if t.path.is_relative() {
