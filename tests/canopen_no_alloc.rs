@@ -7,26 +7,16 @@
 //! stop over the controlword). Start-up (SDO, allowed to allocate) runs before.
 #![allow(clippy::unwrap_used)]
 
-use hytask::gcode::{SourceLoc, NUM_AXES};
-use hytask::machine::runtime::{build, Built};
+use hytask::gcode::SourceLoc;
 use hytask::machine::servo::machine_task::MachineCmd;
-use hytask::machine::servo::{ports, AxisFeedback, QueueItem};
-use hytask::rt::prelude::*;
+use hytask::machine::servo::QueueItem;
 use std::sync::Arc;
 
 mod counting_alloc;
 
 use counting_alloc::so_far as allocations;
 
-fn until_done(rt: &mut hytask::rt::deploy::SteppedRuntime, h: &CommandHandle, max: u64) {
-    for _ in 0..max {
-        rt.run_cycles(1);
-        if h.status() == CommandStatus::Done {
-            return;
-        }
-    }
-    panic!("not done: {:?}", h.status());
-}
+mod machine_rig;
 
 #[test]
 fn a_servo_cycle_with_canopen_axes_allocates_nothing() {
@@ -38,43 +28,28 @@ fn a_servo_cycle_with_canopen_axes_allocates_nothing() {
     let path = dir.path().join("canopen-sim.toml");
     std::fs::write(&path, text).unwrap();
     let cfg = hytask::config::load(&path).unwrap();
-    let Built {
-        mut app,
+    let h = machine_rig::homed_with(&cfg, |app| {
+        let names: Vec<String> = app.tasks().iter().map(|t| t.name().to_string()).collect();
+        assert_eq!(
+            names.first().map(String::as_str),
+            Some("can.sim.rx"),
+            "{names:?}"
+        );
+        let tx = names.iter().position(|n| n == "can.sim.tx").unwrap();
+        assert!(
+            names[tx - 1].starts_with("axis.") && names[tx + 1] == "monitor",
+            "{names:?}"
+        );
+    });
+    let machine_rig::Homed {
+        mut rt,
         machine,
         queue,
         motion_cfg,
         sim_io,
-        ..
-    } = build(&cfg).unwrap();
-    app.configure().unwrap();
-    let names: Vec<String> = app.tasks().iter().map(|t| t.name().to_string()).collect();
-    assert_eq!(
-        names.first().map(String::as_str),
-        Some("can.sim.rx"),
-        "{names:?}"
-    );
-    let tx = names.iter().position(|n| n == "can.sim.tx").unwrap();
-    assert!(
-        names[tx - 1].starts_with("axis.") && names[tx + 1] == "monitor",
-        "{names:?}"
-    );
-    let mut rt = app.start_stepped(SimClock::new(0)).unwrap();
-    let mut fb: Vec<DataReader<AxisFeedback>> = ['X', 'Y', 'Z']
-        .iter()
-        .map(|&c| rt.reader(&ports::feedback(c)).unwrap())
-        .collect();
-    for cmd in [
-        MachineCmd::EstopReset,
-        MachineCmd::On,
-        MachineCmd::Home { mask: 0 },
-    ] {
-        let h = machine.send(cmd).unwrap();
-        until_done(&mut rt, &h, 20_000);
-    }
-    let mut start = [0.0; NUM_AXES];
-    for (i, s) in start.iter_mut().take(3).enumerate() {
-        *s = fb[i].latest().unwrap().actual;
-    }
+        mut fb,
+        start,
+    } = h;
     let mut end = start;
     end[..3].copy_from_slice(&[40.0, 30.0, -10.0]);
     let loc = SourceLoc {

@@ -8,10 +8,9 @@
 //! The same windows on the daemon's real servo thread are in `tests/daemon_no_alloc.rs`.
 #![allow(clippy::unwrap_used)]
 
-use hytask::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
-use hytask::machine::runtime::{build, Built};
+use hytask::gcode::{CanonCmd, SourceLoc, NUM_AXES};
 use hytask::machine::servo::machine_task::MachineCmd;
-use hytask::machine::servo::{ports, AxisFeedback, QueueItem};
+use hytask::machine::servo::{ports, QueueItem};
 use hytask::rt::prelude::*;
 use std::sync::Arc;
 
@@ -19,111 +18,29 @@ mod counting_alloc;
 
 use counting_alloc::so_far as allocations;
 
-fn until_done(rt: &mut hytask::rt::deploy::SteppedRuntime, h: &CommandHandle, max: u64) {
-    for _ in 0..max {
-        rt.run_cycles(1);
-        if h.status() == CommandStatus::Done {
-            return;
-        }
-    }
-    panic!("not done: {:?}", h.status());
-}
+mod machine_rig;
+use machine_rig::{until_done, Homed};
 
-/// The simulated mill on the stepped runtime, homed and idle.
-struct Homed {
-    rt: hytask::rt::deploy::SteppedRuntime,
-    machine: TaskHandle<MachineCmd>,
-    queue: BufferWriter<QueueItem>,
-    motion_cfg: hytask::motion::MotionConfig,
-    sim_io: Vec<Option<hytask_hal::sim::SimIoHandle>>,
-    fb: Vec<DataReader<AxisFeedback>>,
-    /// Where the axes are after homing.
-    start: [f64; NUM_AXES],
-}
-
+/// The simulated mill (fast homing), homed and idle.
 fn homed() -> Homed {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml");
-    let cfg = hytask::config::load(&path).unwrap();
-    let Built {
-        mut app,
-        machine,
-        queue,
-        motion_cfg,
-        sim_io,
-        ..
-    } = build(&cfg).unwrap();
-    app.configure().unwrap();
-    let mut rt = app.start_stepped(SimClock::new(0)).unwrap();
-    let mut fb: Vec<DataReader<AxisFeedback>> = ['X', 'Y', 'Z']
-        .iter()
-        .map(|&c| rt.reader(&ports::feedback(c)).unwrap())
-        .collect();
-    for cmd in [
-        MachineCmd::EstopReset,
-        MachineCmd::On,
-        MachineCmd::Home { mask: 0 },
-    ] {
-        let h = machine.send(cmd).unwrap();
-        until_done(&mut rt, &h, 20_000);
-    }
-    let mut start = [0.0; NUM_AXES];
-    for (i, s) in start.iter_mut().take(3).enumerate() {
-        *s = fb[i].latest().unwrap().actual;
-    }
-    Homed {
-        rt,
-        machine,
-        queue,
-        motion_cfg,
-        sim_io,
-        fb,
-        start,
-    }
+    machine_rig::homed(&hytask::config::load(&path).unwrap())
 }
 
 #[test]
 fn the_servo_cycle_of_the_machine_allocates_nothing() {
+    let h = homed();
+    // A job with spindle and coolant (aux items) and a long feed move, queued up front.
+    let run = queue_cutting_job(&h, 1, h.start, [100.0, 150.0, -30.0]);
     let Homed {
         mut rt,
         machine,
-        queue,
-        motion_cfg,
         sim_io,
         mut fb,
         start,
-    } = homed();
-
-    // A job with spindle and coolant (aux items) and a long feed move, queued up front.
-    let mut end = start;
-    end[..3].copy_from_slice(&[100.0, 150.0, -30.0]);
-    let loc = SourceLoc {
-        file: Arc::from("t"),
-        line: 1,
-        col: 1,
-    };
-    let c = |cmd| Canon {
-        loc: loc.clone(),
-        cmd,
-    };
-    let canon = [
-        c(CanonCmd::SetSpindleSpeed(8000.0)),
-        c(CanonCmd::StartSpindle(
-            hytask::gcode::canon::SpindleDir::Clockwise,
-        )),
-        c(CanonCmd::FloodOn),
-        c(CanonCmd::SetFeedRate(3000.0)),
-        c(CanonCmd::StraightFeed(end)),
-    ];
-    let plan = hytask::motion::plan_from(&canon, &motion_cfg, start).unwrap();
-    for &item in &plan.items {
-        queue.try_push(QueueItem { job: 1, item }).unwrap();
-    }
-    let run = MachineCmd::Run {
-        job: 1,
-        items: plan.items.len() as u64,
-        manual: false,
-    };
+        ..
+    } = h;
     let _running = machine.send(run).unwrap();
     rt.run_cycles(50); // warm-up: the first cycles of a job touch everything once
     let estop = sim_io[0].clone().unwrap();
@@ -236,33 +153,18 @@ fn a_probe_move_its_trip_stop_and_the_next_piece_allocate_nothing() {
 fn queue_cutting_job(h: &Homed, job: u32, from: [f64; NUM_AXES], target: [f64; 3]) -> MachineCmd {
     let mut end = from;
     end[..3].copy_from_slice(&target);
-    let loc = SourceLoc {
-        file: Arc::from("t"),
-        line: 1,
-        col: 1,
-    };
-    let canon: Vec<Canon> = [
+    h.queue_job(job, from, &cutting(end))
+}
+
+/// Spindle and coolant on (aux items), then one long feed move to `end`.
+fn cutting(end: [f64; NUM_AXES]) -> [CanonCmd; 5] {
+    [
         CanonCmd::SetSpindleSpeed(8000.0),
         CanonCmd::StartSpindle(hytask::gcode::canon::SpindleDir::Clockwise),
         CanonCmd::FloodOn,
         CanonCmd::SetFeedRate(3000.0),
         CanonCmd::StraightFeed(end),
     ]
-    .into_iter()
-    .map(|cmd| Canon {
-        loc: loc.clone(),
-        cmd,
-    })
-    .collect();
-    let plan = hytask::motion::plan_from(&canon, &h.motion_cfg, from).unwrap();
-    for &item in &plan.items {
-        h.queue.try_push(QueueItem { job, item }).unwrap();
-    }
-    MachineCmd::Run {
-        job,
-        items: plan.items.len() as u64,
-        manual: false,
-    }
 }
 
 #[test]

@@ -6,6 +6,7 @@
 use hytask::plc::{compile, Options, Value};
 
 mod counting_alloc;
+mod machine_rig;
 
 use counting_alloc::during as allocations;
 
@@ -108,12 +109,10 @@ fn a_faulting_scan_does_not_allocate() {
 /// allocates on either thread once running.
 #[test]
 fn the_servo_and_plc_cycle_allocates_nothing() {
-    use hytask::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
-    use hytask::machine::runtime::{build, Built};
+    use hytask::gcode::CanonCmd;
     use hytask::machine::servo::machine_task::MachineCmd;
-    use hytask::machine::servo::{ports, AxisFeedback, MachineSnapshot, QueueItem};
+    use hytask::machine::servo::{ports, MachineSnapshot};
     use hytask::rt::prelude::*;
-    use std::sync::Arc;
 
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut text = std::fs::read_to_string(root.join("config/sim.toml")).unwrap();
@@ -125,64 +124,31 @@ fn the_servo_and_plc_cycle_allocates_nothing() {
     }
     let mut cfg = hytask::config::parse(&text, "sim.toml").unwrap();
     cfg.plc.as_mut().unwrap().base_dir = Some(root.join("config"));
-    let Built {
-        mut app,
-        machine,
-        queue,
-        motion_cfg,
-        sim_io,
-        ..
-    } = build(&cfg).unwrap();
-    app.configure().unwrap();
-    let mut rt = app.start_stepped(SimClock::new(0)).unwrap();
-    let mut fb: DataReader<AxisFeedback> = rt.reader(&ports::feedback('X')).unwrap();
-    let mut snap: DataReader<MachineSnapshot> = rt.reader(ports::SNAPSHOT).unwrap();
-    for cmd in [
-        MachineCmd::EstopReset,
-        MachineCmd::On,
-        MachineCmd::Home { mask: 0 },
-    ] {
-        let h = machine.send(cmd).unwrap();
-        for _ in 0..40_000 {
-            rt.run_cycles(1);
-            if h.status() == CommandStatus::Done {
-                break;
-            }
-        }
-        assert_eq!(h.status(), CommandStatus::Done, "{cmd:?}");
-    }
-    let mut start = [0.0; NUM_AXES];
-    start[0] = fb.latest().unwrap().actual;
-    start[1] = start[0];
+    let h = machine_rig::homed(&cfg);
+    let mut snap: DataReader<MachineSnapshot> = h.rt.reader(ports::SNAPSHOT).unwrap();
+    let start = h.start;
     let mut end = start;
     end[0] = 100.0;
-    let loc = SourceLoc {
-        file: Arc::from("t"),
-        line: 1,
-        col: 1,
-    };
-    let c = |cmd| Canon {
-        loc: loc.clone(),
-        cmd,
-    };
-    let canon = [
-        c(CanonCmd::FloodOn),
-        c(CanonCmd::StartChange),
-        c(CanonCmd::ChangeTool(4)),
-        c(CanonCmd::SetFeedRate(1200.0)),
-        c(CanonCmd::StraightFeed(end)),
-    ];
-    let plan = hytask::motion::plan_from(&canon, &motion_cfg, start).unwrap();
-    for &item in &plan.items {
-        queue.try_push(QueueItem { job: 1, item }).unwrap();
-    }
-    let _run = machine
-        .send(MachineCmd::Run {
-            job: 1,
-            items: plan.items.len() as u64,
-            manual: false,
-        })
-        .unwrap();
+    let run = h.queue_job(
+        1,
+        start,
+        &[
+            CanonCmd::FloodOn,
+            CanonCmd::StartChange,
+            CanonCmd::ChangeTool(4),
+            CanonCmd::SetFeedRate(1200.0),
+            CanonCmd::StraightFeed(end),
+        ],
+    );
+    let machine_rig::Homed {
+        mut rt,
+        machine,
+        sim_io,
+        fb,
+        ..
+    } = h;
+    let mut fb = fb.into_iter().next().unwrap();
+    let _run = machine.send(run).unwrap();
     rt.run_cycles(50);
     let io = sim_io[0].clone().unwrap();
     let door = 3; // config/sim.toml: estop, probe, spindle_at_speed, door_open, estop_reset
