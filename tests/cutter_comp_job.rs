@@ -79,14 +79,12 @@ fn cutting_distances(text: &str) -> (f64, f64, usize) {
     (lo, hi, n)
 }
 
-#[test]
-fn g41_inside_a_counter_clockwise_rectangle_keeps_the_tool_one_radius_in() {
-    let (lo, hi, n) = cutting_distances(&profile("G41.1", 0.0, 0.0));
+/// Asserts that every sample at the cutting depth of `program` lies one tool radius from the
+/// programmed contour.
+fn assert_one_radius_off_the_contour(program: &str) {
+    let (lo, hi, n) = cutting_distances(program);
     assert!(n > 1000, "only {n} samples at the cutting depth");
     let r = DIAMETER / 2.0;
-    // Left of a counter-clockwise contour is inside: straight offsets, concave corners met
-    // by intersection, so every point is r from the nearest edge (within the interpolation's
-    // sub-micron path error at the corners).
     assert!(
         (lo - r).abs() < 1e-3 && (hi - r).abs() < 1e-3,
         "distance {lo}..{hi}, want {r}"
@@ -94,17 +92,19 @@ fn g41_inside_a_counter_clockwise_rectangle_keeps_the_tool_one_radius_in() {
 }
 
 #[test]
+fn g41_inside_a_counter_clockwise_rectangle_keeps_the_tool_one_radius_in() {
+    // Left of a counter-clockwise contour is inside: straight offsets, concave corners met
+    // by intersection, so every point is r from the nearest edge (within the interpolation's
+    // sub-micron path error at the corners).
+    assert_one_radius_off_the_contour(&profile("G41.1", 0.0, 0.0));
+}
+
+#[test]
 fn g42_outside_the_rectangle_rounds_the_convex_corners_at_one_radius() {
-    let (lo, hi, n) = cutting_distances(&profile("G42.1", 0.0, 0.0));
-    assert!(n > 1000, "only {n} samples at the cutting depth");
-    let r = DIAMETER / 2.0;
     // Outside, the corners are convex: the tool goes round each on an arc of radius r
     // centred on the corner, so it never comes closer or goes farther than r (the arcs are
     // interpolated within the planner's tolerance).
-    assert!(
-        (lo - r).abs() < 1e-3 && (hi - r).abs() < 1e-3,
-        "distance {lo}..{hi}, want {r}"
-    );
+    assert_one_radius_off_the_contour(&profile("G42.1", 0.0, 0.0));
 }
 
 #[test]
