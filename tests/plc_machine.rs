@@ -111,6 +111,22 @@ fn m6_waits_for_the_plc_carousel() {
         "scan statistics in status: {s}"
     );
     assert_eq!(plc["fault"], json!(false));
+    // The PLC is a task of its own, on its own thread, as `hytask tasks` lists it.
+    let tasks = ok(&mut c, "tasks", Value::Null);
+    let task = |name: &str| {
+        tasks
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|t| t["name"] == name)
+            .unwrap_or_else(|| panic!("no {name} task: {tasks}"))
+            .clone()
+    };
+    let (plc, machine) = (task("plc"), task("machine"));
+    assert_eq!(plc["state"], json!("running"), "{plc}");
+    // config/sim.toml's `plc` thread: 10 ms, priority 60, not the 1 ms servo thread.
+    assert_eq!(plc["thread"], json!("rt-p60-10000us"), "{plc}");
+    assert_ne!(plc["thread"], machine["thread"], "{plc} {machine}");
 }
 
 /// A tool the carousel cannot find: the M6 times out and the job is aborted with its line.
