@@ -16,8 +16,8 @@ pub fn parse(src: &str) -> (Unit, Vec<Diag>) {
     (unit, p.diags)
 }
 
-/// Keywords that end a statement list.
-const BLOCK_END: &[&str] = &[
+/// Keywords that end a statement list (the script parser adds its own to these).
+pub(crate) const BLOCK_END: &[&str] = &[
     "END_IF",
     "ELSIF",
     "ELSE",

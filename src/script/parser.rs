@@ -9,7 +9,7 @@ use crate::plc::ast::{Pou, PouKind, Stmt, StmtKind};
 use crate::plc::diag::{Diag, Span};
 use crate::plc::expr::{Ident, Parser};
 use crate::plc::lexer::{lex, Tok};
-use crate::plc::parser::PouKindTag;
+use crate::plc::parser::{PouKindTag, BLOCK_END};
 
 /// Parses a script file; every syntax error found.
 pub fn parse(src: &str) -> (ScriptFile, Vec<Diag>) {
@@ -22,17 +22,8 @@ pub fn parse(src: &str) -> (ScriptFile, Vec<Diag>) {
     (file, p.p.diags)
 }
 
-/// Words ending a statement list.
-const ENDS: &[&str] = &[
-    "END_IF",
-    "ELSIF",
-    "ELSE",
-    "END_CASE",
-    "END_FOR",
-    "END_WHILE",
-    "UNTIL",
-    "END_REPEAT",
-    "END_PROGRAM",
+/// Words ending a statement list in scripts, besides the PLC's ([`BLOCK_END`]).
+const SCRIPT_ENDS: &[&str] = &[
     "END_ENTRY",
     "END_RUN",
     "END_EXIT",
@@ -59,6 +50,10 @@ impl SParser {
     fn at(&self, w: &str) -> bool {
         word(self.p.peek()).is_some_and(|x| x == w)
     }
+    /// At a word that ends a statement list (the PLC's or a script's).
+    fn at_list_end(&self) -> bool {
+        self.at_any(BLOCK_END) || self.at_any(SCRIPT_ENDS)
+    }
     fn at_any(&self, set: &[&str]) -> bool {
         word(self.p.peek()).is_some_and(|x| set.contains(&x.as_str()))
     }
@@ -79,7 +74,7 @@ impl SParser {
     }
     /// Skips to just after the next `;` or to an end word; always makes progress.
     fn recover(&mut self, start: usize) {
-        while !self.p.at_eof() && !self.at_any(ENDS) {
+        while !self.p.at_eof() && !self.at_list_end() {
             if matches!(self.p.bump(), Tok::P(";")) {
                 return;
             }
@@ -269,7 +264,7 @@ impl SParser {
 
     fn stmts(&mut self) -> Vec<SStmt> {
         let mut out = Vec::new();
-        while !self.p.at_eof() && !self.at_any(ENDS) && !self.at_top_level() {
+        while !self.p.at_eof() && !self.at_list_end() && !self.at_top_level() {
             if self.p.eat_p(";") {
                 continue;
             }
