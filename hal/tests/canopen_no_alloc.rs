@@ -133,3 +133,62 @@ fn a_servo_cycle_with_8_canopen_drives_does_not_allocate() {
         "drives follow the target"
     );
 }
+
+/// The loopback drive's SDO server path: expedited and segmented upload and download, and
+/// a block upload, answered by [`DriveSlave::poll`] without allocating (the server's value
+/// buffer and the drive's domain are reserved when they are made). The client side, which
+/// allocates its payloads, runs outside the measurement.
+#[test]
+fn the_loopback_drives_sdo_server_does_not_allocate() {
+    let (_bus, mut ports) = SimCanBus::new(2, 4096).unwrap();
+    let mut drive_port = ports.pop().unwrap();
+    let mut port = ports.pop().unwrap();
+    let node = NodeId::new(4).unwrap();
+    let mut slave = DriveSlave::new(node, SlaveConfig::default());
+    slave.poll(&mut drive_port, Duration::ZERO).unwrap();
+    while port.try_recv().unwrap().is_some() {}
+    let mut allocs = 0;
+    let mut now = Duration::ZERO;
+    // One transfer to its end: the slave's polls are measured, the client's work is not.
+    let mut transfer = |client: &mut SdoClient, first: CanFrame| -> Vec<u8> {
+        port.try_send(&first).unwrap();
+        loop {
+            now += Duration::from_millis(1);
+            allocs += allocations_during(|| slave.poll(&mut drive_port, now).unwrap());
+            while let Some(f) = port.try_recv().unwrap() {
+                match client.on_frame(&f, now) {
+                    SdoStep::Ignored => {}
+                    SdoStep::Send(next) => port.try_send(&next).unwrap(),
+                    SdoStep::SendBlock(frames) => {
+                        frames.iter().for_each(|f| port.try_send(f).unwrap())
+                    }
+                    SdoStep::Downloaded => return Vec::new(),
+                    SdoStep::Uploaded(v) => return v,
+                    SdoStep::BlockUploaded { value, confirm } => {
+                        port.try_send(&confirm).unwrap();
+                        allocs += allocations_during(|| slave.poll(&mut drive_port, now).unwrap());
+                        return value;
+                    }
+                    other => panic!("{other:?}"),
+                }
+            }
+        }
+    };
+    let t = Duration::ZERO;
+    let domain: Vec<u8> = (0..300u16).map(|i| i as u8).collect();
+    for _ in 0..2 {
+        let mut c = SdoClient::new(node).with_block_threshold(None);
+        let sw = c.upload(0x6041, 0, t).unwrap();
+        assert_eq!(transfer(&mut c, sw).len(), 2, "expedited upload");
+        let w = c.download(0x6065, 0, &1000u32.to_le_bytes(), t).unwrap();
+        transfer(&mut c, w);
+        let name = c.upload(0x1008, 0, t).unwrap();
+        assert!(transfer(&mut c, name).len() > 4, "segmented upload");
+        let d = c.download(0x2001, 0, &domain, t).unwrap();
+        transfer(&mut c, d);
+        let mut b = SdoClient::new(node);
+        let up = b.upload_block(0x2001, 0, t).unwrap();
+        assert_eq!(transfer(&mut b, up), domain, "block upload");
+    }
+    assert_eq!(allocs, 0, "the loopback drive's SDO server allocated");
+}

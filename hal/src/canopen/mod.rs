@@ -28,8 +28,10 @@
 //! Realtime rule: the per-cycle path ([`master::CspMaster`], [`pdo::PdoMapping::encode`]/[`decode`](pdo::PdoMapping::decode),
 //! [`sync::SyncProducer::next_frame`], [`heartbeat::HeartbeatConsumer::check`],
 //! [`cia402::PowerController::step`], [`emcy::Emergency::decode`]) works on fixed arrays and
-//! never allocates (checked by `hal/tests/canopen_no_alloc.rs`). SDO transfers allocate (their payloads are `Vec`s); they run at
-//! configuration time or on a non-realtime path, never in the servo step.
+//! never allocates (checked by `hal/tests/canopen_no_alloc.rs`). The SDO client allocates
+//! (its payloads are `Vec`s): it runs at configuration time or on a non-realtime path, never
+//! in the servo step. The SDO server (the loopback drive's) reserves its value buffer once
+//! and then answers without allocating (checked by the same test).
 //!
 //! Not yet here (issue 9): SDO block transfer (the server answers a block request with abort
 //! 0x05040001, the client never starts one). The SocketCAN [`CanBus`](crate::CanBus) is

@@ -3,6 +3,11 @@
 //! directions. A block upload sends a whole sub-block per request: [`SdoServer::on_frame`]
 //! returns its first segment and [`SdoServer::next_burst`] the others, so the caller can
 //! pace them to its transmit queue.
+//!
+//! The server allocates once, when it is made: one value buffer of [`MAX_SEGMENTED`] bytes
+//! that every transfer (upload value, download data) uses in turn. Answering a request
+//! then allocates nothing as long as the object dictionary appends within that capacity,
+//! so a drive (the loopback drive) can serve SDO on the same thread as its PDOs.
 
 use super::block::{self, RxStep, SubBlockRx, SubBlockTx, BLKSIZE, CRC_SUPPORTED, END_CONFIRM};
 use super::{abort_frame, initiate, multiplexer, sdo_frame, SdoAbortCode, DEFAULT_TIMEOUT, TX};
@@ -16,45 +21,42 @@ pub const MAX_SEGMENTED: usize = 1 << 16;
 
 /// An object dictionary as the SDO server sees it: values as little-endian bytes.
 pub trait ObjectAccess {
-    /// The value of `index:sub`, or why it cannot be read.
-    fn read(&mut self, index: u16, sub: u8) -> Result<Vec<u8>, SdoAbortCode>;
+    /// Appends the value of `index:sub` to `out` (empty, with capacity for
+    /// [`MAX_SEGMENTED`] bytes), or says why it cannot be read.
+    fn read(&mut self, index: u16, sub: u8, out: &mut Vec<u8>) -> Result<(), SdoAbortCode>;
     /// Stores `data` in `index:sub`, or says why not (wrong length, read-only, range…).
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), SdoAbortCode>;
 }
 
+/// Where a transfer stands. The value itself (download data received so far, or the
+/// upload value) is in the server's one buffer.
 #[derive(Debug, Clone)]
 enum Phase {
     Idle,
     Down {
-        buf: Vec<u8>,
         size: Option<usize>,
         toggle: bool,
     },
     Up {
-        data: Vec<u8>,
         pos: usize,
         toggle: bool,
     },
     BlkDown {
-        buf: Vec<u8>,
         size: Option<usize>,
         crc: bool,
         rx: SubBlockRx,
     },
     BlkDownEnd {
-        buf: Vec<u8>,
         size: Option<usize>,
         crc: bool,
     },
     /// Block upload initiated, waiting for the client's start.
     BlkUpInit {
-        data: Vec<u8>,
         tx: SubBlockTx,
     },
     /// Sending (`next` is the next segment number of the sub-block) or waiting for the
     /// acknowledgement of a sub-block.
     BlkUp {
-        data: Vec<u8>,
         tx: SubBlockTx,
         next: u8,
     },
@@ -70,6 +72,9 @@ pub struct SdoServer {
     sub: u8,
     deadline: Duration,
     phase: Phase,
+    /// The value of the transfer in progress (capacity [`MAX_SEGMENTED`] + one segment,
+    /// allocated once).
+    buf: Vec<u8>,
 }
 
 impl SdoServer {
@@ -82,6 +87,7 @@ impl SdoServer {
             sub: 0,
             deadline: Duration::ZERO,
             phase: Phase::Idle,
+            buf: Vec::with_capacity(MAX_SEGMENTED + 8),
         }
     }
 
@@ -107,7 +113,9 @@ impl SdoServer {
     /// block upload's sub-block is still going out, the client is not late: the wait
     /// for its acknowledgement counts from the last poll with segments left to send.
     pub fn poll(&mut self, now: Duration) -> Option<CanFrame> {
-        let sending = matches!(&self.phase, Phase::BlkUp { data, tx, next } if tx.segment(data, *next).is_some());
+        let data = &self.buf;
+        let sending =
+            matches!(&self.phase, Phase::BlkUp { tx, next } if tx.segment(data, *next).is_some());
         if sending {
             self.deadline = now + self.timeout;
         }
@@ -120,10 +128,10 @@ impl SdoServer {
     /// The next segment of a block upload's sub-block, until the sub-block is out. Call it
     /// after [`SdoServer::on_frame`] (and again later if the transmit queue was full).
     pub fn next_burst(&mut self) -> Option<CanFrame> {
-        let Phase::BlkUp { data, tx, next } = &mut self.phase else {
+        let Phase::BlkUp { tx, next } = &mut self.phase else {
             return None;
         };
-        let seg = tx.segment(data, *next)?;
+        let seg = tx.segment(&self.buf, *next)?;
         *next += 1;
         Some(sdo_frame(self.node, TX, seg))
     }
@@ -140,21 +148,16 @@ impl SdoServer {
     ) -> Option<Option<CanFrame>> {
         let cmd = d[0];
         let reply = match core::mem::replace(&mut self.phase, Phase::Idle) {
-            Phase::BlkDown {
-                mut buf,
-                size,
-                crc,
-                mut rx,
-            } => {
-                let step = rx.on_segment(d, &mut buf);
-                if buf.len() > MAX_SEGMENTED + 7 {
+            Phase::BlkDown { size, crc, mut rx } => {
+                if self.buf.len() > MAX_SEGMENTED {
                     return Some(self.abort(SdoAbortCode::OutOfMemory));
                 }
+                let step = rx.on_segment(d, &mut self.buf);
                 let ack = matches!(step, RxStep::Ack(_));
                 self.phase = if rx.last && ack {
-                    Phase::BlkDownEnd { buf, size, crc }
+                    Phase::BlkDownEnd { size, crc }
                 } else {
-                    Phase::BlkDown { buf, size, crc, rx }
+                    Phase::BlkDown { size, crc, rx }
                 };
                 match step {
                     RxStep::Ack(a) => self.reply(a, now),
@@ -164,29 +167,29 @@ impl SdoServer {
                     }
                 }
             }
-            Phase::BlkDownEnd { mut buf, size, crc } if cmd & 0xE1 == 0xC1 => {
-                if let Err(code) = block::finish(d, &mut buf, size, crc) {
+            Phase::BlkDownEnd { size, crc } if cmd & 0xE1 == 0xC1 => {
+                if let Err(code) = block::finish(d, &mut self.buf, size, crc) {
                     return Some(self.abort(code));
                 }
-                match od.write(self.index, self.sub, &buf) {
+                match od.write(self.index, self.sub, &self.buf) {
                     Ok(()) => self.reply([END_CONFIRM, 0, 0, 0, 0, 0, 0, 0], now),
                     Err(code) => self.abort(code),
                 }
             }
-            Phase::BlkUpInit { data, tx } if cmd == 0xA3 => {
-                self.phase = Phase::BlkUp { data, tx, next: 1 };
+            Phase::BlkUpInit { tx } if cmd == 0xA3 => {
+                self.phase = Phase::BlkUp { tx, next: 1 };
                 self.deadline = now + self.timeout;
                 self.next_burst()
             }
-            Phase::BlkUp { data, mut tx, .. } if cmd & 0xE3 == block::ACK => {
-                match tx.on_ack(d, &data) {
+            Phase::BlkUp { mut tx, .. } if cmd & 0xE3 == block::ACK => {
+                match tx.on_ack(d, &self.buf) {
                     Err(code) => self.abort(code),
                     Ok(true) => {
                         self.phase = Phase::BlkUpEnd;
-                        self.reply(block::end_frame(&data), now)
+                        self.reply(block::end_frame(&self.buf), now)
                     }
                     Ok(false) => {
-                        self.phase = Phase::BlkUp { data, tx, next: 1 };
+                        self.phase = Phase::BlkUp { tx, next: 1 };
                         self.deadline = now + self.timeout;
                         self.next_burst()
                     }
@@ -246,8 +249,8 @@ impl SdoServer {
                 if size.is_some_and(|s| s > MAX_SEGMENTED) {
                     return self.abort(SdoAbortCode::OutOfMemory);
                 }
+                self.buf.clear();
                 self.phase = Phase::Down {
-                    buf: Vec::with_capacity(size.unwrap_or(0)),
                     size,
                     toggle: false,
                 };
@@ -255,9 +258,10 @@ impl SdoServer {
             }
             // Download segment.
             0 => {
-                let Phase::Down { buf, size, toggle } = &mut self.phase else {
+                let Phase::Down { size, toggle } = &mut self.phase else {
                     return self.abort(SdoAbortCode::InvalidCommandSpecifier);
                 };
+                let buf = &mut self.buf;
                 if toggle_bit != *toggle {
                     return self.abort(SdoAbortCode::ToggleBitNotAlternated);
                 }
@@ -275,9 +279,8 @@ impl SdoServer {
                     if size.is_some_and(|s| buf.len() < s) {
                         return self.abort(SdoAbortCode::LengthTooLow);
                     }
-                    let data = core::mem::take(buf);
                     self.phase = Phase::Idle;
-                    if let Err(code) = od.write(self.index, self.sub, &data) {
+                    if let Err(code) = od.write(self.index, self.sub, &self.buf) {
                         return self.abort(code);
                     }
                 }
@@ -287,13 +290,14 @@ impl SdoServer {
             2 => {
                 (self.index, self.sub) = multiplexer(d);
                 let (index, sub) = (self.index, self.sub);
-                let data = match od.read(index, sub) {
-                    Ok(v) => v,
-                    Err(code) => return self.abort(code),
-                };
+                self.buf.clear();
+                if let Err(code) = od.read(index, sub, &mut self.buf) {
+                    return self.abort(code);
+                }
+                let data = &self.buf;
                 if data.len() <= 4 {
                     let mut p = [0u8; 4];
-                    p[..data.len()].copy_from_slice(&data);
+                    p[..data.len()].copy_from_slice(data);
                     // Cannot truncate: len <= 4.
                     let n = (4 - data.len()) as u8;
                     self.phase = Phase::Idle;
@@ -303,7 +307,6 @@ impl SdoServer {
                     return self.abort(SdoAbortCode::OutOfMemory);
                 };
                 self.phase = Phase::Up {
-                    data,
                     pos: 0,
                     toggle: false,
                 };
@@ -311,9 +314,10 @@ impl SdoServer {
             }
             // Upload segment.
             3 => {
-                let Phase::Up { data, pos, toggle } = &mut self.phase else {
+                let Phase::Up { pos, toggle } = &mut self.phase else {
                     return self.abort(SdoAbortCode::InvalidCommandSpecifier);
                 };
+                let data = &self.buf;
                 if toggle_bit != *toggle {
                     return self.abort(SdoAbortCode::ToggleBitNotAlternated);
                 }
@@ -340,12 +344,12 @@ impl SdoServer {
             5 if cmd & 0x03 == 0 => {
                 (self.index, self.sub) = multiplexer(d);
                 let (index, sub) = (self.index, self.sub);
-                let data = match od.read(index, sub) {
-                    Ok(v) => v,
-                    Err(code) => return self.abort(code),
-                };
+                self.buf.clear();
+                if let Err(code) = od.read(index, sub, &mut self.buf) {
+                    return self.abort(code);
+                }
                 let pst = usize::from(d[5]);
-                if pst > 0 && data.len() <= pst {
+                if pst > 0 && self.buf.len() <= pst {
                     // Protocol switch: a short value goes the normal way.
                     self.phase = Phase::Idle;
                     return self.on_frame(
@@ -358,10 +362,10 @@ impl SdoServer {
                     Ok(tx) => tx,
                     Err(code) => return self.abort(code),
                 };
-                let Ok(size) = u32::try_from(data.len()) else {
+                let Ok(size) = u32::try_from(self.buf.len()) else {
                     return self.abort(SdoAbortCode::OutOfMemory);
                 };
-                self.phase = Phase::BlkUpInit { data, tx };
+                self.phase = Phase::BlkUpInit { tx };
                 let cmd = 0xC0 | CRC_SUPPORTED | 0x02;
                 self.reply(initiate(cmd, index, sub, size.to_le_bytes()), now)
             }
@@ -376,8 +380,8 @@ impl SdoServer {
                 if size.is_some_and(|s| s > MAX_SEGMENTED) {
                     return self.abort(SdoAbortCode::OutOfMemory);
                 }
+                self.buf.clear();
                 self.phase = Phase::BlkDown {
-                    buf: Vec::with_capacity(size.unwrap_or(0) + 7),
                     size,
                     crc: cmd & CRC_SUPPORTED != 0,
                     rx: SubBlockRx {

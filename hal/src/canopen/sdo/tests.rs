@@ -7,11 +7,13 @@ use std::time::Duration;
 struct Od(BTreeMap<(u16, u8), Vec<u8>>);
 
 impl ObjectAccess for Od {
-    fn read(&mut self, index: u16, sub: u8) -> Result<Vec<u8>, SdoAbortCode> {
-        self.0
+    fn read(&mut self, index: u16, sub: u8, out: &mut Vec<u8>) -> Result<(), SdoAbortCode> {
+        let v = self
+            .0
             .get(&(index, sub))
-            .cloned()
-            .ok_or(SdoAbortCode::ObjectDoesNotExist)
+            .ok_or(SdoAbortCode::ObjectDoesNotExist)?;
+        out.extend_from_slice(v);
+        Ok(())
     }
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), SdoAbortCode> {
         if index == 0x1000 {

@@ -108,8 +108,11 @@ pub(crate) struct Core {
     pub(crate) tpdo: [PdoParams; 4],
     /// Frames produced by object writes (EMCY), sent by the slave after the write.
     pub(crate) pending: Outbox<8>,
-    /// The value of [`DOMAIN`].
+    /// The value of [`DOMAIN`] (capacity [`DOMAIN_MAX`], reserved once).
     pub(crate) domain: Vec<u8>,
+    /// Where a refused write reads the object to tell read-only from missing (capacity
+    /// reserved once; the values that land there are at most 8 bytes).
+    scratch: Vec<u8>,
 }
 
 impl Core {
@@ -124,7 +127,12 @@ impl Core {
             rpdo: [PdoParams::new(0, 0, None); 4],
             tpdo: [PdoParams::new(0, 0, None); 4],
             pending: Outbox::default(),
-            domain: domain_default(),
+            domain: {
+                let mut d = Vec::with_capacity(DOMAIN_MAX);
+                d.extend(domain_default());
+                d
+            },
+            scratch: Vec::with_capacity(64),
         };
         c.reset_communication();
         c
@@ -182,24 +190,31 @@ impl Core {
         self.pending.push(e.frame(self.node));
     }
 
-    fn pdo_read(p: &PdoParams, comm: bool, tx: bool, sub: u8) -> Result<Vec<u8>, SdoAbortCode> {
+    fn pdo_read(
+        p: &PdoParams,
+        comm: bool,
+        tx: bool,
+        sub: u8,
+        out: &mut Vec<u8>,
+    ) -> Result<(), SdoAbortCode> {
         use SdoAbortCode::SubIndexDoesNotExist as Nx;
-        Ok(if comm {
+        if comm {
             match sub {
-                0 => vec![if tx { 5 } else { 2 }],
-                1 => p.cob.to_le_bytes().to_vec(),
-                2 => vec![p.transmission],
-                3 if tx => p.inhibit.to_le_bytes().to_vec(),
-                5 if tx => p.event_timer.to_le_bytes().to_vec(),
+                0 => out.push(if tx { 5 } else { 2 }),
+                1 => out.extend_from_slice(&p.cob.to_le_bytes()),
+                2 => out.push(p.transmission),
+                3 if tx => out.extend_from_slice(&p.inhibit.to_le_bytes()),
+                5 if tx => out.extend_from_slice(&p.event_timer.to_le_bytes()),
                 _ => return Err(Nx),
             }
         } else {
             match sub {
-                0 => vec![p.count],
-                1..=8 => p.map[usize::from(sub - 1)].to_le_bytes().to_vec(),
+                0 => out.push(p.count),
+                1..=8 => out.extend_from_slice(&p.map[usize::from(sub - 1)].to_le_bytes()),
                 _ => return Err(Nx),
             }
-        })
+        }
+        Ok(())
     }
 
     fn pdo_write(
@@ -296,56 +311,74 @@ fn u32_of(d: &[u8]) -> Result<u32, SdoAbortCode> {
 }
 
 impl ObjectAccess for Core {
-    fn read(&mut self, index: u16, sub: u8) -> Result<Vec<u8>, SdoAbortCode> {
+    fn read(&mut self, index: u16, sub: u8, out: &mut Vec<u8>) -> Result<(), SdoAbortCode> {
         use SdoAbortCode::{ObjectDoesNotExist as NoObj, SubIndexDoesNotExist as NoSub};
         let d = &self.drive;
-        let v = match (index, sub) {
-            (0x1000, 0) => DEVICE_TYPE.to_le_bytes().to_vec(),
-            (0x1001, 0) => vec![d.error_register],
-            (0x1008, 0) => DEVICE_NAME.as_bytes().to_vec(),
-            (0x1017, 0) => self.heartbeat_ms.to_le_bytes().to_vec(),
-            (0x1018, 0) => vec![4],
-            (0x1018, 1) => VENDOR_ID.to_le_bytes().to_vec(),
-            (0x1018, 2) => PRODUCT_CODE.to_le_bytes().to_vec(),
-            (0x1018, 3) => 1u32.to_le_bytes().to_vec(),
-            (0x1018, 4) => u32::from(self.node.get()).to_le_bytes().to_vec(),
-            (0x1400..=0x1403, _) => {
-                Self::pdo_read(&self.rpdo[usize::from(index - 0x1400)], true, false, sub)?
+        match (index, sub) {
+            (0x1000, 0) => out.extend_from_slice(&DEVICE_TYPE.to_le_bytes()),
+            (0x1001, 0) => out.push(d.error_register),
+            (0x1008, 0) => out.extend_from_slice(DEVICE_NAME.as_bytes()),
+            (0x1017, 0) => out.extend_from_slice(&self.heartbeat_ms.to_le_bytes()),
+            (0x1018, 0) => out.push(4),
+            (0x1018, 1) => out.extend_from_slice(&VENDOR_ID.to_le_bytes()),
+            (0x1018, 2) => out.extend_from_slice(&PRODUCT_CODE.to_le_bytes()),
+            (0x1018, 3) => out.extend_from_slice(&1u32.to_le_bytes()),
+            (0x1018, 4) => out.extend_from_slice(&u32::from(self.node.get()).to_le_bytes()),
+            (0x1400..=0x1403, _) => Self::pdo_read(
+                &self.rpdo[usize::from(index - 0x1400)],
+                true,
+                false,
+                sub,
+                out,
+            )?,
+            (0x1600..=0x1603, _) => Self::pdo_read(
+                &self.rpdo[usize::from(index - 0x1600)],
+                false,
+                false,
+                sub,
+                out,
+            )?,
+            (0x1800..=0x1803, _) => Self::pdo_read(
+                &self.tpdo[usize::from(index - 0x1800)],
+                true,
+                true,
+                sub,
+                out,
+            )?,
+            (0x1A00..=0x1A03, _) => Self::pdo_read(
+                &self.tpdo[usize::from(index - 0x1A00)],
+                false,
+                true,
+                sub,
+                out,
+            )?,
+            (DOMAIN, 0) => out.extend_from_slice(&self.domain),
+            (INJECT, 0) => out.push(3),
+            (INJECT, 1) => out.extend_from_slice(&d.error_code.to_le_bytes()),
+            (INJECT, 2) => out.push(u8::from(self.heartbeat_stopped)),
+            (INJECT, 3) => out.extend_from_slice(&0u16.to_le_bytes()),
+            (0x603F, 0) => out.extend_from_slice(&d.error_code.to_le_bytes()),
+            (0x6040, 0) => out.extend_from_slice(&d.controlword.to_le_bytes()),
+            (0x6041, 0) => out.extend_from_slice(&d.statusword().to_le_bytes()),
+            (0x6060, 0) => out.extend_from_slice(&d.mode.to_le_bytes()),
+            (0x6061, 0) => out.extend_from_slice(&d.mode.to_le_bytes()),
+            (0x6064, 0) => out.extend_from_slice(&d.position_actual().to_le_bytes()),
+            (0x6065, 0) => out.extend_from_slice(&d.following_window.to_le_bytes()),
+            (0x606C, 0) => out.extend_from_slice(&d.velocity_actual().to_le_bytes()),
+            (0x607A, 0) => out.extend_from_slice(&d.target_position.to_le_bytes()),
+            (0x6098, 0) => out.extend_from_slice(&d.homing_method.to_le_bytes()),
+            (0x607C, 0) => out.extend_from_slice(&d.home_offset.to_le_bytes()),
+            (0x6099, 0) | (SWITCHES, 0) => out.push(if index == SWITCHES { 3 } else { 2 }),
+            (0x6099, s @ 1..=2) => {
+                out.extend_from_slice(&d.homing_speeds[usize::from(s - 1)].to_le_bytes())
             }
-            (0x1600..=0x1603, _) => {
-                Self::pdo_read(&self.rpdo[usize::from(index - 0x1600)], false, false, sub)?
-            }
-            (0x1800..=0x1803, _) => {
-                Self::pdo_read(&self.tpdo[usize::from(index - 0x1800)], true, true, sub)?
-            }
-            (0x1A00..=0x1A03, _) => {
-                Self::pdo_read(&self.tpdo[usize::from(index - 0x1A00)], false, true, sub)?
-            }
-            (DOMAIN, 0) => self.domain.clone(),
-            (INJECT, 0) => vec![3],
-            (INJECT, 1) => d.error_code.to_le_bytes().to_vec(),
-            (INJECT, 2) => vec![u8::from(self.heartbeat_stopped)],
-            (INJECT, 3) => 0u16.to_le_bytes().to_vec(),
-            (0x603F, 0) => d.error_code.to_le_bytes().to_vec(),
-            (0x6040, 0) => d.controlword.to_le_bytes().to_vec(),
-            (0x6041, 0) => d.statusword().to_le_bytes().to_vec(),
-            (0x6060, 0) => d.mode.to_le_bytes().to_vec(),
-            (0x6061, 0) => d.mode.to_le_bytes().to_vec(),
-            (0x6064, 0) => d.position_actual().to_le_bytes().to_vec(),
-            (0x6065, 0) => d.following_window.to_le_bytes().to_vec(),
-            (0x606C, 0) => d.velocity_actual().to_le_bytes().to_vec(),
-            (0x607A, 0) => d.target_position.to_le_bytes().to_vec(),
-            (0x6098, 0) => d.homing_method.to_le_bytes().to_vec(),
-            (0x607C, 0) => d.home_offset.to_le_bytes().to_vec(),
-            (0x6099, 0) | (SWITCHES, 0) => vec![if index == SWITCHES { 3 } else { 2 }],
-            (0x6099, s @ 1..=2) => d.homing_speeds[usize::from(s - 1)].to_le_bytes().to_vec(),
-            (0x609A, 0) => d.homing_acceleration.to_le_bytes().to_vec(),
-            (SWITCHES, 1) => d.switches.home.to_le_bytes().to_vec(),
-            (SWITCHES, 2) => d.switches.negative_limit.to_le_bytes().to_vec(),
-            (SWITCHES, 3) => d.switches.positive_limit.to_le_bytes().to_vec(),
-            (0x60FF, 0) => d.target_velocity.to_le_bytes().to_vec(),
+            (0x609A, 0) => out.extend_from_slice(&d.homing_acceleration.to_le_bytes()),
+            (SWITCHES, 1) => out.extend_from_slice(&d.switches.home.to_le_bytes()),
+            (SWITCHES, 2) => out.extend_from_slice(&d.switches.negative_limit.to_le_bytes()),
+            (SWITCHES, 3) => out.extend_from_slice(&d.switches.positive_limit.to_le_bytes()),
+            (0x60FF, 0) => out.extend_from_slice(&d.target_velocity.to_le_bytes()),
             // Supported drive modes: PP (bit 0), HM (bit 5), CSP (bit 7).
-            (0x6502, 0) => 0x0000_00A1u32.to_le_bytes().to_vec(),
+            (0x6502, 0) => out.extend_from_slice(&0x0000_00A1u32.to_le_bytes()),
             (
                 0x1000
                 | 0x1001
@@ -359,8 +392,8 @@ impl ObjectAccess for Core {
                 _,
             ) if self.exists(index) => return Err(NoSub),
             _ => return Err(NoObj),
-        };
-        Ok(v)
+        }
+        Ok(())
     }
 
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), SdoAbortCode> {
@@ -402,7 +435,9 @@ impl ObjectAccess for Core {
                 if data.len() > DOMAIN_MAX {
                     return Err(A::LengthTooHigh);
                 }
-                self.domain = data.to_vec();
+                // Within the capacity reserved at construction: no allocation.
+                self.domain.clear();
+                self.domain.extend_from_slice(data);
             }
             (INJECT, 1) => {
                 let code = u16_of(data)?;
@@ -447,8 +482,13 @@ impl ObjectAccess for Core {
             (0x60FF, 0) => self.drive.target_velocity = u32_of(data)? as i32,
             _ => {
                 // Distinguish read-only, missing sub-index and missing object.
-                return Err(match self.read(index, sub) {
-                    Ok(_) => A::ReadOnly,
+                // Into the scratch buffer reserved at construction: no allocation.
+                let mut scratch = core::mem::take(&mut self.scratch);
+                scratch.clear();
+                let r = self.read(index, sub, &mut scratch);
+                self.scratch = scratch;
+                return Err(match r {
+                    Ok(()) => A::ReadOnly,
                     Err(e) => e,
                 });
             }
