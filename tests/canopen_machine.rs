@@ -36,9 +36,34 @@ fn config(dir: &std::path::Path) -> std::path::PathBuf {
 }
 
 fn machine() -> (tempfile::TempDir, Arc<Machine>) {
+    machine_with(|t| t)
+}
+
+/// The machine of [`config`] with its text changed by `edit`.
+fn machine_with(edit: impl FnOnce(String) -> String) -> (tempfile::TempDir, Arc<Machine>) {
     let dir = tempfile::tempdir().unwrap();
-    let cfg = hytask::config::load(&config(dir.path())).unwrap();
+    let path = config(dir.path());
+    std::fs::write(&path, edit(std::fs::read_to_string(&path).unwrap())).unwrap();
+    let cfg = hytask::config::load(&path).unwrap();
     (dir, Machine::deploy(cfg).unwrap())
+}
+
+/// Drive-side homing on node 1 (axis X) with CiA 402 method `method`, home position 5 mm.
+fn drive_homing(method: i8) -> impl FnOnce(String) -> String {
+    move |t| {
+        t.replacen(
+            "interface = \"sim\"\nnode_id = 1\n",
+            &format!(
+                "interface = \"sim\"\nnode_id = 1\nhoming = \"drive\"\nhoming_method = {method}\nhoming_speeds = [5000, 1000]\n"
+            ),
+            1,
+        )
+        .replacen(
+            "home = { method = \"current_position\", position = 0.0 }",
+            "home = { method = \"current_position\", position = 5.0 }",
+            1,
+        )
+    }
 }
 
 fn wait(m: &Machine, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
@@ -303,7 +328,108 @@ fn a_canopen_axis_that_homes_on_a_switch_is_refused_by_the_check() {
     std::fs::write(&path, text).unwrap();
     let err = hytask::config::load(&path).unwrap_err().to_string();
     assert!(
-        err.contains("drive[0] (x-servo).canopen: axis X homes with a switch: CANopen drives home with method = \"current_position\" only"),
+        err.contains("drive[0] (x-servo).canopen: axis X homes with a switch, which the master cannot do on a CANopen drive")
+            && err.contains("homing = \"drive\" and homing_method"),
+        "{err}"
+    );
+}
+
+/// `homing = "drive"`: the loopback drive searches its home switch (method 19: at 10 mm of
+/// motor travel, positive direction), backs off to its edge and takes the home offset 0x607C
+/// = 5 mm; the master switched it to homing mode and back to CSP through the PDOs. Then a
+/// job runs from there without a jump (a jump would trip the 1 mm following-error limit).
+#[test]
+fn a_canopen_axis_homes_in_the_drive_then_runs_a_job() {
+    let (_dir, m) = machine_with(drive_homing(19));
+    m.estop_reset().unwrap();
+    m.machine_on().unwrap();
+    wait(&m, "drives enabled", |s| {
+        s.mode == Mode::Idle && s.axes.iter().all(|a| a.drive_state == "operation enabled")
+    });
+    let sdo = |index, sub| m.can_sdo().read("x-servo", index, sub).unwrap();
+    assert_eq!(sdo(0x6098, 0), [19], "method written at start-up");
+    assert_eq!(
+        sdo(0x607C, 0),
+        5000i32.to_le_bytes(),
+        "home offset in counts"
+    );
+    m.home(None).unwrap();
+    // The drive moves toward its switch (10 mm at 5 mm/s): X is seen beyond 1 mm before it
+    // is homed.
+    wait(&m, "X searching its switch", |s| s.axes[0].actual > 1.0);
+    let s = wait(&m, "homed and idle", |s| {
+        s.mode == Mode::Idle && s.axes.iter().all(|a| a.homed)
+    });
+    assert!(
+        (s.axes[0].actual - 5.0).abs() < 1e-3,
+        "X at {}",
+        s.axes[0].actual
+    );
+    assert_eq!(sdo(0x6061, 0), [8], "back in CSP");
+    m.job_load(&job(SQUARE)).unwrap();
+    m.job_run().unwrap();
+    let s = wait(&m, "job done", |s| {
+        s.job.state == "done" || s.job.state == "failed"
+    });
+    assert_eq!(s.job.state, "done", "{:?} {:?}", s.job, s.faults);
+    let s = wait(&m, "at rest", |s| {
+        s.axes.iter().all(|a| a.velocity.abs() < 1e-6)
+    });
+    assert!(
+        (s.axes[0].actual - 12.5).abs() < 1e-3,
+        "X at {}",
+        s.axes[0].actual
+    );
+    let counts = i32::from_le_bytes(sdo(0x6064, 0)[..4].try_into().unwrap());
+    assert!((counts - 12_500).abs() <= 1, "0x6064 = {counts}");
+    shutdown(&m);
+}
+
+/// A homing method the drive does not have: the drive sets statusword bit 13 (homing
+/// error), which is a fault naming node and axis, and homing fails.
+#[test]
+fn a_drive_homing_error_is_a_fault_naming_node_and_axis() {
+    let (_dir, m) = machine_with(drive_homing(1));
+    m.estop_reset().unwrap();
+    m.machine_on().unwrap();
+    wait(&m, "drives enabled", |s| {
+        s.mode == Mode::Idle && s.axes.iter().all(|a| a.drive_state == "operation enabled")
+    });
+    m.home(None).unwrap();
+    let s = wait(&m, "homing error reported", |s| {
+        s.faults
+            .iter()
+            .any(|f| f.contains("CANopen node 1: homing error"))
+    });
+    assert!(
+        s.faults
+            .iter()
+            .any(|f| f.contains("axis X") && f.contains("CANopen node 1: homing error")),
+        "{:?}",
+        s.faults
+    );
+    assert!(!s.axes[0].homed);
+    assert_eq!(
+        m.can_sdo().read("x-servo", 0x6061, 0).unwrap(),
+        [8],
+        "back in CSP after the error"
+    );
+    shutdown(&m);
+}
+
+#[test]
+fn drive_homing_without_a_method_is_refused_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = config(dir.path());
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "node_id = 1\n",
+        "node_id = 1\nhoming = \"drive\"\n",
+        1,
+    );
+    std::fs::write(&path, text).unwrap();
+    let err = hytask::config::load(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("drive[0] (x-servo).canopen.homing_method: required with homing = \"drive\""),
         "{err}"
     );
 }
@@ -355,5 +481,146 @@ fn an_emcy_and_a_lost_heartbeat_in_estop_are_reported() {
         |m| m.can_sdo().write("z-servo", 0x2000, 2, &[1]).unwrap(),
         3,
         "heartbeat lost",
+    );
+}
+
+/// Every loopback drive follows with position-loop lag `lag_s`, every axis has the
+/// following-error limit `limit`; runs a full-feed move on X and returns the final status.
+fn full_feed_job(lag_s: f64, limit: f64) -> Status {
+    let (_dir, m) = machine_with(|t| {
+        t.replace(
+            "interface = \"sim\"\n",
+            &format!("interface = \"sim\"\nloopback_lag_s = {lag_s:?}\n"),
+        )
+        .replace(
+            "following_error_limit = 1.0",
+            &format!("following_error_limit = {limit:?}"),
+        )
+    });
+    ready(&m);
+    // F6000 = 100 mm/s, X's max_velocity: 0.2 mm per 2 ms cycle.
+    m.job_load(&job("G21 G90\nG1 X100 F6000\nG1 X0\nM2\n"))
+        .unwrap();
+    m.job_run().unwrap();
+    let s = wait(&m, "job ended", |s| {
+        s.job.state == "done" || s.job.state == "failed"
+    });
+    shutdown(&m);
+    s
+}
+
+/// The position a CANopen axis reports answers the setpoint of the previous cycle: the
+/// monitor compares it with that one, so a drive that follows exactly does not trip a
+/// limit (0.1 mm) tighter than one cycle's travel at full feed (0.2 mm).
+#[test]
+fn a_following_error_limit_under_one_cycles_travel_holds_at_full_feed() {
+    let s = full_feed_job(0.0, 0.1);
+    assert_eq!(s.job.state, "done", "{:?} {:?}", s.job, s.faults);
+    assert!(
+        s.axes[0].max_following_error < 0.1,
+        "X max following error {}",
+        s.axes[0].max_following_error
+    );
+}
+
+/// A drive that really lags (50 ms: 5 mm at 100 mm/s) still trips its 1 mm limit.
+#[test]
+fn a_lagging_canopen_drive_still_trips_its_following_error_limit() {
+    let s = full_feed_job(0.05, 1.0);
+    assert_eq!(s.job.state, "failed", "{:?}", s.job);
+    assert!(
+        s.faults
+            .iter()
+            .any(|f| f.contains("axis X: following error") && f.contains("exceeds the limit 1")),
+        "{:?}",
+        s.faults
+    );
+}
+
+/// `[drive.canopen]` of node 1 (x-servo) with `keys` added: the EDS of the loopback drive
+/// and PDO mappings by its object names.
+fn eds_keys(keys: &str) -> impl FnOnce(String) -> String + '_ {
+    move |t| {
+        let eds =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/loopback-drive.eds");
+        t.replacen(
+            "interface = \"sim\"\nnode_id = 1\n",
+            &format!(
+                "interface = \"sim\"\nnode_id = 1\neds = {:?}\n{keys}\n",
+                eds.display().to_string()
+            ),
+            1,
+        )
+    }
+}
+
+/// TPDO1 mapped by names to statusword, position and error code (8 bytes, not the default
+/// layout): the drive is configured so and the machine homes and runs a job on it.
+#[test]
+fn pdos_mapped_by_eds_names_configure_the_drive_and_run_a_job() {
+    let (_dir, m) = machine_with(eds_keys(
+        "rpdo = [\"Controlword\", \"Target position\"]\ntpdo = [\"Statusword\", \"position actual value\", \"Error code\"]",
+    ));
+    let sdo = |index, sub| m.can_sdo().read("x-servo", index, sub).unwrap();
+    assert_eq!(sdo(0x1A00, 0), [3]);
+    assert_eq!(sdo(0x1A00, 3), 0x603F_0010u32.to_le_bytes());
+    ready(&m);
+    m.job_load(&job(SQUARE)).unwrap();
+    m.job_run().unwrap();
+    let s = wait(&m, "job done", |s| {
+        s.job.state == "done" || s.job.state == "failed"
+    });
+    assert_eq!(s.job.state, "done", "{:?} {:?}", s.job, s.faults);
+    let s = wait(&m, "at rest", |s| {
+        s.axes.iter().all(|a| a.velocity.abs() < 1e-6)
+    });
+    assert!(
+        (s.axes[0].actual - 12.5).abs() < 1e-3,
+        "X at {}",
+        s.axes[0].actual
+    );
+    shutdown(&m);
+}
+
+fn deploy_error(keys: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = config(dir.path());
+    let text = eds_keys(keys)(std::fs::read_to_string(&path).unwrap());
+    std::fs::write(&path, text).unwrap();
+    match Machine::deploy(hytask::config::load(&path).unwrap()) {
+        Ok(_) => panic!("{keys}: deployed"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn pdo_names_that_do_not_resolve_are_refused_naming_key_and_name() {
+    let err = deploy_error("rpdo = [\"Controlword\", \"Target pos\"]");
+    assert!(
+        err.contains(
+            "drive[0] (x-servo).canopen.rpdo[1]: no object named \"Target pos\" in the EDS"
+        ),
+        "{err}"
+    );
+    let err = deploy_error("tpdo = [\"Statusword\", \"Home offset\"]");
+    assert!(
+        err.contains(
+            "drive[0] (x-servo).canopen.tpdo[1]: \"Home offset\" (607C:00) is not PDO-mappable"
+        ),
+        "{err}"
+    );
+    let err = deploy_error("tpdo = [\"Statusword\", \"Velocity actual value\"]");
+    assert!(
+        err.contains("drive[0] (x-servo).canopen.tpdo: must map Position actual value (6064:00)"),
+        "{err}"
+    );
+    let err = deploy_error(
+        "tpdo = [\"Statusword\", \"Position actual value\", \"Velocity actual value\"]",
+    );
+    assert!(
+        err.contains(
+            "drive[0] (x-servo).canopen.tpdo: PDO mapping: the mapped objects exceed the 8 bytes"
+        ) && err.contains("take 10 bytes"),
+        "{err}"
     );
 }

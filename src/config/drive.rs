@@ -172,6 +172,74 @@ pub struct CanopenDriveConfig {
     /// for every drive of the interface.
     #[serde(default)]
     pub sync_counter: u8,
+    /// Where the axis homes: `"master"` (in CSP, the present position becomes
+    /// `[axis.home] position`) or `"drive"` (the drive's own homing mode, method
+    /// `homing_method`; 0x607C home offset = `[axis.home] position` × scale).
+    #[serde(default)]
+    pub homing: CanopenHoming,
+    /// CiA 402 homing method 0x6098 with `homing = "drive"` (e.g. 17/18 limit switch,
+    /// 19..=22 home switch, 35/37 current position).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub homing_method: Option<i8>,
+    /// 0x6099 speeds with `homing = "drive"`: [search for switch, search for zero], in the
+    /// drive's units (counts/s), written as they are.
+    #[serde(default = "default_homing_speeds")]
+    pub homing_speeds: [u32; 2],
+    /// 0x609A homing acceleration with `homing = "drive"`, counts/s² (0: the drive's own).
+    #[serde(default)]
+    pub homing_acceleration: u32,
+    /// How long drive-side homing may take, mode switches included, in ms.
+    #[serde(default = "default_homing_timeout_ms")]
+    pub homing_timeout_ms: u32,
+    /// `interface = "sim"` only: the in-process loopback drive's position-loop lag in
+    /// seconds (how far behind a moving target it runs: velocity × lag). Default 5 ms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loopback_lag_s: Option<LagSeconds>,
+    /// The drive's EDS file (CiA 306), for object names in `rpdo` / `tpdo`; a relative
+    /// path is relative to the configuration file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eds: Option<std::path::PathBuf>,
+    /// RPDO1 mapping by EDS object names, in order (default: controlword, target position,
+    /// and modes of operation with `homing = "drive"`). Must map 0x6040 and 0x607A.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rpdo: Option<Vec<String>>,
+    /// TPDO1 mapping by EDS object names, in order (default: statusword, position actual,
+    /// and modes display with `homing = "drive"`). Must map 0x6041 and 0x6064.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tpdo: Option<Vec<String>>,
+}
+
+/// A lag in seconds, `0.0 ..= 1.0` (checked by the validation), compared by its bits so
+/// the drive configuration stays `Eq`.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(transparent)]
+pub struct LagSeconds(pub f64);
+
+impl PartialEq for LagSeconds {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.to_bits() == other.0.to_bits()
+    }
+}
+
+impl Eq for LagSeconds {}
+
+/// `[drive.canopen] homing`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CanopenHoming {
+    /// The master homes in CSP by an offset (current position, no motion).
+    #[default]
+    Master,
+    /// The drive homes in CiA 402 homing mode, commanded through the process data.
+    Drive,
+}
+
+fn default_homing_speeds() -> [u32; 2] {
+    [20_000, 2_000]
+}
+
+fn default_homing_timeout_ms() -> u32 {
+    60_000
 }
 
 /// `[drive.canopen] mode`.
@@ -280,11 +348,12 @@ impl DriveConfig {
                 Some(c) => {
                     c.validate(&format!("{key}.canopen"), issues);
                     if let Some(a) = axis.filter(|a| a.home.method != HomeMethod::CurrentPosition) {
-                        // The master homes in CSP by an offset: no switch search on the bus.
+                        // The master cannot search a switch (the drive reads it): switch
+                        // homing on a CANopen axis is the drive's own homing method.
                         issues.push(
                             format!("{key}.canopen"),
                             format!(
-                                "axis {} homes with a switch: CANopen drives home with method = \"current_position\" only",
+                                "axis {} homes with a switch, which the master cannot do on a CANopen drive: keep [axis.home] method = \"current_position\" and let the drive search its switch with homing = \"drive\" and homing_method (e.g. 19)",
                                 a.name
                             ),
                         );
@@ -403,6 +472,55 @@ impl CanopenDriveConfig {
                     self.sync_counter
                 ),
             );
+        }
+        match (self.homing, self.homing_method) {
+            (CanopenHoming::Drive, None | Some(0)) => issues.push(
+                format!("{key}.homing_method"),
+                "required with homing = \"drive\": the drive's CiA 402 homing method (0x6098, e.g. 19 home switch, 35 current position), not 0",
+            ),
+            (CanopenHoming::Master, Some(m)) => issues.push(
+                format!("{key}.homing_method"),
+                format!("{m} is only used with homing = \"drive\" (homing is \"master\")"),
+            ),
+            _ => {}
+        }
+        for (what, names) in [("rpdo", &self.rpdo), ("tpdo", &self.tpdo)] {
+            if names.is_some() && self.eds.is_none() {
+                issues.push(
+                    format!("{key}.{what}"),
+                    "object names need the drive's EDS file: eds = \"<file>.eds\"",
+                );
+            }
+        }
+        if let Some(LagSeconds(lag)) = self.loopback_lag_s {
+            issues.in_range(format!("{key}.loopback_lag_s"), lag, 0.0, 1.0);
+            if self.interface != SIM_INTERFACE {
+                issues.push(
+                    format!("{key}.loopback_lag_s"),
+                    format!(
+                        "only used with interface = \"{SIM_INTERFACE}\" (interface is {:?})",
+                        self.interface
+                    ),
+                );
+            }
+        }
+        issues.in_range(
+            format!("{key}.homing_timeout_ms"),
+            self.homing_timeout_ms,
+            1,
+            3_600_000,
+        );
+    }
+}
+
+/// Makes the relative `[drive.canopen] eds` paths relative to `dir` (the configuration
+/// file's directory).
+pub(super) fn resolve_eds_paths(drives: &mut [DriveConfig], dir: &std::path::Path) {
+    for c in drives.iter_mut().filter_map(|d| d.canopen.as_mut()) {
+        if let Some(e) = &mut c.eds {
+            if e.is_relative() {
+                *e = dir.join(&*e);
+            }
         }
     }
 }

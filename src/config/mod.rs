@@ -49,8 +49,8 @@ mod thread;
 
 pub use axis::{AxisConfig, AxisName, HomeConfig, HomeMethod};
 pub use drive::{
-    CanopenDriveConfig, CanopenMode, DriveBackend, DriveConfig, SimDriveConfig, SwitchConfig,
-    SIM_DRIVE_HEADROOM, SIM_INTERFACE,
+    CanopenDriveConfig, CanopenHoming, CanopenMode, DriveBackend, DriveConfig, SimDriveConfig,
+    SwitchConfig, SIM_DRIVE_HEADROOM, SIM_INTERFACE,
 };
 pub use error::{ConfigError, Issue, Issues};
 pub use io::{AnalogPoint, DigitalPoint, IoBackend, IoConfig, IoKind, IoRef, TouchPlate};
@@ -124,6 +124,9 @@ pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
     }
     if let Some(p) = &mut config.plc {
         p.base_dir = path.parent().map(Path::to_path_buf);
+    }
+    if let Some(dir) = path.parent() {
+        drive::resolve_eds_paths(&mut config.drives, dir);
     }
     Ok(config)
 }

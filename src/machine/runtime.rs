@@ -317,8 +317,12 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         schedule,
     )?;
     let mut guards = Vec::new();
+    let mut delays = Vec::new();
     for ((name, dev), cfg) in axis_devices.into_iter().zip(&config.axes) {
         let i = name as usize;
+        if matches!(dev, devices::AxisDevice::Can(_)) {
+            delays.push((i, crate::machine::servo::can_delay::CAN_FEEDBACK_DELAY));
+        }
         let letter = axis_letter(i);
         let homing = cfg.home.params();
         app.add_periodic(
@@ -340,7 +344,12 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
     for (name, task) in can_tx {
         app.add_periodic(&name, task, schedule)?;
     }
-    app.add_periodic("monitor", MonitorTask::new(guards), schedule)?;
+    let monitor = delays
+        .into_iter()
+        .fold(MonitorTask::new(guards), |m, (i, d)| {
+            m.with_feedback_delay(i, d)
+        });
+    app.add_periodic("monitor", monitor, schedule)?;
     // The PLC on its own thread, after the servo tasks (the servo thread stays first).
     let plc_stats = plc.as_ref().map(|p| p.stats.clone());
     if let Some(p) = plc {

@@ -7,23 +7,38 @@
 //! All three run on the same thread in a fixed order, so the atomics never contend; they
 //! only make the sharing `Send` without a lock, and nothing allocates.
 //!
-//! Homing: the loopback and most CiA 402 drives home in homing mode (0x6060 = 6), but
-//! switching modes needs SDO traffic, which never runs on the servo thread. So a CANopen
-//! axis homes on the master side, in CSP: method `current_position` (the only one the
-//! configuration accepts for CANopen drives) makes the present position the home position
-//! by an offset kept here, exactly as CiA 402 methods 35/37 would.
+//! Homing, two ways (`[drive.canopen] homing`):
+//! * on the master (the default): in CSP, method `current_position` makes the present
+//!   position the home position by an offset kept here, exactly as CiA 402 methods 35/37
+//!   would;
+//! * in the drive ([`CanAxis::with_drive_homing`]): the drive runs its own homing method
+//!   (0x6098, with speeds, acceleration and home offset written over SDO at start-up) in
+//!   homing mode. The mode switch travels in the process data, not over SDO: the layout
+//!   maps 0x6060 into RPDO1 and 0x6061 into TPDO1 ([`CspLayout::with_mode`](super::pdo::CspLayout::with_mode)).
+//!   Why: SDO never runs on the servo thread, and switching from the non-realtime side
+//!   would race with the RPDOs (which carry controlword and target every SYNC) and need the
+//!   axis held by a second path; in the PDOs the switch happens at a SYNC like every other
+//!   set-point, and its confirmation arrives with the statusword and position it applies
+//!   to. The sequence, stepped once a cycle from [`Homing::homing_status`]: 0x6060 = 6,
+//!   wait for 0x6061 = 6; controlword bit 4 (homing start); wait for statusword bit 12
+//!   (homing attained) with bit 10, or bit 13 (homing error: a link fault naming the node);
+//!   then the target becomes the drive's actual position and 0x6060 = 8, and the axis is
+//!   homed once 0x6061 = 8. A bounded number of cycles (the timeout) covers it all.
 
 use super::bus_health::BusFault;
 use super::cia402::PowerRequest;
+use super::cia402::{CW_OP_MODE_4, SW_OP_MODE_12, SW_OP_MODE_13, SW_TARGET_REACHED};
 use super::NodeId;
 use crate::axis::{
-    AxisDrive, AxisFeedback, AxisSwitches, DriveState, FaultCode, Homing, HomingMethod,
-    HomingParams, HomingStatus,
+    AxisDrive, AxisFeedback, AxisSwitches, DriveState, FaultCode, Homing, HomingFailure,
+    HomingMethod, HomingParams, HomingStatus,
 };
 use crate::error::{Error, ErrorKind, ErrorType};
 use crate::socketcan::IfName;
 use core::fmt;
-use std::sync::atomic::{AtomicI32, AtomicU32, AtomicU64, AtomicU8, Ordering::Relaxed};
+use std::sync::atomic::{
+    AtomicI32, AtomicI8, AtomicU16, AtomicU32, AtomicU64, AtomicU8, Ordering::Relaxed,
+};
 use std::sync::Arc;
 
 /// Why the link to a drive failed (the cause a fault event names).
@@ -48,10 +63,14 @@ pub enum LinkCause {
     TxQueueFull,
     /// Any other failure of the interface.
     BusError,
+    /// The drive reported a homing error (statusword bit 13 in homing mode).
+    HomingError,
+    /// Drive-side homing did not finish (or the mode switch was not confirmed) in time.
+    HomingTimeout,
 }
 
 impl LinkCause {
-    const ALL: [LinkCause; 9] = [
+    const ALL: [LinkCause; 11] = [
         LinkCause::HeartbeatLost,
         LinkCause::Emergency,
         LinkCause::DriveFault,
@@ -61,6 +80,8 @@ impl LinkCause {
         LinkCause::InterfaceDown,
         LinkCause::TxQueueFull,
         LinkCause::BusError,
+        LinkCause::HomingError,
+        LinkCause::HomingTimeout,
     ];
 
     /// True for a fault of the interface as a whole (every drive on it has it): the
@@ -100,6 +121,8 @@ impl LinkCause {
             LinkCause::InterfaceDown => "interface down",
             LinkCause::TxQueueFull => "transmit queue full",
             LinkCause::BusError => "CAN bus error",
+            LinkCause::HomingError => "homing error",
+            LinkCause::HomingTimeout => "homing timed out",
         }
     }
 
@@ -129,6 +152,8 @@ impl LinkFault {
     pub const COMMUNICATION_CODE: u16 = 0x8100;
     /// Error code of a bus-off / interface failure.
     pub const BUS_OFF_CODE: u16 = 0x8140;
+    /// Error code of a failed drive-side homing (CiA 402 positioning controller class).
+    pub const HOMING_CODE: u16 = 0x8600;
 
     fn pack(self) -> u64 {
         1 << 40 | self.cause.index() << 24 | u64::from(self.node) << 16 | u64::from(self.code)
@@ -187,6 +212,12 @@ pub struct DriveLink {
     fault: AtomicU64,
     request: AtomicU8,
     target: AtomicI32,
+    /// Modes of operation to send (where the layout maps 0x6060).
+    mode: AtomicI8,
+    /// Last modes of operation display received.
+    mode_display: AtomicI8,
+    /// Operation-mode controlword bits (homing start) added to the power controlword.
+    op_bits: AtomicU16,
 }
 
 impl DriveLink {
@@ -208,6 +239,9 @@ impl DriveLink {
             fault: AtomicU64::new(0),
             request: AtomicU8::new(0),
             target: AtomicI32::new(0),
+            mode: AtomicI8::new(MODE_CSP),
+            mode_display: AtomicI8::new(0),
+            op_bits: AtomicU16::new(0),
         })
     }
 
@@ -222,6 +256,21 @@ impl DriveLink {
         self.position.store(position, Relaxed);
         self.velocity.store(velocity, Relaxed);
         self.fresh.fetch_add(1, Relaxed);
+    }
+
+    /// Rx: the modes of operation display of a fresh TPDO image (before [`publish`](Self::publish)).
+    pub fn publish_mode(&self, display: i8) {
+        self.mode_display.store(display, Relaxed);
+    }
+
+    /// Tx: modes of operation to send.
+    pub fn mode(&self) -> i8 {
+        self.mode.load(Relaxed)
+    }
+
+    /// Tx: operation-mode controlword bits to add.
+    pub fn op_bits(&self) -> u16 {
+        self.op_bits.load(Relaxed)
     }
 
     /// Rx: records a fault. The first cause is kept (it is what went wrong first), except
@@ -331,6 +380,33 @@ impl Error for CanAxisError {
     }
 }
 
+/// Modes of operation codes used here.
+const MODE_HM: i8 = 6;
+const MODE_CSP: i8 = 8;
+
+/// Where a drive-side homing run stands (see the module doc).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum HomePhase {
+    /// No run.
+    Idle,
+    /// 0x6060 = 6 sent, waiting for 0x6061 = 6.
+    ToHoming,
+    /// Homing start sent, waiting for attained or error.
+    Running,
+    /// Back to CSP at the actual position, waiting for 0x6061 = 8.
+    ToCsp,
+}
+
+/// A drive-side homing run: its phase, the TPDO count when the phase began, the cycles
+/// it has taken and may take.
+#[derive(Debug, Clone, Copy)]
+struct DriveHomingRun {
+    phase: HomePhase,
+    mark: u32,
+    cycles: u32,
+    timeout_cycles: u32,
+}
+
 /// A CiA 402 drive in CSP as a HAL axis. Positions are `counts / scale + offset`.
 #[derive(Debug)]
 pub struct CanAxis {
@@ -341,6 +417,7 @@ pub struct CanAxis {
     seen: u32,
     missed: u32,
     max_missed: u32,
+    drive_homing: Option<DriveHomingRun>,
 }
 
 impl CanAxis {
@@ -354,6 +431,96 @@ impl CanAxis {
             seen: 0,
             missed: 0,
             max_missed: 0,
+            drive_homing: None,
+        }
+    }
+
+    /// Homes in the drive's own homing mode (the method, speeds and offset are the drive's,
+    /// written at start-up), allowing `timeout_cycles` servo cycles for the whole run. The
+    /// drive's layout must map 0x6060 / 0x6061 ([`CspLayout::with_mode`](super::pdo::CspLayout::with_mode)).
+    pub fn with_drive_homing(mut self, timeout_cycles: u32) -> CanAxis {
+        self.drive_homing = Some(DriveHomingRun {
+            phase: HomePhase::Idle,
+            mark: 0,
+            cycles: 0,
+            timeout_cycles,
+        });
+        self
+    }
+
+    /// True while a drive-side homing run owns the drive (targets are not sent).
+    fn drive_homing_active(&self) -> bool {
+        self.drive_homing
+            .is_some_and(|r| r.phase != HomePhase::Idle)
+    }
+
+    /// Back to CSP holding the drive's actual position (so CSP takes over without a jump).
+    fn back_to_csp(&self) {
+        self.link
+            .target
+            .store(self.link.position.load(Relaxed), Relaxed);
+        self.link.op_bits.store(0, Relaxed);
+        self.link.mode.store(MODE_CSP, Relaxed);
+    }
+
+    fn fail_drive_homing(&mut self, cause: Option<LinkCause>, failure: HomingFailure) {
+        if let Some(c) = cause {
+            self.link.raise(c, LinkFault::HOMING_CODE);
+        }
+        self.back_to_csp();
+        if let Some(r) = &mut self.drive_homing {
+            r.phase = HomePhase::Idle;
+        }
+        self.homing = HomingStatus::Failed(failure);
+    }
+
+    /// One cycle of a drive-side homing run. A phase reads the drive only from the second
+    /// TPDO after its request: the first may answer a SYNC sent before it (a TPDO one
+    /// cycle late), the second answers a SYNC that carried the request.
+    fn step_drive_homing(&mut self) {
+        let Some(mut run) = self.drive_homing else {
+            return;
+        };
+        if run.phase == HomePhase::Idle {
+            return;
+        }
+        run.cycles = run.cycles.saturating_add(1);
+        let fresh = self.link.fresh.load(Relaxed);
+        let settled = fresh.wrapping_sub(run.mark) >= 2;
+        let sw = self.link.statusword();
+        let shown = self.link.mode_display.load(Relaxed);
+        if !self.state().is_operational() {
+            return self.fail_drive_homing(None, HomingFailure::DriveStopped);
+        }
+        match run.phase {
+            HomePhase::ToHoming if settled && shown == MODE_HM => {
+                self.link.op_bits.store(CW_OP_MODE_4, Relaxed);
+                run.phase = HomePhase::Running;
+                run.mark = fresh;
+            }
+            HomePhase::Running if settled && sw & SW_OP_MODE_13 != 0 => {
+                return self
+                    .fail_drive_homing(Some(LinkCause::HomingError), HomingFailure::LimitReached);
+            }
+            HomePhase::Running
+                if settled
+                    && sw & (SW_OP_MODE_12 | SW_TARGET_REACHED)
+                        == SW_OP_MODE_12 | SW_TARGET_REACHED =>
+            {
+                self.back_to_csp();
+                run.phase = HomePhase::ToCsp;
+                run.mark = fresh;
+            }
+            HomePhase::ToCsp if settled && shown == MODE_CSP => {
+                run.phase = HomePhase::Idle;
+                self.offset = 0.0;
+                self.homing = HomingStatus::Homed;
+            }
+            _ => {}
+        }
+        self.drive_homing = Some(run);
+        if run.phase != HomePhase::Idle && run.cycles > run.timeout_cycles {
+            self.fail_drive_homing(Some(LinkCause::HomingTimeout), HomingFailure::Aborted);
         }
     }
 
@@ -402,6 +569,10 @@ impl AxisDrive for CanAxis {
     }
 
     fn set_target_position(&mut self, position: f64) -> Result<(), CanAxisError> {
+        if self.drive_homing_active() {
+            // The drive's homing mode owns the motion; CSP resumes at its actual position.
+            return Ok(());
+        }
         if !self.state().is_operational() {
             return Err(CanAxisError::NotOperational(self.node()));
         }
@@ -469,12 +640,29 @@ impl AxisFeedback for CanAxis {
 
 impl Homing for CanAxis {
     fn start_homing(&mut self, params: &HomingParams) -> Result<(), CanAxisError> {
+        if let Some(run) = &mut self.drive_homing {
+            // The drive homes with its own method; the configuration allows no other.
+            if !DriveState::from_statusword(self.link.statusword()).is_operational() {
+                self.homing = HomingStatus::Failed(HomingFailure::DriveStopped);
+                return Err(CanAxisError::NotOperational(self.link.node.get()));
+            }
+            *run = DriveHomingRun {
+                phase: HomePhase::ToHoming,
+                mark: self.link.fresh.load(Relaxed),
+                cycles: 0,
+                timeout_cycles: run.timeout_cycles,
+            };
+            self.link.op_bits.store(0, Relaxed);
+            self.link.mode.store(MODE_HM, Relaxed);
+            self.homing = HomingStatus::InProgress;
+            return Ok(());
+        }
         if params.method != HomingMethod::CurrentPosition {
-            self.homing = HomingStatus::Failed(crate::axis::HomingFailure::Aborted);
+            self.homing = HomingStatus::Failed(HomingFailure::Aborted);
             return Err(CanAxisError::HomingUnsupported(self.node()));
         }
         if !self.state().is_operational() {
-            self.homing = HomingStatus::Failed(crate::axis::HomingFailure::DriveStopped);
+            self.homing = HomingStatus::Failed(HomingFailure::DriveStopped);
             return Err(CanAxisError::NotOperational(self.node()));
         }
         let counts = f64::from(self.link.position.load(Relaxed));
@@ -487,11 +675,16 @@ impl Homing for CanAxis {
         Ok(())
     }
 
+    /// Also steps a drive-side homing run: the axis task asks once a cycle.
     fn homing_status(&mut self) -> Result<HomingStatus, CanAxisError> {
+        self.step_drive_homing();
         Ok(self.homing)
     }
 
     fn abort_homing(&mut self) -> Result<(), CanAxisError> {
+        if self.drive_homing_active() {
+            self.fail_drive_homing(None, HomingFailure::Aborted);
+        }
         Ok(())
     }
 }

@@ -312,6 +312,27 @@ impl Eds {
     pub fn entries(&self) -> impl Iterator<Item = &EdsEntry> {
         self.entries.values()
     }
+
+    /// The PDO mapping entry of the object named `name` (as [`Eds::find`]), its width from
+    /// the EDS data type. Refused, saying why, when the name is unknown, the object is not
+    /// PDO-mappable or its type has no fixed size.
+    pub fn mapped_object(&self, name: &str) -> Result<super::pdo::MappedObject, String> {
+        let e = self
+            .find(name)
+            .ok_or_else(|| format!("no object named {name:?} in the EDS"))?;
+        let at = format!("{name:?} ({:04X}:{:02X})", e.index, e.sub);
+        if !e.pdo_mappable {
+            return Err(format!(
+                "{at} is not PDO-mappable (PDOMapping=0 in the EDS)"
+            ));
+        }
+        let bits = e
+            .data_type
+            .size()
+            .and_then(|n| u8::try_from(n * 8).ok())
+            .ok_or_else(|| format!("{at} has no fixed size ({:?}) to map", e.data_type))?;
+        Ok(super::pdo::MappedObject::new(e.index, e.sub, bits))
+    }
 }
 
 #[cfg(test)]

@@ -44,6 +44,12 @@ pub struct DriveImage {
     pub mode_display: i8,
     /// Target position sent with the next RPDO, counts.
     pub target: i32,
+    /// Modes of operation 0x6060 sent with the next RPDO, where the layout maps it (CSP,
+    /// 8, until the axis homes in the drive's homing mode).
+    pub mode: i8,
+    /// Operation-mode-specific controlword bits (4..=6, 8: homing start, halt) the axis
+    /// adds to the power state machine's controlword.
+    pub op_bits: u16,
     /// TPDO1 frames received since the last [`CspMaster::write`].
     pub fresh: u32,
     fault_reported: bool,
@@ -121,6 +127,8 @@ impl<const N: usize> CspMaster<N> {
             velocity: 0,
             mode_display: 0,
             target: 0,
+            mode: super::cia402::Mode::CyclicSyncPosition.code(),
+            op_bits: 0,
             fresh: 0,
             fault_reported: false,
             seen: false,
@@ -185,26 +193,19 @@ impl<const N: usize> CspMaster<N> {
                 }
                 return None;
             }
-            let mut v = [0i64; 8];
-            if route % 2 == 1 {
-                // A malformed TPDO keeps the last image; the stale `fresh` count tells.
-                if d.layout
-                    .tpdo1
-                    .mapping
-                    .decode(f.data(), &[false, true], &mut v)
-                    .is_ok()
-                {
-                    // Truncations are the mapped widths (u16 statusword, i32 position).
-                    d.statusword = v[0] as u16;
-                    d.position = v[1] as i32;
-                    d.fresh += 1;
-                    d.seen = true;
+            // Any other layout: each mapped object by its index. A malformed TPDO keeps the
+            // last image; the stale `fresh` count tells.
+            let mapping = if route % 2 == 1 {
+                d.layout.tpdo1.mapping
+            } else {
+                match d.layout.tpdo2 {
+                    Some(t2) => t2.mapping,
+                    None => return None,
                 }
-            } else if let Some(t2) = &d.layout.tpdo2 {
-                if t2.mapping.decode(f.data(), &[true, true], &mut v).is_ok() {
-                    d.velocity = v[0] as i32;
-                    d.mode_display = v[1] as i8;
-                }
+            };
+            if !f.is_remote() && decode_image(d, &mapping, f.data()) && route % 2 == 1 {
+                d.fresh += 1;
+                d.seen = true;
             }
             return None;
         }
@@ -259,7 +260,7 @@ impl<const N: usize> CspMaster<N> {
     /// SYNC. Never allocates.
     pub fn write<B: CanBus>(&mut self, bus: &mut B) -> Result<(), B::Error> {
         for d in self.drives.iter_mut().flatten() {
-            let cw = d.power.step(d.statusword);
+            let cw = d.power.step(d.statusword) | d.op_bits;
             let r = &d.layout.rpdo1;
             if d.default_layout {
                 let c = cw.to_le_bytes();
@@ -271,10 +272,19 @@ impl<const N: usize> CspMaster<N> {
                 d.fresh = 0;
                 continue;
             }
-            // The default layout's RPDO1 maps exactly controlword + target.
+            // Any other layout: each mapped object by its index (unknown objects send 0).
+            let mut v = [0i64; 8];
+            for (slot, e) in v.iter_mut().zip(r.mapping.entries()) {
+                *slot = match e.index {
+                    0x6040 => i64::from(cw),
+                    0x607A => i64::from(d.target),
+                    0x6060 => i64::from(d.mode),
+                    _ => 0,
+                };
+            }
             if let Ok(f) = r
                 .mapping
-                .encode(r.can_id(), &[i64::from(cw), i64::from(d.target)])
+                .encode(r.can_id(), &v[..r.mapping.entries().len()])
             {
                 bus.try_send(&f)?;
             }
@@ -282,4 +292,29 @@ impl<const N: usize> CspMaster<N> {
         }
         bus.try_send(&self.sync.next_frame())
     }
+}
+
+/// Decodes a TPDO of any mapping into the image by object index (statusword 0x6041,
+/// position 0x6064, velocity 0x606C, modes display 0x6061; others ignored). False when
+/// the data does not match the mapping. Never allocates.
+fn decode_image(d: &mut DriveImage, mapping: &super::pdo::PdoMapping, data: &[u8]) -> bool {
+    let mut v = [0i64; 8];
+    let mut signed = [false; 8];
+    for (s, e) in signed.iter_mut().zip(mapping.entries()) {
+        *s = matches!(e.index, 0x6064 | 0x606C | 0x6061);
+    }
+    if mapping.decode(data, &signed, &mut v).is_err() {
+        return false;
+    }
+    for (e, v) in mapping.entries().iter().zip(v) {
+        // Truncations are the mapped widths.
+        match e.index {
+            0x6041 => d.statusword = v as u16,
+            0x6064 => d.position = v as i32,
+            0x606C => d.velocity = v as i32,
+            0x6061 => d.mode_display = v as i8,
+            _ => {}
+        }
+    }
+    true
 }

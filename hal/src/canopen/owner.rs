@@ -129,6 +129,7 @@ where
             if let Some(d) = self.master.drive_mut(i) {
                 if d.fresh > 0 {
                     d.fresh = 0;
+                    l.publish_mode(d.mode_display);
                     l.publish(d.statusword, d.position, d.velocity);
                 }
             }
@@ -164,6 +165,8 @@ where
             if let Some(d) = self.master.drive_mut(i) {
                 d.statusword = l.statusword();
                 d.target = l.target();
+                d.mode = l.mode();
+                d.op_bits = l.op_bits();
                 d.power.request(l.request());
             }
         }

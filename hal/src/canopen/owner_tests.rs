@@ -24,6 +24,7 @@ fn plan(node: u8) -> NodePlan {
         layout: CspLayout::new(node, true).unwrap(),
         heartbeat_ms: 20,
         sdo_timeout: 50 * MS,
+        homing: None,
     }
 }
 

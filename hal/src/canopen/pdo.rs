@@ -330,20 +330,50 @@ pub struct CspLayout {
 impl CspLayout {
     /// The layout for `node`, with or without the velocity TPDO.
     pub fn new(node: NodeId, with_velocity: bool) -> Result<CspLayout, CanOpenError> {
+        CspLayout::mapped(
+            node,
+            &[CONTROLWORD, TARGET_POSITION],
+            &[STATUSWORD, POSITION_ACTUAL],
+            with_velocity,
+        )
+    }
+
+    /// The layout of a drive that homes itself (CiA 402 homing mode, commanded by the
+    /// master): RPDO1 also carries modes of operation 0x6060 and TPDO1 modes display
+    /// 0x6061 (7 bytes each, still one frame). The mode switch CSP → homing → CSP then
+    /// travels with the SYNC-timed process data, and its confirmation arrives in the same
+    /// TPDO as the statusword and position it applies to: no SDO on the servo thread.
+    pub fn with_mode(node: NodeId, with_velocity: bool) -> Result<CspLayout, CanOpenError> {
+        CspLayout::mapped(
+            node,
+            &[CONTROLWORD, TARGET_POSITION, MODES_OF_OPERATION],
+            &[STATUSWORD, POSITION_ACTUAL, MODES_DISPLAY],
+            with_velocity,
+        )
+    }
+
+    /// A layout with the given RPDO1 and TPDO1 mappings (checked to fit 8 bytes), and the
+    /// default TPDO2 if wanted.
+    pub fn mapped(
+        node: NodeId,
+        rpdo1: &[MappedObject],
+        tpdo1: &[MappedObject],
+        with_velocity: bool,
+    ) -> Result<CspLayout, CanOpenError> {
         use PdoDirection::{Rpdo, Tpdo};
         let rpdo1 = PdoConfig::predefined(
             Rpdo,
             1,
             node,
             TRANSMISSION_SYNC_EVERY,
-            PdoMapping::new(&[CONTROLWORD, TARGET_POSITION])?,
+            PdoMapping::new(rpdo1)?,
         )?;
         let tpdo1 = PdoConfig::predefined(
             Tpdo,
             1,
             node,
             TRANSMISSION_SYNC_EVERY,
-            PdoMapping::new(&[STATUSWORD, POSITION_ACTUAL])?,
+            PdoMapping::new(tpdo1)?,
         )?;
         let tpdo2 = if with_velocity {
             Some(PdoConfig::predefined(

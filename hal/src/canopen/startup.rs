@@ -28,6 +28,35 @@ pub struct NodePlan {
     pub heartbeat_ms: u16,
     /// SDO answer timeout.
     pub sdo_timeout: Duration,
+    /// The drive's own homing parameters, when it homes in homing mode.
+    pub homing: Option<DriveHomingPlan>,
+}
+
+/// Homing parameters of a drive that homes itself (CiA 402 homing mode), in drive units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DriveHomingPlan {
+    /// Homing method 0x6098 (e.g. 17..=22 switches, 35/37 current position).
+    pub method: i8,
+    /// 0x6099:1 speed during search for switch, 0x6099:2 during search for zero, counts/s.
+    pub speeds: [u32; 2],
+    /// 0x609A homing acceleration, counts/s² (0: the drive's own).
+    pub acceleration: u32,
+    /// 0x607C home offset, counts.
+    pub offset: i32,
+}
+
+impl DriveHomingPlan {
+    /// The SDO writes (index, sub, little-endian data) that configure it.
+    pub fn writes(&self) -> [(u16, u8, [u8; 4], usize); 5] {
+        let w = |v: u32| v.to_le_bytes();
+        [
+            (0x6098, 0, w(u32::from(self.method as u8)), 1),
+            (0x6099, 1, w(self.speeds[0]), 4),
+            (0x6099, 2, w(self.speeds[1]), 4),
+            (0x609A, 0, w(self.acceleration), 4),
+            (0x607C, 0, self.offset.to_le_bytes(), 4),
+        ]
+    }
 }
 
 /// Why start-up failed; every variant names the interface and the node.
@@ -207,6 +236,9 @@ fn configure_node<B: CanBus>(
     write(bus, 0x1017, 0, &n.heartbeat_ms.to_le_bytes())?;
     for w in n.layout.sdo_writes() {
         write(bus, w.index, w.sub, &w.data)?;
+    }
+    for (index, sub, data, len) in n.homing.iter().flat_map(DriveHomingPlan::writes) {
+        write(bus, index, sub, &data[..len])?;
     }
     let mode = Mode::CyclicSyncPosition;
     write(bus, 0x6060, 0, &mode.code().to_le_bytes())?;

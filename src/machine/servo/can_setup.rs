@@ -9,16 +9,16 @@
 
 use super::can_bus::{RxHalf, SimTx, TxHalf};
 use crate::config::{
-    AxisConfig, CanopenDriveConfig, ConfigError, Issue, MachineConfig, SIM_DRIVE_HEADROOM,
-    SIM_INTERFACE,
+    AxisConfig, CanopenDriveConfig, CanopenHoming, ConfigError, Issue, MachineConfig,
+    SIM_DRIVE_HEADROOM, SIM_INTERFACE,
 };
 use hytask_hal::can::CanBus;
 use hytask_hal::canopen::axis::{CanAxis, DriveLink};
 use hytask_hal::canopen::busload::CycleTraffic;
 use hytask_hal::canopen::owner::{BusDrive, BusRx, BusTx, SimDrives, MAX_DRIVES};
-use hytask_hal::canopen::pdo::{CspLayout, PdoDirection};
+use hytask_hal::canopen::pdo::PdoDirection;
 use hytask_hal::canopen::slave::{DriveSlave, SlaveConfig};
-use hytask_hal::canopen::startup::{sdo_transfer, start_nodes, NodePlan};
+use hytask_hal::canopen::startup::{sdo_transfer, start_nodes, DriveHomingPlan, NodePlan};
 use hytask_hal::canopen::sync::SyncProducer;
 use hytask_hal::canopen::{NodeId, COB_EMCY, COB_HEARTBEAT, COB_SDO_TX};
 use hytask_hal::sim::SimCanBus;
@@ -263,14 +263,19 @@ fn build_bus(
     for m in members {
         let node = NodeId::new(m.co.node_id)
             .map_err(|e| invalid(cfg, format!("{}.node_id", m.key), e.to_string()))?;
-        let layout = CspLayout::new(node, m.co.velocity_pdo)
-            .map_err(|e| invalid(cfg, format!("{}.velocity_pdo", m.key), e.to_string()))?;
+        let drive_homing = drive_homing_plan(m);
+        let layout = super::can_pdo_names::layout(m.co, node, drive_homing.is_some())
+            .map_err(|e| invalid(cfg, format!("{}.{}", m.key, e.key), e.message))?;
         let link = DriveLink::on_bus(node, iface);
         // 50 ms (at least 3 cycles) without process data is a lost drive; shorter gaps are
         // a drive answering SYNC late, and the last values stand.
         let missed = (50_000 / period_us.max(1)).max(3);
-        out.axes[m.axis_index] =
-            Some(CanAxis::new(link.clone(), m.axis.scale).with_missed_cycles(missed));
+        let mut axis = CanAxis::new(link.clone(), m.axis.scale).with_missed_cycles(missed);
+        if drive_homing.is_some() {
+            let cycles = u64::from(m.co.homing_timeout_ms) * 1000 / u64::from(period_us.max(1));
+            axis = axis.with_drive_homing(u32::try_from(cycles).unwrap_or(u32::MAX));
+        }
+        out.axes[m.axis_index] = Some(axis);
         let hb = Duration::from_millis(u64::from(m.co.heartbeat_ms));
         drives.push(BusDrive {
             link,
@@ -282,6 +287,7 @@ fn build_bus(
             layout,
             heartbeat_ms: u16::try_from(m.co.heartbeat_ms).unwrap_or(u16::MAX),
             sdo_timeout: Duration::from_millis(u64::from(m.co.sdo_timeout_ms)),
+            homing: drive_homing,
         });
         out.sdo.drives.push((
             m.drive.to_string(),
@@ -328,7 +334,7 @@ fn build_bus(
         let slaves = members
             .iter()
             .zip(&plans)
-            .map(|(m, p)| DriveSlave::new(p.node, slave_config(m.axis, period_us)))
+            .map(|(m, p)| DriveSlave::new(p.node, slave_config(m.axis, m.co, period_us)))
             .collect();
         let mut sim = SimDrives::new(slaves_port, slaves);
         let mut sdo = sdo;
@@ -387,16 +393,35 @@ fn build_bus(
     Ok(())
 }
 
+/// The drive's own homing parameters when `homing = "drive"`: method, speeds and
+/// acceleration as configured, home offset 0x607C = `[axis.home] position` in counts (so
+/// the axis reads its home position after homing, with no offset on the master).
+fn drive_homing_plan(m: &Member<'_>) -> Option<DriveHomingPlan> {
+    if m.co.homing != CanopenHoming::Drive {
+        return None;
+    }
+    let offset = (m.axis.home.position * m.axis.scale)
+        .round()
+        .clamp(f64::from(i32::MIN), f64::from(i32::MAX));
+    Some(DriveHomingPlan {
+        method: m.co.homing_method.unwrap_or(0),
+        speeds: m.co.homing_speeds,
+        acceleration: m.co.homing_acceleration,
+        // Clamped to the i32 range above.
+        offset: offset as i32,
+    })
+}
+
 /// The loopback drive's motor for `axis`, in counts: the simulated axis's headroom over
 /// the planning limits.
-fn slave_config(axis: &AxisConfig, period_us: u32) -> SlaveConfig {
+fn slave_config(axis: &AxisConfig, co: &CanopenDriveConfig, period_us: u32) -> SlaveConfig {
     let k = axis.scale.abs();
     SlaveConfig {
         cycle: Duration::from_micros(u64::from(period_us)),
         max_velocity: axis.max_velocity * SIM_DRIVE_HEADROOM * k,
         max_acceleration: axis.max_acceleration * SIM_DRIVE_HEADROOM * k,
         quick_stop_deceleration: 2.0 * axis.max_acceleration * k,
-        lag_s: 0.005,
+        lag_s: co.loopback_lag_s.map_or(0.005, |l| l.0),
         heartbeat_ms: 0,
     }
 }

@@ -27,6 +27,8 @@
 
 pub mod axis_task;
 pub mod can_bus;
+pub mod can_delay;
+pub mod can_pdo_names;
 pub mod can_setup;
 pub mod interp_task;
 pub mod io_task;

@@ -8,6 +8,7 @@
 //! The monitor only reports: the machine task decides the reaction (the error policy lives
 //! outside the task that finds the error).
 
+use super::can_delay::SetpointHistory;
 use super::status::StatusPublisher;
 use super::{ports, AxisFeedback, FaultEvent, MonitorSnapshot, MotionControl, Setpoints};
 use crate::gcode::NUM_AXES;
@@ -32,6 +33,8 @@ pub struct MonitorTask {
     job: u32,
     /// The status snapshot of the cycle, published last.
     status: StatusPublisher,
+    /// Per pose index: past setpoints, for axes whose feedback answers an older one.
+    history: [SetpointHistory; NUM_AXES],
 }
 
 impl MonitorTask {
@@ -51,7 +54,18 @@ impl MonitorTask {
             snap: MonitorSnapshot::default(),
             job: 0,
             status: StatusPublisher::default(),
+            history: [SetpointHistory::new(0); NUM_AXES],
         }
+    }
+
+    /// Feedback of axis `index` answers the setpoint of `delay` cycles ago (CANopen axes:
+    /// [`CAN_FEEDBACK_DELAY`](super::can_delay::CAN_FEEDBACK_DELAY)): the following error
+    /// is taken against that setpoint.
+    pub fn with_feedback_delay(mut self, index: usize, delay: usize) -> Self {
+        if let Some(h) = self.history.get_mut(index) {
+            *h = SetpointHistory::new(delay);
+        }
+        self
     }
 }
 
@@ -93,18 +107,19 @@ impl Task for MonitorTask {
             self.snap.max_following_error = [0.0; NUM_AXES];
         }
         for &(_, i, guard) in &self.axes {
+            let commanded = self.history[i].push(self.setpoints.joints[i]);
             let fb = &self.feedback[i];
             if !fb.valid {
                 continue;
             }
-            let error = self.setpoints.joints[i] - fb.actual;
+            let error = commanded - fb.actual;
             self.snap.following_error[i] = error;
             let moving = !self.setpoints.tracking;
             if moving && error.abs() > self.snap.max_following_error[i] {
                 self.snap.max_following_error[i] = error.abs();
             }
             let sample = AxisSample {
-                commanded: self.setpoints.joints[i],
+                commanded,
                 actual: fb.actual,
                 fault: fb.fault.or(fb.state.is_fault().then_some(0)),
                 limit_switch: fb.limit_switch && !fb.homing,
