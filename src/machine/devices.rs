@@ -64,6 +64,15 @@ impl AxisDevice {
         }
     }
 
+    /// Cycles the position of a CANopen drive is older than usual (a late TPDO: the last
+    /// values stand); 0 for other backends.
+    pub fn feedback_age(&mut self) -> u32 {
+        match self {
+            AxisDevice::Can(c) => c.inner().feedback_age(),
+            _ => 0,
+        }
+    }
+
     /// Advances a simulated drive by one servo period (no-op for real drives).
     pub fn tick(&mut self, dt: Duration) {
         if let AxisDevice::Sim(s) = self {

@@ -361,7 +361,7 @@ pub enum CanAxisError {
     #[error("{0}")]
     Link(LinkFault),
     /// A homing method the master cannot run in CSP.
-    #[error("CANopen node {0}: only current-position homing runs on CANopen drives")]
+    #[error("CANopen node {0}: the master homes on the current position only; a switch search is the drive's own homing method (homing = \"drive\")")]
     HomingUnsupported(u8),
     /// A target that does not fit the drive's 32-bit position.
     #[error("CANopen node {0}: target out of the drive's position range")]
@@ -530,6 +530,13 @@ impl CanAxis {
     pub fn with_missed_cycles(mut self, n: u32) -> CanAxis {
         self.max_missed = n;
         self
+    }
+
+    /// Cycles since the last fresh TPDO (0 when one arrived this cycle): how much older than
+    /// usual the position of [`AxisFeedback::actual_position`] is, while the last values
+    /// stand in for a drive that answers SYNC late.
+    pub fn feedback_age(&self) -> u32 {
+        self.missed
     }
 
     /// The link fault of this drive, if any (the monitor names node and cause with it).
@@ -729,8 +736,14 @@ mod tests {
         assert_eq!(a.actual_velocity().unwrap(), -2.0);
         let mut tolerant = CanAxis::new(link.clone(), 1000.0).with_missed_cycles(2);
         assert_eq!(tolerant.actual_position().unwrap(), 12.5);
+        assert_eq!(tolerant.feedback_age(), 0);
         assert_eq!(tolerant.actual_position().unwrap(), 12.5, "1 missed");
         assert_eq!(tolerant.actual_position().unwrap(), 12.5, "2 missed");
+        assert_eq!(
+            tolerant.feedback_age(),
+            2,
+            "the position is 2 cycles older than usual"
+        );
         assert_eq!(tolerant.actual_position(), Err(CanAxisError::Stale(3)));
         assert_eq!(a.drive_state().unwrap(), DriveState::OperationEnabled);
         let home = HomingParams {

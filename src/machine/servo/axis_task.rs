@@ -166,6 +166,7 @@ impl Task for AxisTask {
         self.device.tick(Duration::from_nanos(ctx.period_ns));
         ok &= self.read_feedback();
         self.fb.link = self.device.link_fault();
+        self.fb.age = self.device.feedback_age();
         self.fb.stale_cycles = if ok {
             0
         } else {

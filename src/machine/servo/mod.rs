@@ -257,6 +257,8 @@ pub struct AxisFeedback {
     pub valid: bool,
     /// Fieldbus fault of a CANopen drive: node and cause.
     pub link: Option<LinkFault>,
+    /// Cycles the position is older than usual (a CANopen drive that answered SYNC late).
+    pub age: u32,
 }
 
 impl Default for AxisFeedback {
@@ -273,6 +275,7 @@ impl Default for AxisFeedback {
             stale_cycles: 0,
             valid: false,
             link: None,
+            age: 0,
         }
     }
 }

@@ -107,8 +107,8 @@ impl Task for MonitorTask {
             self.snap.max_following_error = [0.0; NUM_AXES];
         }
         for &(_, i, guard) in &self.axes {
-            let commanded = self.history[i].push(self.setpoints.joints[i]);
             let fb = &self.feedback[i];
+            let commanded = self.history[i].push(self.setpoints.joints[i], fb.age);
             if !fb.valid {
                 continue;
             }
