@@ -348,3 +348,138 @@ fn bad_bindings_are_refused_naming_key_and_variable() {
         assert!(wanted.iter().all(|w| e.contains(w)), "{table}.{var}: {e}");
     }
 }
+
+/// `[plc] m66_digital`: M66 P0 waits on the PLC's `coolant_pump`: L4 (low) passes at once,
+/// L3 (high) waits until the operator forces it on (the timeouts are far beyond the hang
+/// guard, so only the PLC variable can end these waits), and a wait that times out lets
+/// the program go on, as LinuxCNC's M66 does.
+#[test]
+fn m66_waits_on_a_plc_variable() {
+    let (d, _dir) = start(|t| {
+        t.replace(
+            "[plc.inputs]\n",
+            "m66_digital = [\"coolant_pump\"]\n\n[plc.inputs]\n",
+        )
+    });
+    let mut c = d.client();
+    ready(&mut c);
+    run_text(
+        &mut c,
+        "G21 G90\nM66 P0 L4 Q100000\nG0 X20\nM66 P0 L3 Q100000\nG0 X40\nM2\n",
+        "m66.ngc",
+    );
+    let s = wait_status(&mut c, "waiting at the M66 L3", HANG, |s| {
+        s["job"]["line"] == json!(4)
+    });
+    assert!(
+        (axis(&s, "X")["actual"].as_f64().unwrap() - 20.0).abs() < 0.01,
+        "{s}"
+    );
+    let s = ok(&mut c, "status", Value::Null);
+    assert_eq!(s["job"]["state"], json!("running"), "still waiting: {s}");
+    let v = ok(
+        &mut c,
+        "plc.force",
+        json!({"name": "coolant_pump", "value": true}),
+    );
+    assert_eq!(v["forced"], json!(true), "{v}");
+    let s = wait_status(&mut c, "forced in status", HANG, |s| {
+        s["plc"]["forced"] == json!(1)
+    });
+    assert_eq!(s["plc"]["forced"], json!(1));
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("done"), "{s}");
+    assert!(
+        (axis(&s, "X")["actual"].as_f64().unwrap() - 40.0).abs() < 0.01,
+        "{s}"
+    );
+    ok(&mut c, "plc.unforce", json!({}));
+
+    // Nothing turns the pump on: the wait times out after 0.3 s and the job goes on.
+    run_text(
+        &mut c,
+        "G21 G90\nM66 P0 L3 Q0.3\nG0 X10\nM2\n",
+        "m66-timeout.ngc",
+    );
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("done"), "{s}");
+    assert!(
+        (axis(&s, "X")["actual"].as_f64().unwrap() - 10.0).abs() < 0.01,
+        "{s}"
+    );
+}
+
+/// A new version of the mill's program loaded while a job runs takes over at a scan
+/// boundary: the job finishes, the PLC keeps scanning without a fault, and the status
+/// counts the load. A version that does not compile is refused with file:line:col.
+#[test]
+fn plc_load_while_a_job_runs() {
+    let (d, dir) = start(|t| t);
+    let mut c = d.client();
+    ready(&mut c);
+    let good = std::fs::read_to_string(root().join("config/plc/mill.st")).unwrap();
+    // `hytask plc ARGS --socket S`: its standard output, once it succeeded.
+    let cli = |d: &Daemon, args: &[&str]| -> String {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+            .arg("plc")
+            .args(args)
+            .arg("--socket")
+            .arg(&d.socket)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "hytask plc {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    run_text(&mut c, "G21 G90\nG1 X150 F300\nG1 X0\nM2\n", "long.ngc");
+    wait_status(&mut c, "job running", HANG, |s| {
+        s["job"]["state"] == json!("running")
+    });
+    let before = ok(&mut c, "status", Value::Null)["plc"]["scans"]
+        .as_u64()
+        .unwrap();
+    let (code, msg) = err(
+        &mut c,
+        "plc.load",
+        json!({"file": "bad.st", "source": good.replace("started := TRUE;", "started := 1.5;")}),
+    );
+    assert_ne!(code, 0);
+    assert!(
+        msg.contains("bad.st:") && msg.contains("unchanged"),
+        "{msg}"
+    );
+    let changed = good.replace(
+        "    lube_now : BOOL;",
+        "    lube_now : BOOL;\n    loads : DINT := 1;",
+    );
+    // The operator's way: `hytask plc load FILE`, then `plc get`, `force`, `vars`.
+    let file = dir.path().join("mill-v2.st");
+    std::fs::write(&file, changed).unwrap();
+    let out = cli(&d, &["load", &file.display().to_string()]);
+    assert!(out.contains("loaded version 2"), "{out}");
+    assert!(out.contains("1 reset: Mill.loads"), "{out}");
+    assert!(out.contains("0 removed"), "{out}");
+    let s = ok(&mut c, "status", Value::Null);
+    assert_eq!(
+        s["job"]["state"],
+        json!("running"),
+        "loaded while the job runs: {s}"
+    );
+    assert_eq!(cli(&d, &["get", "loads"]).trim(), "Mill.loads : DINT = 1");
+    let out = cli(&d, &["force", "loads", "5"]);
+    assert_eq!(out.trim(), "Mill.loads : DINT = 5 FORCED");
+    let out = cli(&d, &["vars", "loads"]);
+    assert_eq!(out.trim(), "Mill.loads : DINT = 5 FORCED");
+    cli(&d, &["unforce"]);
+    let v = ok(&mut c, "plc.get", json!({"name": "loads"}));
+    assert_eq!(v["forced"], json!(false), "{v}");
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("done"), "{s}");
+    let plc = &s["plc"];
+    assert_eq!(plc["reloads"], json!(1), "{s}");
+    assert_eq!(plc["fault"], json!(false), "{s}");
+    assert!(plc["scans"].as_u64().unwrap() > before, "{s}");
+}

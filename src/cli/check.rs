@@ -38,8 +38,18 @@ pub fn run(args: CheckArgs) -> anyhow::Result<ExitCode> {
         Some(path) => (path.display().to_string(), config::load(path)),
         None => ("built-in sim".to_string(), config::builtin_sim()),
     };
+    // The PLC program compiles and its bindings resolve, as the daemon requires to start.
+    let result = result.map(|m| {
+        let plc = crate::plc::deploy::check(&m);
+        (m, plc)
+    });
     match result {
-        Ok(machine) => {
+        Ok((_, Err(plc))) => {
+            eprintln!("{origin}: [plc]:");
+            eprintln!("{plc}");
+            Ok(ExitCode::FAILURE)
+        }
+        Ok((machine, Ok(()))) => {
             if !args.quiet {
                 print!("{}", machine.to_toml()?);
             }

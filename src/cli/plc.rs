@@ -1,7 +1,10 @@
 //! `hytask plc`: PLC program tools that need no machine. `check` compiles a Structured Text
 //! file and prints its errors (file:line:col, all of them) or its interface; `run` scans it
 //! offline in simulated time and prints the variables that changed, per scan: how a machine
-//! builder tests logic at a desk.
+//! builder tests logic at a desk. `vars`, `get`, `set`, `force`, `unforce` and `load` talk
+//! to the running daemon ([`online`]).
+
+mod online;
 
 use crate::plc::{self, ast::Section, Options, Program, VarId};
 use anyhow::{bail, Context as _};
@@ -27,6 +30,8 @@ pub enum PlcCommand {
     },
     /// Run a program offline in simulated time and print what changed per scan.
     Run(RunArgs),
+    #[command(flatten)]
+    Online(online::OnlineCommand),
 }
 
 /// Arguments of `hytask plc run`.
@@ -61,6 +66,7 @@ pub fn run(args: PlcArgs) -> anyhow::Result<ExitCode> {
     match args.command {
         PlcCommand::Check { file } => check(&file),
         PlcCommand::Run(a) => run_offline(&a),
+        PlcCommand::Online(c) => online::run(c),
     }
 }
 

@@ -19,6 +19,7 @@
 //! (`plc::machine::bind`); this module checks what needs no program.
 
 use super::error::Issues;
+use crate::plc::{M66_ANALOG_MAX, M66_DIGITAL_MAX};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -53,6 +54,14 @@ pub struct PlcConfig {
     /// Instructions one scan may execute (runaway loops fault instead of overrunning).
     #[serde(default = "default_budget")]
     pub instruction_budget: u64,
+    /// PLC variables M66 P0, P1, ... wait on (BOOL outputs or globals of the program), as
+    /// LinuxCNC's `motion.digital-in-NN`: `M66 P0 L3 Q5` waits up to 5 s for the first one
+    /// to be TRUE. A number listed here shadows the physical input of the same number.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub m66_digital: Vec<String>,
+    /// PLC variables M66 E0, E1, ... sample (REAL/LREAL outputs or globals).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub m66_analog: Vec<String>,
     /// Variable ← signal, copied into the program before each scan.
     #[serde(default)]
     pub inputs: BTreeMap<String, String>,
@@ -77,6 +86,8 @@ impl PartialEq for PlcConfig {
             self.instruction_budget,
             &self.inputs,
             &self.outputs,
+            &self.m66_digital,
+            &self.m66_analog,
         ) == (
             &o.program,
             &o.thread,
@@ -88,6 +99,8 @@ impl PartialEq for PlcConfig {
             o.instruction_budget,
             &o.inputs,
             &o.outputs,
+            &o.m66_digital,
+            &o.m66_analog,
         )
     }
 }
@@ -123,6 +136,18 @@ impl PlcConfig {
                     format!("M{m} is not a user M code (100..=199)"),
                 );
             }
+        }
+        if self.m66_digital.len() > M66_DIGITAL_MAX {
+            issues.push(
+                "plc.m66_digital",
+                format!("at most {M66_DIGITAL_MAX} variables"),
+            );
+        }
+        if self.m66_analog.len() > M66_ANALOG_MAX {
+            issues.push(
+                "plc.m66_analog",
+                format!("at most {M66_ANALOG_MAX} variables"),
+            );
         }
         if self.instruction_budget == 0 {
             issues.push("plc.instruction_budget", "must be at least 1");

@@ -1,8 +1,9 @@
 //! Who may do what on the control socket, by the peer's credentials (SO_PEERCRED).
 //!
-//! Two roles: an **observer** may watch (`status`, `subscribe`, `unsubscribe`, `tasks`) and
-//! trip the e-stop (stopping is never refused to anyone who can reach the socket, as the
-//! red button on the machine is not); an **operator** may do everything. Roles apply when
+//! Two roles: an **observer** may watch (`status`, `subscribe`, `unsubscribe`, `tasks`,
+//! `plc.vars`, `plc.get`) and trip the e-stop (stopping is never refused to anyone who can
+//! reach the socket, as the red button on the machine is not); an **operator** may do
+//! everything. Roles apply when
 //! `[control] operators` or `observers` is configured; then root and the daemon's own user
 //! are always operators, the lists decide for everyone else, and `[control] unlisted`
 //! decides for a user in neither list (observer by default, or refused). Without either
@@ -32,7 +33,15 @@ impl Role {
 }
 
 /// Methods an observer may call.
-pub const OBSERVER_METHODS: &[&str] = &["status", "subscribe", "unsubscribe", "tasks", "estop"];
+pub const OBSERVER_METHODS: &[&str] = &[
+    "status",
+    "subscribe",
+    "unsubscribe",
+    "tasks",
+    "estop",
+    "plc.vars",
+    "plc.get",
+];
 
 /// Whether `role` may call `method`.
 pub fn permits(role: Role, method: &str) -> bool {

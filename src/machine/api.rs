@@ -221,6 +221,12 @@ pub struct PlcStatus {
     pub overruns: u64,
     /// The PLC is in fault (outputs at their safe values).
     pub fault: bool,
+    /// Variables forced online (`plc.force`).
+    #[serde(default)]
+    pub forced: u64,
+    /// Program versions loaded online (`plc.load`) since start.
+    #[serde(default)]
+    pub reloads: u64,
 }
 
 /// A fault to inject into a simulated machine (`sim.fault`).
@@ -399,6 +405,10 @@ pub trait MachineApi: Send + Sync + 'static {
     fn subscribe(&self) -> tokio::sync::broadcast::Receiver<MachineEvent>;
     /// The machine's script hosts (programs and state machines), if it deploys any.
     fn scripts(&self) -> Option<&crate::script::ScriptHosts> {
+        None
+    }
+    /// Online access to the machine's PLC, if it has one (`plc.*` methods).
+    fn plc(&self) -> Option<&crate::plc::online::PlcOnline> {
         None
     }
     /// Reads object `index:sub` of CANopen drive `drive` by SDO (non-realtime path).

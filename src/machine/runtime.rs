@@ -123,6 +123,8 @@ pub struct Machine {
     link_events: Mutex<Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>>,
     /// Scan statistics of the PLC task.
     plc_stats: Option<Arc<crate::plc::task::PlcStats>>,
+    /// Online access to the PLC (`plc.*` methods).
+    plc_online: Option<Arc<crate::plc::online::PlcOnline>>,
 }
 
 mod events;
@@ -178,6 +180,8 @@ pub struct Built {
     pub link_events: Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>,
     /// Scan statistics of the PLC task (`None` without `[plc]`).
     pub plc_stats: Option<Arc<crate::plc::task::PlcStats>>,
+    /// Online access to the PLC (`None` without `[plc]`).
+    pub plc_online: Option<Arc<crate::plc::online::PlcOnline>>,
 }
 
 /// Builds the backends and adds the machine's tasks to a new deployment, in start order
@@ -352,11 +356,13 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
     app.add_periodic("monitor", monitor, schedule)?;
     // The PLC on its own thread, after the servo tasks (the servo thread stays first).
     let plc_stats = plc.as_ref().map(|p| p.stats.clone());
+    let plc_online = plc.as_ref().map(|p| p.online.clone());
     if let Some(p) = plc {
         app.add_periodic("plc", p.task, p.schedule)?;
     }
     Ok(Built {
         plc_stats,
+        plc_online,
         app,
         machine,
         queue: queue_w,
@@ -400,6 +406,7 @@ impl Machine {
             can_sim_buses,
             link_events,
             plc_stats,
+            plc_online,
         } = build(&config)?;
         let report = app.configure()?;
         for w in &report.warnings {
@@ -463,6 +470,7 @@ impl Machine {
             })),
             link_events: Mutex::new(link_events),
             plc_stats,
+            plc_online,
         });
         let weak = Arc::downgrade(&m);
         let stop = m.bridge_stop.clone();
@@ -768,6 +776,10 @@ impl Machine {
 }
 
 impl MachineApi for Machine {
+    fn plc(&self) -> Option<&crate::plc::online::PlcOnline> {
+        self.plc_online.as_deref()
+    }
+
     fn status(&self) -> Status {
         // One read: every value below belongs to servo cycle `st.cycle`.
         let st = self.snapshot();

@@ -69,6 +69,10 @@ pub enum OutSignal {
     StartInhibit,
     /// E-stop when it rises.
     Estop,
+    /// What M66 P`i` waits on (`plc.m66_digital[i]`).
+    M66Digital(usize),
+    /// What M66 E`i` samples (`plc.m66_analog[i]`).
+    M66Analog(usize),
 }
 
 /// What a signal carries, for the type check.
@@ -310,6 +314,34 @@ pub fn resolve(
             // A faulted PLC finishes nothing, holds feed and refuses starts.
             OutSignal::FeedHold | OutSignal::StartInhibit => Value::Bool(true),
             OutSignal::M6Done | OutSignal::McodeDone | OutSignal::Estop => Value::Bool(false),
+            OutSignal::M66Digital(_) => Value::Bool(false),
+            OutSignal::M66Analog(_) => Value::Real(0.0),
+        };
+        b.outputs.push((id, s, safe));
+    }
+    // M66 waits read these variables; a faulted PLC reads as FALSE / 0.
+    let m66 = plc
+        .m66_digital
+        .iter()
+        .enumerate()
+        .map(|(i, v)| ("m66_digital", i, v, Carrier::Bool))
+        .chain(
+            plc.m66_analog
+                .iter()
+                .enumerate()
+                .map(|(i, v)| ("m66_analog", i, v, Carrier::Real)),
+        );
+    for (table, i, var, c) in m66 {
+        let key = format!("plc.{table}[{i}]");
+        let Some(id) = lookup(program, &key, var, VarKind::Output, &mut errors) else {
+            continue;
+        };
+        if !type_check(&key, id, c, var, &mut errors) {
+            continue;
+        }
+        let (s, safe) = match c {
+            Carrier::Bool => (OutSignal::M66Digital(i), Value::Bool(false)),
+            _ => (OutSignal::M66Analog(i), Value::Real(0.0)),
         };
         b.outputs.push((id, s, safe));
     }

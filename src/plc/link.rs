@@ -3,6 +3,7 @@
 //! Both are fixed-size `Copy` values, so the two tasks can run on different threads without
 //! a lock.
 
+use super::M66_ANALOG_MAX;
 use crate::machine::servo::{Outputs, MAX_ANALOG};
 
 /// Data object names.
@@ -73,6 +74,10 @@ pub struct PlcCommand {
     pub analog_mask: u16,
     /// Their values.
     pub analog: [f64; MAX_ANALOG],
+    /// What M66 P`i` waits on, bit i (`plc.m66_digital`).
+    pub m66_digital: u64,
+    /// What M66 E`i` samples (`plc.m66_analog`).
+    pub m66_analog: [f64; M66_ANALOG_MAX],
 }
 
 impl PlcCommand {

@@ -11,6 +11,7 @@
 //! - [`program`], [`value`]: the loaded program, its variable table and its scan.
 //! - [`bind`], [`link`], [`task`]: the PLC in the machine: bindings of variables to the
 //!   machine's signals, the data exchanged with the machine task, the realtime scan task.
+//! - [`online`]: reads, writes, forces and program loads while the PLC runs.
 
 pub mod ast;
 #[cfg(not(loom))]
@@ -24,6 +25,8 @@ pub mod expr;
 pub mod lexer;
 #[cfg(not(loom))]
 pub mod link;
+#[cfg(not(loom))]
+pub mod online;
 pub mod parser;
 mod peephole;
 pub mod program;
@@ -42,6 +45,11 @@ pub use program::{Fault, InterfaceEntry, Program, VarId, VarInfo, VarKind};
 pub use types::{IntKind, Ty};
 pub use value::Value;
 pub use vm::FaultKind;
+
+/// Most variables `[plc] m66_digital` may list (M66 P0..P63, a 64-bit image).
+pub const M66_DIGITAL_MAX: usize = 64;
+/// Most variables `[plc] m66_analog` may list (M66 E0..E15).
+pub const M66_ANALOG_MAX: usize = 16;
 
 /// Reads and compiles a program file.
 pub fn load_file(path: &std::path::Path, opts: Options) -> Result<Program, LoadError> {

@@ -110,6 +110,11 @@ pub struct Program {
     outputs: Vec<(VarId, Value)>,
     fault: Option<Fault>,
     last_used: u64,
+    /// Forced variables: (cell, value), applied after the input image is copied in and
+    /// again after the program ran, so a forced value overrides inputs, online writes and
+    /// the program's own assignments. Capacity for every variable is reserved in
+    /// [`Program::bind`], so forcing in the scan never allocates.
+    forces: Vec<(u32, u64)>,
 }
 
 impl Program {
@@ -150,6 +155,7 @@ impl Program {
             outputs: Vec::new(),
             fault: None,
             last_used: 0,
+            forces: Vec::new(),
         }
     }
 
@@ -270,6 +276,69 @@ impl Program {
     pub fn bind(&mut self, inputs: &[VarId], outputs: &[(VarId, Value)]) {
         self.inputs = inputs.to_vec();
         self.outputs = outputs.to_vec();
+        self.forces = Vec::with_capacity(self.vars.len());
+    }
+
+    /// Forces variable `id` to the raw cell `cell` until [`Program::unforce`]. Never
+    /// allocates after [`Program::bind`] (one entry per variable at most).
+    pub fn force_cell(&mut self, id: VarId, cell: u64) {
+        let Some(addr) = self.vars.get(id.0 as usize).map(|v| v.addr) else {
+            return;
+        };
+        if let Some(f) = self.forces.iter_mut().find(|(a, _)| *a == addr) {
+            f.1 = cell;
+        } else if self.forces.len() < self.forces.capacity() {
+            self.forces.push((addr, cell));
+        } else {
+            return;
+        }
+        self.mem[addr as usize] = cell;
+    }
+    /// Releases the force on `id` (it keeps its forced value until written).
+    pub fn unforce(&mut self, id: VarId) {
+        if let Some(addr) = self.vars.get(id.0 as usize).map(|v| v.addr) {
+            self.forces.retain(|(a, _)| *a != addr);
+        }
+    }
+    /// Releases every force.
+    pub fn unforce_all(&mut self) {
+        self.forces.clear();
+    }
+    /// Whether `id` is forced.
+    pub fn is_forced(&self, id: VarId) -> bool {
+        let addr = self.info(id).addr;
+        self.forces.iter().any(|(a, _)| *a == addr)
+    }
+    /// Number of forced variables.
+    pub fn forced_count(&self) -> usize {
+        self.forces.len()
+    }
+    /// Writes a raw cell of variable `id` (an online write, between scans).
+    pub fn set_cell(&mut self, id: VarId, cell: u64) {
+        if let Some(addr) = self.vars.get(id.0 as usize).map(|v| v.addr) {
+            self.mem[addr as usize] = cell;
+        }
+    }
+    /// Copies the cells `keep` names (old address, new address) from `old`: the values a
+    /// new program version takes over. Out-of-range pairs are skipped.
+    pub fn take_cells(&mut self, old: &Program, keep: &[(u32, u32)]) {
+        for &(o, n) in keep {
+            if let (Some(v), Some(c)) = (old.mem.get(o as usize), self.mem.get_mut(n as usize)) {
+                *c = *v;
+            }
+        }
+    }
+    /// Formats a raw cell of variable `id` as an IEC literal.
+    pub fn format_value(&self, id: VarId, cell: u64) -> String {
+        self.format_cell(self.info(id).ty, cell)
+    }
+
+    fn apply_forces(&mut self) {
+        for &(a, c) in &self.forces {
+            if let Some(m) = self.mem.get_mut(a as usize) {
+                *m = c;
+            }
+        }
     }
 
     /// The fault the program is in, if any.
@@ -302,7 +371,10 @@ impl Program {
                     self.mem[info.addr as usize] = c;
                 }
             }
-            if let Err((kind, pc)) = self.run(now_ns) {
+            self.apply_forces();
+            let ran = self.run(now_ns);
+            self.apply_forces();
+            if let Err((kind, pc)) = ran {
                 let span = self.spans.get(pc as usize).copied().unwrap_or_default();
                 self.fault = Some(Fault {
                     kind,

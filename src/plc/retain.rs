@@ -16,9 +16,17 @@ use std::time::Duration;
 pub struct RetainShared {
     seq: AtomicU64,
     cells: Vec<AtomicU64>,
+    /// Replaced by a new program version's: its writer stops without a last write, so the
+    /// old version's values never overwrite the new one's.
+    retired: std::sync::atomic::AtomicBool,
 }
 
 impl RetainShared {
+    /// Stops this writer for good (a new program version took over the file).
+    pub fn retire(&self) {
+        self.retired.store(true, Ordering::Release);
+    }
+
     /// Publishes `program`'s retained cells (realtime: stores only).
     pub fn publish(&self, program: &Program, ids: &[VarId]) {
         self.seq.fetch_add(1, Ordering::AcqRel);
@@ -88,12 +96,23 @@ pub fn start(program: &mut Program, path: &Path) -> Result<Retain, RetainError> 
             program.set(id, v).map_err(|e| err(e.to_string()))?;
         }
     }
+    Ok(follow(program, path))
+}
+
+/// Starts a writer of `program`'s RETAIN variables to `path` without restoring from it (a
+/// new program version that took its values over from the running one).
+pub fn follow(program: &Program, path: &Path) -> Retain {
+    let ids: Vec<VarId> = (0..program.vars().len() as u32)
+        .map(VarId)
+        .filter(|id| program.info(*id).retain)
+        .collect();
     let shared = Arc::new(RetainShared {
         seq: AtomicU64::new(0),
         cells: ids
             .iter()
             .map(|id| AtomicU64::new(program.cell(*id)))
             .collect(),
+        retired: std::sync::atomic::AtomicBool::new(false),
     });
     let names: Vec<(String, Ty)> = ids
         .iter()
@@ -106,13 +125,16 @@ pub fn start(program: &mut Program, path: &Path) -> Result<Retain, RetainError> 
             .name("plc-retain".into())
             .spawn(move || write_loop(&writer, &names, &path));
     }
-    Ok(Retain { ids, shared })
+    Retain { ids, shared }
 }
 
 fn write_loop(shared: &Arc<RetainShared>, names: &[(String, Ty)], path: &Path) {
     let mut last = shared.snapshot();
     loop {
         std::thread::sleep(Duration::from_millis(1000));
+        if shared.retired.load(Ordering::Acquire) {
+            return;
+        }
         // The task is gone (machine shut down): one last write, then stop.
         let done = Arc::strong_count(shared) == 1;
         let now = shared.snapshot();

@@ -7,6 +7,7 @@
 
 use super::bind::{Bindings, InSignal, OutSignal};
 use super::link::{ports, PlcCommand, PlcRequest, RequestKind};
+use super::online::{OnlineRt, Running};
 use super::{Fault, Program, Value};
 use crate::machine::api::Mode;
 use crate::machine::servo::{ports as servo_ports, Inputs, MachineSnapshot};
@@ -53,6 +54,10 @@ pub struct PlcStats {
     pub histogram: [AtomicU64; 32],
     /// In fault.
     pub faulted: AtomicBool,
+    /// Variables forced (online), as of the last scan.
+    pub forced: AtomicU64,
+    /// Program versions loaded online since start.
+    pub reloads: AtomicU64,
 }
 
 impl PlcStats {
@@ -76,6 +81,8 @@ impl PlcStats {
             max_us: us(self.max_ns.load(Ordering::Relaxed)),
             overruns: self.overruns.load(Ordering::Relaxed),
             fault: self.faulted.load(Ordering::Relaxed),
+            forced: self.forced.load(Ordering::Relaxed),
+            reloads: self.reloads.load(Ordering::Relaxed),
         }
     }
 
@@ -133,14 +140,20 @@ pub struct PlcTask {
     watchdog: bool,
     reported: bool,
     retain: Option<super::retain::Retain>,
+    online: Option<OnlineRt>,
+}
+
+/// Binds `program`'s process image to `bindings` (allocates: at load, off the scan).
+pub fn bind_program(program: &mut Program, bindings: &Bindings) {
+    let ins: Vec<_> = bindings.inputs.iter().map(|(v, _)| *v).collect();
+    let outs: Vec<_> = bindings.outputs.iter().map(|(v, _, s)| (*v, *s)).collect();
+    program.bind(&ins, &outs);
 }
 
 impl PlcTask {
     /// A task scanning `program` with `bindings` (already bound to the program).
     pub fn new(mut program: Program, bindings: Bindings, setup: PlcSetup) -> Self {
-        let ins: Vec<_> = bindings.inputs.iter().map(|(v, _)| *v).collect();
-        let outs: Vec<_> = bindings.outputs.iter().map(|(v, _, s)| (*v, *s)).collect();
-        program.bind(&ins, &outs);
+        bind_program(&mut program, &bindings);
         let mut cmd = PlcCommand::default();
         for (_, s, _) in &bindings.outputs {
             match *s {
@@ -170,7 +183,25 @@ impl PlcTask {
             watchdog: false,
             reported: false,
             retain: None,
+            online: None,
         }
+    }
+
+    /// Takes online writes, forces and new program versions from `online` at scan
+    /// boundaries, and answers its reads.
+    pub fn with_online(mut self, online: OnlineRt) -> Self {
+        self.online = Some(online);
+        self
+    }
+
+    /// The program (before the task starts: for the online channel's first version).
+    pub fn program(&self) -> &Program {
+        &self.program
+    }
+
+    /// The RETAIN writer, if any.
+    pub fn retain(&self) -> Option<&super::retain::Retain> {
+        self.retain.as_ref()
     }
 
     /// Publishes the RETAIN variables after every scan for the state-file writer.
@@ -249,6 +280,18 @@ impl PlcTask {
                     c.done_seq = self.request.seq;
                 }
                 OutSignal::M6Done | OutSignal::McodeDone => {}
+                OutSignal::M66Digital(i) => {
+                    if on {
+                        c.m66_digital |= 1 << i;
+                    } else {
+                        c.m66_digital &= !(1 << i);
+                    }
+                }
+                OutSignal::M66Analog(i) => {
+                    if let (Some(a), Value::Real(x)) = (c.m66_analog.get_mut(i), v) {
+                        *a = *x;
+                    }
+                }
                 OutSignal::FeedHold => c.feed_hold |= on,
                 OutSignal::StartInhibit => c.start_inhibit |= on,
                 OutSignal::Estop => c.estop |= on,
@@ -308,6 +351,22 @@ impl Task for PlcTask {
 
     fn update(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         let t0 = std::time::Instant::now();
+        if let Some(o) = &mut self.online {
+            let swapped = o.before_scan(Running {
+                program: &mut self.program,
+                bindings: &mut self.bindings,
+                retain: &mut self.retain,
+            });
+            if swapped {
+                self.stats.reloads.fetch_add(1, Ordering::Relaxed);
+                // A new version starts clean, unless the watchdog holds the PLC down.
+                if !self.watchdog {
+                    self.cmd.fault = false;
+                    self.reported = false;
+                    self.stats.faulted.store(false, Ordering::Relaxed);
+                }
+            }
+        }
         let reset = self.request.estop_reset_seq != self.reset_seen;
         self.reset_seen = self.request.estop_reset_seq;
         for i in 0..self.bindings.inputs.len() {
@@ -330,6 +389,12 @@ impl Task for PlcTask {
         if let Some(r) = &self.retain {
             r.shared.publish(&self.program, &r.ids);
         }
+        if let Some(o) = &mut self.online {
+            o.after_scan(&self.program);
+        }
+        self.stats
+            .forced
+            .store(self.program.forced_count() as u64, Ordering::Relaxed);
         self.cmd.scans = self.cmd.scans.wrapping_add(1);
         if let Some(w) = &mut self.command_out {
             w.set(self.cmd);

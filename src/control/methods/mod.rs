@@ -17,6 +17,7 @@ mod jog;
 mod machine_power;
 mod mdi;
 mod overrides;
+mod plc;
 mod script;
 mod sim_input;
 mod status;
@@ -57,6 +58,12 @@ pub const METHODS: &[&str] = &[
     "script.stop",
     "script.unload",
     "script.list",
+    "plc.vars",
+    "plc.get",
+    "plc.set",
+    "plc.force",
+    "plc.unforce",
+    "plc.load",
 ];
 
 /// Runs one method against the machine.
@@ -85,6 +92,7 @@ pub fn dispatch(m: &dyn MachineApi, method: &str, params: Value) -> Result<Value
         "sim.fault" => sim_input::handle_fault(m, params),
         "drive.sdo_read" => drive::handle_read(m, params),
         "drive.sdo_write" => drive::handle_write(m, params),
+        other if other.starts_with("plc.") => plc::handle(m, &other[4..], params),
         other if other.starts_with("script.") => script::handle(m, &other[7..], params),
         other => Err(ControlError::new(
             ErrorCode::MethodNotFound,

@@ -762,6 +762,10 @@ impl MachineTask {
     }
 
     fn input_level(&self, index: u32, input: InputKind) -> bool {
+        // `[plc] m66_digital` / `m66_analog`: the PLC's variables.
+        if let Some(v) = self.plc.as_ref().and_then(|p| p.m66_level(index, input)) {
+            return v;
+        }
         match input {
             InputKind::Digital => self.inputs.di(index as usize),
             InputKind::Analog => self

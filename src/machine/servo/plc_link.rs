@@ -4,6 +4,7 @@
 //! has no link and behaves exactly as before.
 
 use super::Outputs;
+use crate::gcode::canon::InputKind;
 use crate::plc::link::{ports, PlcCommand, PlcRequest, RequestKind};
 use crate::rt::prelude::*;
 
@@ -20,6 +21,10 @@ pub struct PlcLinkSetup {
     pub mcode_timeout_cycles: u64,
     /// A PLC fault stops the machine.
     pub safety_relevant: bool,
+    /// M66 P0..P(n-1) wait on PLC variables (`plc.m66_digital`), not on physical inputs.
+    pub m66_digital: usize,
+    /// M66 E0..E(n-1) sample PLC variables (`plc.m66_analog`).
+    pub m66_analog: usize,
 }
 
 /// The link: the request written to the PLC, the last command read from it.
@@ -80,6 +85,21 @@ impl PlcLink {
             estop,
             fault,
             feed_hold: self.cmd.feed_hold,
+        }
+    }
+
+    /// The level M66 sees on input `index` when the PLC provides it (`None`: a physical
+    /// input). An analog value counts as high above 0.5, as for physical inputs.
+    pub fn m66_level(&self, index: u32, input: InputKind) -> Option<bool> {
+        let i = index as usize;
+        match input {
+            InputKind::Digital if i < self.setup.m66_digital => {
+                Some(self.cmd.m66_digital & (1 << i) != 0)
+            }
+            InputKind::Analog if i < self.setup.m66_analog => {
+                self.cmd.m66_analog.get(i).map(|v| *v > 0.5)
+            }
+            _ => None,
         }
     }
 
