@@ -9,9 +9,10 @@
 //! `tests/gcode/DIFFERENCES.md`.
 #![allow(clippy::unwrap_used)]
 
-use hytask::gcode::{canon_fmt, load_file, InterpOptions, LengthUnits};
+use hytask::gcode::{canon_fmt, load_file, InterpOptions, LengthUnits, VarFile};
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::Arc;
 
 /// What differs on purpose, per corpus file.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -64,6 +65,19 @@ fn options() -> InterpOptions {
     }
 }
 
+/// The var file a corpus program starts from (`NAME.var` beside it), if any: rs274 runs with
+/// `-v` on a copy of it, and the file it writes back is the golden `NAME.var`.
+fn var_file(p: &Path) -> Option<PathBuf> {
+    Some(p.with_extension("var")).filter(|v| v.exists())
+}
+
+/// [`options`] for one program: with its var file.
+fn options_for(p: &Path) -> InterpOptions {
+    let mut o = options();
+    o.parameters = var_file(p).map(|v| Arc::new(VarFile::load(&v).unwrap()));
+    o
+}
+
 /// Drops rs274's `%5d N..... ` prefix columns (sequence number and N word), which hytask
 /// does not reproduce (see DIFFERENCES.md); bare lines (PRINT output) stay as they are.
 fn strip(trace: &str) -> Vec<String> {
@@ -83,11 +97,17 @@ fn strip(trace: &str) -> Vec<String> {
         .collect()
 }
 
-fn hytask_trace(p: &Path) -> Result<Vec<String>, String> {
-    let prog = load_file(p, &options()).map_err(|e| e.to_string())?;
+/// hytask's whole trace text and the var file it leaves.
+fn hytask_run(p: &Path) -> Result<(String, VarFile), String> {
+    let (prog, vars) =
+        hytask::gcode::load_file_persistent(p, &options_for(p)).map_err(|e| e.to_string())?;
     let mut s = Vec::new();
     canon_fmt::write_trace(&mut s, &prog.canon);
-    Ok(strip(&String::from_utf8(s).unwrap()))
+    Ok((String::from_utf8(s).unwrap(), vars))
+}
+
+fn hytask_trace(p: &Path) -> Result<Vec<String>, String> {
+    hytask_run(p).map(|(t, _)| strip(&t))
 }
 
 fn name(p: &Path) -> String {
@@ -136,6 +156,44 @@ fn compare(p: &Path, expected: &[String], rs274_rejects: bool) -> Option<String>
     }
 }
 
+/// Compares the var file hytask leaves with the one rs274 wrote (`want`), text for text.
+fn compare_vars(p: &Path, want: &str) -> Option<String> {
+    let got = match hytask_run(p) {
+        Ok((_, v)) => v.to_text(),
+        Err(e) => return Some(format!("{}: {e}", name(p))),
+    };
+    (got != want).then(|| {
+        let (g, w): (Vec<_>, Vec<_>) = (got.lines().collect(), want.lines().collect());
+        let i = g
+            .iter()
+            .zip(&w)
+            .position(|(a, b)| a != b)
+            .unwrap_or(g.len().min(w.len()));
+        format!(
+            "{}: var file differs at line {}: hytask {:?}, rs274 {:?}",
+            name(p),
+            i + 1,
+            g.get(i),
+            w.get(i)
+        )
+    })
+}
+
+#[test]
+fn var_files_are_checked() {
+    // The persistent-parameter programs exist and have their goldens (the comparison above
+    // must not pass vacuously).
+    let with_vars: Vec<_> = programs()
+        .into_iter()
+        .filter(|p| var_file(p).is_some())
+        .collect();
+    assert!(with_vars.len() >= 2, "{with_vars:?}");
+    for p in with_vars {
+        let g = golden_dir().join(format!("{}.var", name(&p)));
+        assert!(g.exists(), "missing {}", g.display());
+    }
+}
+
 #[test]
 fn corpus_matches_rs274_goldens() {
     let mut failures = Vec::new();
@@ -151,6 +209,10 @@ fn corpus_matches_rs274_goldens() {
         let rejects = golden_dir().join(format!("{n}.err")).exists();
         if let Some(f) = compare(&p, &strip(&expected), rejects) {
             failures.push(f);
+        }
+        if var_file(&p).is_some() && !rejects {
+            let want = std::fs::read_to_string(golden_dir().join(format!("{n}.var"))).unwrap();
+            failures.extend(compare_vars(&p, &want));
         }
     }
     assert!(
@@ -175,19 +237,29 @@ fn corpus_matches_live_rs274() {
         return;
     }
     let mut failures = Vec::new();
+    let tmp = std::env::temp_dir().join(format!("hytask-diff-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
     for p in programs() {
-        let out = Command::new("rs274")
-            .current_dir(corpus())
-            .args(["-t", "tool.tbl", "-g"])
-            .arg(p.file_name().unwrap())
-            .output()
-            .unwrap();
+        let mut cmd = Command::new("rs274");
+        cmd.current_dir(corpus()).args(["-t", "tool.tbl"]);
+        // rs274 writes the var file back at exit: give it a copy.
+        let vars = var_file(&p).map(|v| {
+            let copy = tmp.join(v.file_name().unwrap());
+            std::fs::copy(&v, &copy).unwrap();
+            cmd.arg("-v").arg(&copy);
+            copy
+        });
+        let out = cmd.arg("-g").arg(p.file_name().unwrap()).output().unwrap();
         let rejects = !out.status.success();
         let expected = strip(&String::from_utf8_lossy(&out.stdout));
         if let Some(f) = compare(&p, &expected, rejects) {
             failures.push(f);
         }
+        if let (Some(v), false) = (vars, rejects) {
+            failures.extend(compare_vars(&p, &std::fs::read_to_string(v).unwrap()));
+        }
     }
+    let _ = std::fs::remove_dir_all(&tmp);
     assert!(
         failures.is_empty(),
         "{} mismatches:\n{}",
