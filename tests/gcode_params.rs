@@ -107,3 +107,42 @@ fn a_relative_var_file_is_resolved_against_the_config_directory() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_prepared_job_carries_the_parameters_it_leaves_for_the_daemon_to_save() {
+    // The daemon commits `PreparedJob::parameters` when the job has run to its end; every
+    // way a job is prepared (streamed, probing, MDI) must fill it in.
+    use hytask::machine::api::JobSource;
+    use hytask::machine::job::{motion_config, prepare, prepare_mdi};
+    let cfg = sim_with("");
+    let mut opts = interp_options(&cfg);
+    opts.parameters = Some(Arc::new(VarFile::parse("m.var", "100\t1\n").unwrap()));
+    let motion = motion_config(&cfg);
+    let start = [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let get = |v: &VarFile, n: u16| v.values.iter().find(|x| x.0 == n).map(|x| x.1);
+    let src = |text: &str| JobSource {
+        path: None,
+        text: Some(text.into()),
+        name: None,
+    };
+    let streamed = prepare(
+        &src("G21 G10 L2 P1 X5\n#100=2\nG0 X20\nM2\n"),
+        &opts,
+        &motion,
+        start,
+    )
+    .unwrap();
+    let v = streamed.parameters.unwrap();
+    assert_eq!((get(&v, 5221), get(&v, 100)), (Some(5.0), Some(2.0)));
+    let probing = prepare(
+        &src("G21 G10 L2 P2 Y7\nG38.2 Z-20 F100\nG0 Z0\nM2\n"),
+        &opts,
+        &motion,
+        start,
+    )
+    .unwrap();
+    assert!(probing.probing.is_some());
+    assert_eq!(get(probing.parameters.as_ref().unwrap(), 5242), Some(7.0));
+    let mdi = prepare_mdi("G21 G10 L2 P3 Z-3", &opts, &motion, start).unwrap();
+    assert_eq!(get(mdi.parameters.as_ref().unwrap(), 5263), Some(-3.0));
+}
