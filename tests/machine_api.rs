@@ -27,20 +27,7 @@ fn sim_machine() -> (Arc<Machine>, tempfile::TempDir) {
 }
 
 fn wait(m: &Machine, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
-    let t0 = Instant::now();
-    loop {
-        let s = m.status();
-        if pred(&s) {
-            return s;
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "timed out waiting for {what}: mode {:?}, job {:?}",
-            s.mode,
-            s.job
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    support::wait_machine(m, what, pred)
 }
 
 fn ready(m: &Machine) {

@@ -11,6 +11,7 @@
 //! [spindle]       max/min rpm, enable/direction/speed/at-speed channels
 //! [coolant]       flood/mist outputs
 //! [tool_table]    path
+//! [gcode]         var_file, ini.<section>.<name> (`#<_ini[section]name>`)
 //! [control]       socket_path, mode, group, jobs_dir, max_job_bytes, idle_timeout_s,
 //!                 max_clients, max_buffered_bytes, operators, observers, unlisted
 //! [logging]       level
@@ -38,6 +39,7 @@
 mod axis;
 mod drive;
 mod error;
+mod gcode;
 mod io;
 mod machine;
 pub mod modbus;
@@ -53,6 +55,7 @@ pub use drive::{
     SwitchConfig, SIM_DRIVE_HEADROOM, SIM_INTERFACE,
 };
 pub use error::{ConfigError, Issue, Issues};
+pub use gcode::GcodeConfig;
 pub use io::{AnalogPoint, DigitalPoint, IoBackend, IoConfig, IoKind, IoRef, TouchPlate};
 pub use machine::{Kinematics, KinematicsKind, MachineSection, ScaraConfig};
 pub use plc::PlcConfig;
@@ -112,14 +115,19 @@ pub fn parse(text: &str, origin: &str) -> Result<MachineConfig, ConfigError> {
     Ok(config)
 }
 
-/// Reads, parses and validates a machine file. A relative `tool_table.path` is made
-/// relative to the file's directory (and `[plc]` paths are resolved against it).
+/// Reads, parses and validates a machine file. A relative `tool_table.path` or
+/// `gcode.var_file` is made relative to the file's directory (and `[plc]` paths are resolved against it).
 pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
     let text = read(path)?;
     let mut config = parse(&text, &path.display().to_string())?;
     if let (Some(t), Some(dir)) = (&mut config.tool_table, path.parent()) {
         if t.path.is_relative() {
             t.path = dir.join(&t.path);
+        }
+    }
+    if let (Some(v), Some(dir)) = (&mut config.gcode.var_file, path.parent()) {
+        if v.is_relative() {
+            *v = dir.join(&*v);
         }
     }
     if let Some(p) = &mut config.plc {

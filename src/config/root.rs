@@ -41,6 +41,9 @@ pub struct MachineConfig {
     /// `[tool_table]`: absent for a machine without tool offsets.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tool_table: Option<ToolTableConfig>,
+    /// `[gcode]`: var file and `#<_ini[…]>` values.
+    #[serde(default, skip_serializing_if = "super::GcodeConfig::is_default")]
+    pub gcode: super::GcodeConfig,
     /// `[control]`: the control socket.
     #[serde(default)]
     pub control: ControlConfig,
@@ -119,6 +122,7 @@ impl MachineConfig {
         if let Some(t) = &self.tool_table {
             t.validate(&mut issues);
         }
+        self.gcode.validate(&mut issues);
         self.control.validate(&mut issues);
         self.motion.validate(&mut issues);
         if !self.threads.is_empty() && self.thread(&self.motion.servo_thread).is_none() {

@@ -24,6 +24,7 @@
 pub mod canon;
 pub mod canon_fmt;
 pub mod expr;
+pub mod ini;
 mod interp;
 pub mod lexer;
 pub mod modal;
@@ -31,11 +32,15 @@ pub mod params;
 pub mod parser;
 pub mod session;
 pub mod tooltable;
+pub mod varfile;
 
 pub use canon::{Canon, CanonCmd, LengthUnits, Pose, ProbeKind, SourceLoc, NUM_AXES};
+pub use ini::IniValues;
 pub use session::{Chunked, PieceEnd, ProbeResult, Session};
+pub use varfile::VarFile;
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Resource limits. Each one turns a hostile or broken program into a clear error instead of
 /// a hang or an out-of-memory kill.
@@ -105,6 +110,12 @@ pub struct InterpOptions {
     /// written for another machine (`M107` fan off) must not run with the code silently
     /// doing nothing.
     pub user_mcodes: Vec<u16>,
+    /// Persistent parameters at start (LinuxCNC's var file, [`varfile`]): work offsets, the
+    /// active coordinate system, G92, G28/G30 positions and any user parameter the file lists.
+    /// `None` starts from zeros in G54, as `rs274` without `-v` does.
+    pub parameters: Option<Arc<VarFile>>,
+    /// Values of `#<_ini[section]name>` (see [`IniValues`]).
+    pub ini: Arc<IniValues>,
     /// Resource limits.
     pub limits: Limits,
 }
@@ -121,6 +132,8 @@ impl Default for InterpOptions {
             initial_position: None,
             mdi: false,
             user_mcodes: Vec::new(),
+            parameters: None,
+            ini: Arc::default(),
             limits: Limits::default(),
         }
     }
@@ -155,6 +168,17 @@ pub fn load_file(path: &Path, opts: &InterpOptions) -> Result<Program, GcodeErro
     Ok(Program { canon })
 }
 
+/// [`load_file`], also returning the persistent parameters as the program leaves them: the
+/// var file to save after the job (the numbers [`VarFile::saved_numbers`] of the loaded one).
+pub fn load_file_persistent(
+    path: &Path,
+    opts: &InterpOptions,
+) -> Result<(Program, VarFile), GcodeError> {
+    let (name, text, o) = read_program(path, opts)?;
+    let (canon, vars) = interp::interpret_persistent(&name, text, &o)?;
+    Ok((Program { canon }, vars))
+}
+
 /// Interprets a program file and returns its canonical trace in `rs274 -g` layout (see
 /// [`canon_fmt`]), formatting each command as it is produced instead of collecting a
 /// [`Program`]: the fast path of `hytask gcode canon`. Like [`load_file`], a program with
@@ -183,6 +207,17 @@ fn read_program(
         o.program_dir = path.parent().map(Path::to_path_buf);
     }
     Ok((path.display().to_string(), text, o))
+}
+
+/// [`load_str`], also returning the persistent parameters the program leaves (see
+/// [`load_file_persistent`]).
+pub fn load_str_persistent(
+    name: &str,
+    text: &str,
+    opts: &InterpOptions,
+) -> Result<(Program, VarFile), GcodeError> {
+    let (canon, vars) = interp::interpret_persistent(name, text.to_string(), opts)?;
+    Ok((Program { canon }, vars))
 }
 
 /// Interprets program text; `name` is used as the file name in locations and errors.

@@ -117,6 +117,12 @@ impl Session {
         })
     }
 
+    /// The persistent parameters as the program has left them so far (the var file to save
+    /// once the job has run).
+    pub fn parameters(&self) -> super::VarFile {
+        self.it.persistent()
+    }
+
     /// True once the program has ended.
     pub fn finished(&self) -> bool {
         self.it.ended() && self.it.pending_probe.is_none()
@@ -158,6 +164,12 @@ impl Chunked {
             std::mem::swap(v, out);
         }
         Ok(!self.it.ended())
+    }
+
+    /// The persistent parameters as the program has left them so far (after the last chunk:
+    /// the var file to save when the job has run).
+    pub fn parameters(&self) -> super::VarFile {
+        self.it.persistent()
     }
 }
 

@@ -73,6 +73,10 @@ pub struct PreparedJob {
     /// Set for a job too large to keep its items: `plan.items` is empty and the feeder plans
     /// the job again from this.
     pub replay: Option<Replay>,
+    /// The persistent parameters (var file) as the program leaves them: saved when the job
+    /// has run to its end (a probing job's: with the simulated probe results).
+    /// `None` for a jog.
+    pub parameters: Option<gcode::VarFile>,
 }
 
 impl PreparedJob {
@@ -186,8 +190,9 @@ impl Replay {
 
 /// How a streaming pass ended.
 enum Streamed {
-    /// Planned to the end: the summary and the number of commands.
-    Planned(Box<Finished>, usize),
+    /// Planned to the end: the summary, the number of commands and the persistent
+    /// parameters the program leaves.
+    Planned(Box<Finished>, usize, Box<gcode::VarFile>),
     /// The program probes: it must be prepared whole.
     Probes,
     /// The batch consumer asked to stop.
@@ -231,12 +236,13 @@ fn stream_pass(
         }
     }
     drop(chunk);
+    let vars = Box::new(run.parameters());
     drop(run);
     let finished = planner.finish(&mut sink).map_err(refuse)?;
     Ok(if stopped.get() {
         Streamed::Stopped
     } else {
-        Streamed::Planned(Box::new(finished), commands)
+        Streamed::Planned(Box::new(finished), commands, vars)
     })
 }
 
@@ -391,6 +397,8 @@ pub fn motion_config(cfg: &MachineConfig) -> MotionConfig {
 pub fn interp_options(cfg: &MachineConfig) -> InterpOptions {
     InterpOptions {
         tool_table: cfg.tool_table.as_ref().map(|t| t.path.clone()),
+        // `#<_ini[section]name>` (issue 13; mapping in config::gcode).
+        ini: std::sync::Arc::new(cfg.gcode.ini_values(&cfg.axes)),
         // The user M codes the PLC handles (issue 11).
         user_mcodes: cfg
             .plc
@@ -472,12 +480,12 @@ pub fn prepare_keeping(
         }
         true
     })?;
-    let (finished, commands) = match streamed {
-        Streamed::Planned(f, c) => (*f, c),
+    let (finished, commands, parameters) = match streamed {
+        Streamed::Planned(f, c, v) => (*f, c, *v),
         Streamed::Probes | Streamed::Stopped => {
             // A probing job: validated whole with simulated probes, run piece by piece.
-            let program =
-                gcode::load_str(&name, &text, &opts).map_err(|e| ApiError::Gcode(e.to_string()))?;
+            let (program, parameters) = gcode::load_str_persistent(&name, &text, &opts)
+                .map_err(|e| ApiError::Gcode(e.to_string()))?;
             let plan = plan_job(&program.canon, motion, start_mm, &name)?;
             let probing = probing_source(&program.canon, &name, &text, &opts);
             return Ok(PreparedJob {
@@ -487,6 +495,7 @@ pub fn prepare_keeping(
                 plan,
                 probing,
                 replay: None,
+                parameters: Some(parameters),
             });
         }
     };
@@ -513,6 +522,7 @@ pub fn prepare_keeping(
         plan,
         probing: None,
         replay,
+        parameters: Some(parameters),
     })
 }
 
@@ -527,8 +537,8 @@ pub fn prepare_mdi(
     let mut opts = starting_at(opts, start_mm);
     opts.mdi = true;
     let text = format!("{line}\n");
-    let program =
-        gcode::load_str("mdi", &text, &opts).map_err(|e| ApiError::Gcode(e.to_string()))?;
+    let (program, parameters) = gcode::load_str_persistent("mdi", &text, &opts)
+        .map_err(|e| ApiError::Gcode(e.to_string()))?;
     let plan = plan_job(&program.canon, motion, start_mm, "mdi")?;
     let probing = probing_source(&program.canon, "mdi", &text, &opts);
     Ok(PreparedJob {
@@ -538,6 +548,7 @@ pub fn prepare_mdi(
         plan,
         probing,
         replay: None,
+        parameters: Some(parameters),
     })
 }
 

@@ -101,6 +101,8 @@ pub struct Machine {
     config: MachineConfig,
     motion_cfg: MotionConfig,
     interp_opts: InterpOptions,
+    /// `[gcode] var_file`: persistent parameters, committed when a job has run to its end.
+    pub(super) params: Option<Arc<crate::gcode::varfile::ParamStore>>,
     runtime: Mutex<Option<Runtime>>,
     machine: TaskHandle<MachineCmd>,
     queue: BufferWriter<QueueItem>,
@@ -383,9 +385,23 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
 }
 
 impl Machine {
+    /// The interpreter options with the persistent parameters as they are now.
+    fn interp_opts_now(&self) -> InterpOptions {
+        let mut o = self.interp_opts.clone();
+        o.parameters = self.params.as_ref().map(|p| p.snapshot());
+        o
+    }
+
     /// Deploys `config`: builds backends and tasks, checks the topology, starts the servo
     /// thread. The machine starts in e-stop.
     pub fn deploy(config: MachineConfig) -> Result<Arc<Machine>, DeployError> {
+        let params = match &config.gcode.var_file {
+            Some(p) => Some(Arc::new(
+                crate::gcode::varfile::ParamStore::load(p)
+                    .map_err(|e| DeployError::Invalid(format!("gcode.var_file: {e}")))?,
+            )),
+            None => None,
+        };
         if crate::rt::system::lock_memory().is_err() {
             crate::rt::system::warn_not_realtime(
                 "mlockall failed (no CAP_IPC_LOCK or RLIMIT_MEMLOCK too low)",
@@ -443,6 +459,7 @@ impl Machine {
         let m = Arc::new(Machine {
             name: config.machine.name.clone(),
             interp_opts: job::interp_options(&config),
+            params,
             motion_cfg,
             config,
             runtime: Mutex::new(Some(runtime)),
@@ -960,6 +977,7 @@ impl MachineApi for Machine {
             plan,
             probing: None,
             replay: None,
+            parameters: None,
         });
         self.start_job(job, true)
     }
@@ -972,7 +990,7 @@ impl MachineApi for Machine {
         self.check_can_run(false)?;
         let job = job::prepare_mdi(
             line,
-            &self.interp_opts,
+            &self.interp_opts_now(),
             &self.motion_cfg,
             self.actual_pose(),
         )?;
@@ -980,7 +998,8 @@ impl MachineApi for Machine {
     }
 
     fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError> {
-        let job = job::prepare(src, &self.interp_opts, &self.motion_cfg, self.actual_pose())?;
+        let opts = self.interp_opts_now();
+        let job = job::prepare(src, &opts, &self.motion_cfg, self.actual_pose())?;
         let info = JobInfo {
             name: job.name.clone(),
             lines: job.total_lines,
@@ -1199,6 +1218,11 @@ impl crate::daemon::Deployed for Machine {
         }
         if let Some(rt) = lock(&self.runtime).take() {
             let _ = rt.stop();
+        }
+        if let Some(p) = &self.params {
+            if let Err(e) = p.save() {
+                tracing::warn!("saving {}: {e}", p.path().display());
+            }
         }
         Ok(())
     }

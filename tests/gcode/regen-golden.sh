@@ -2,18 +2,30 @@
 # Regenerates tests/gcode/golden/*.canon (and *.err for programs rs274 rejects) from
 # LinuxCNC's rs274 (Debian package linuxcnc-uspace). Run from anywhere; needs rs274 on PATH.
 # Every corpus program runs with the corpus tool table, from the corpus directory (so
-# `o<name> call` finds name.ngc there, as it does for hytask).
+# `o<name> call` finds name.ngc there, as it does for hytask). A program with a var file
+# beside it (NAME.var) runs with `-v` on a copy of it; the copy rs274 writes back at exit is
+# kept as golden/NAME.var.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 cd "$here/corpus"
 mkdir -p "$here/golden"
-rm -f "$here"/golden/*.canon "$here"/golden/*.err
+rm -f "$here"/golden/*.canon "$here"/golden/*.err "$here"/golden/*.var
+tmp="$(mktemp -d)"
+trap 'rm -rf "$tmp"' EXIT
 for f in *.ngc; do
     name="${f%.ngc}"
+    vars=()
+    if [ -f "$name.var" ]; then
+        cp "$name.var" "$tmp/$name.var"
+        vars=(-v "$tmp/$name.var")
+    fi
     set +e
-    rs274 -t tool.tbl -g "$f" >"$here/golden/$name.canon" 2>"$here/golden/$name.stderr"
+    rs274 -t tool.tbl "${vars[@]}" -g "$f" >"$here/golden/$name.canon" 2>"$here/golden/$name.stderr"
     rc=$?
     set -e
+    if [ -f "$name.var" ] && [ "$rc" -eq 0 ]; then
+        cp "$tmp/$name.var" "$here/golden/$name.var"
+    fi
     if [ "$rc" -ne 0 ]; then
         grep -v '^executing$' "$here/golden/$name.stderr" >"$here/golden/$name.err" || true
     fi

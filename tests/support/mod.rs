@@ -307,3 +307,27 @@ pub fn run_text(c: &mut Client, text: &str, name: &str) -> Value {
     ok(c, "job.run", Value::Null);
     info
 }
+
+/// Polls a machine deployed in this process until `pred` holds; a one-minute hang guard,
+/// never a timing.
+pub fn wait_machine(
+    m: &hytask::machine::Machine,
+    what: &str,
+    pred: impl Fn(&hytask::machine::api::Status) -> bool,
+) -> hytask::machine::api::Status {
+    use hytask::machine::api::MachineApi;
+    let t0 = Instant::now();
+    loop {
+        let s = m.status();
+        if pred(&s) {
+            return s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "timed out waiting for {what}: mode {:?}, job {:?}",
+            s.mode,
+            s.job
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}

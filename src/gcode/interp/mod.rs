@@ -15,6 +15,7 @@ mod lathe;
 mod mcodes;
 mod motion;
 mod ocode;
+mod persistent;
 mod splines;
 mod state;
 mod thread_cycle;
@@ -291,7 +292,7 @@ impl<'a> Interp<'a> {
                 s.pos[i] = if i < 3 { v / per_unit } else { *v };
             }
         }
-        Ok(Interp {
+        let mut it = Interp {
             opts,
             out: Sink::Canon(Vec::new()),
             count: 0,
@@ -317,7 +318,9 @@ impl<'a> Interp<'a> {
             live_probe: false,
             pending_probe: None,
             yield_after: usize::MAX,
-        })
+        };
+        it.restore_persistent()?;
+        Ok(it)
     }
 
     /// Emits one canonical command at the current location.
@@ -448,11 +451,11 @@ impl<'a> Interp<'a> {
         let u = self.s.units;
         self.emit(CanonCmd::UseLengthUnits(u))?;
         self.emit(CanonCmd::SetG5xOffset {
-            index: 1,
-            offset: [0.0; 9],
+            index: self.s.origin_index,
+            offset: motion::pose6(&self.s.g5x),
         })?;
-        self.emit(CanonCmd::SetG92Offset([0.0; 9]))?;
-        self.emit(CanonCmd::SetXyRotation(0.0))?;
+        self.emit(CanonCmd::SetG92Offset(motion::pose6(&self.s.g92)))?;
+        self.emit(CanonCmd::SetXyRotation(self.s.rotation))?;
         self.emit(CanonCmd::SetFeedReference)?;
         self.emit(CanonCmd::OnReset)?;
         Ok(())
@@ -628,6 +631,9 @@ impl ParamSource for Interp<'_> {
         if let Some(v) = self.p.named(name) {
             return Some(v);
         }
+        if let Some(v) = self.opts.ini.lookup(name) {
+            return v;
+        }
         self.predefined(name)
     }
 }
@@ -643,6 +649,22 @@ pub(crate) fn interpret(
     match it.out {
         Sink::Canon(v) => Ok(v),
         Sink::Trace { .. } => Ok(Vec::new()),
+    }
+}
+
+/// Runs a whole program; also returns the persistent parameters it leaves (the var file to
+/// save).
+pub(crate) fn interpret_persistent(
+    name: &str,
+    text: String,
+    opts: &InterpOptions,
+) -> Result<(Vec<Canon>, crate::gcode::VarFile), GcodeError> {
+    let mut it = Interp::new(Cow::Borrowed(opts))?;
+    it.run(name, text)?;
+    let vars = it.persistent();
+    match it.out {
+        Sink::Canon(v) => Ok((v, vars)),
+        Sink::Trace { .. } => Ok((Vec::new(), vars)),
     }
 }
 

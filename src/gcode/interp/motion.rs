@@ -363,7 +363,7 @@ impl Interp<'_> {
         self.emit(CanonCmd::UseToolLengthOffset(off))
     }
 
-    fn load_g5x(&self, index: u8) -> ([f64; 6], f64) {
+    pub(super) fn load_g5x(&self, index: u8) -> ([f64; 6], f64) {
         let base = g5x_base(index);
         let k = self.s.k_mp();
         let mut o = [0.0; 6];

@@ -224,6 +224,13 @@ fn handle_job_event(m: &Machine, news: JobNews) {
             if state == "done" {
                 book.status.progress = 1.0;
                 book.status.distance_to_go_mm = 0.0;
+                // The job ran to its end: its persistent parameters become the machine's
+                // (issue 13; a small file, written on this non-realtime thread).
+                if let (Some(p), Some(v)) = (&m.params, &a.job.parameters) {
+                    if let Err(e) = p.commit(v.clone()) {
+                        tracing::warn!("saving {}: {e}", p.path().display());
+                    }
+                }
             }
             finished = a.feeder.take();
         }

@@ -1,0 +1,76 @@
+//! The daemon's var file (`[gcode] var_file`, issue 13): loaded at deploy, committed and
+//! saved when a job has run to its end, so the next job (and the next daemon) starts from
+//! the offsets the last one left.
+//!
+//! Simulated clock, unpaced; the waits are hang guards of a minute, never timings.
+#![allow(clippy::unwrap_used)]
+
+mod support;
+
+use hytask::machine::api::{JobSource, MachineApi, Mode, Status};
+use hytask::machine::Machine;
+use std::sync::Arc;
+
+fn wait(m: &Machine, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
+    support::wait_machine(m, what, pred)
+}
+
+fn deploy(config: &std::path::Path) -> Arc<Machine> {
+    let m = Machine::deploy(hytask::config::load(config).unwrap()).unwrap();
+    m.estop_reset().unwrap();
+    m.machine_on().unwrap();
+    m.home(None).unwrap();
+    wait(&m, "homed and idle", |s| {
+        s.mode == Mode::Idle && s.axes.iter().all(|a| a.homed)
+    });
+    m
+}
+
+fn run(m: &Machine, program: &str) {
+    m.job_load(&JobSource {
+        path: None,
+        text: Some(program.into()),
+        name: Some("v.ngc".into()),
+    })
+    .unwrap();
+    m.job_run().unwrap();
+    wait(m, "the job's end", |s| {
+        s.job.state == "done" && s.mode == Mode::Idle
+    });
+}
+
+fn value(file: &std::path::Path, n: u16) -> Option<String> {
+    let text = std::fs::read_to_string(file).unwrap();
+    text.lines()
+        .find_map(|l| l.strip_prefix(&format!("{n}\t")).map(str::to_string))
+}
+
+#[test]
+fn a_finished_job_saves_its_offsets_and_the_next_daemon_starts_from_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = support::sim_clock_config(dir.path(), 0, None);
+    let mut text = std::fs::read_to_string(&config).unwrap();
+    text.push_str("\n[gcode]\nvar_file = \"m.var\"\n");
+    std::fs::write(&config, text).unwrap();
+    let var = dir.path().join("m.var");
+    std::fs::write(&var, "100\t4\n5220\t1\n").unwrap();
+
+    let m = deploy(&config);
+    run(
+        &m,
+        "G21 G90\nG10 L2 P2 X12.5\n#100 = [#100 + 1]\nG0 X1 Y1\nM2\n",
+    );
+    assert_eq!(value(&var, 5241).as_deref(), Some("12.500000"));
+    assert_eq!(value(&var, 100).as_deref(), Some("5.000000"));
+    hytask::daemon::Deployed::shutdown(&*m).unwrap();
+
+    // A new daemon reads the file: G55's offset is there.
+    let m = deploy(&config);
+    run(
+        &m,
+        "G21 G90 G55\n#100 = [#100 + 1]\nG0 X[#5241 * 2] Y1\nM2\n",
+    );
+    assert_eq!(value(&var, 100).as_deref(), Some("6.000000"));
+    hytask::daemon::Deployed::shutdown(&*m).unwrap();
+    assert_eq!(value(&var, 5241).as_deref(), Some("12.500000"));
+}
