@@ -15,6 +15,8 @@ mod lathe;
 mod mcodes;
 mod motion;
 mod ocode;
+mod roughing;
+mod roughing_geom;
 mod splines;
 mod state;
 mod thread_cycle;
