@@ -290,6 +290,8 @@ impl Interp<'_> {
         let tap = motion == 331 && (g1.is_some() || axis);
         let m19 = b.mcode(7) == Some(19);
         let g76 = motion == 760 && (g1.is_some() || axis);
+        // G70/G71/G72 (and .1): Q profile, D/E/P (G70) or D/I/R (G71, G72).
+        let g7x = matches!(g1, Some(700 | 710 | 711 | 720 | 721));
         if !b"ijkredhpql".iter().any(|&c| b.has(c)) {
             return Ok(());
         }
@@ -304,7 +306,8 @@ impl Interp<'_> {
             || matches!(b.mcode(5), Some(62..=66))
             || user_m
             || m19
-            || g76;
+            || g76
+            || g7x;
         let q_ok = g10
             || g5
             || b.gcode(13) == Some(640)
@@ -313,7 +316,8 @@ impl Interp<'_> {
             || b.mcode(6) == Some(61)
             || user_m
             || m19
-            || g76;
+            || g76
+            || g7x;
         let l_ok = matches!(motion, 52 | 53)
             || g10
             || cycle
@@ -324,7 +328,7 @@ impl Interp<'_> {
         let checks: [(u8, bool, &str); 10] = [
             (
                 b'i',
-                arc || spline || g10 || motion == 870 || tap || g76,
+                arc || spline || g10 || motion == 870 || tap || g76 || g7x,
                 "I word with no G2, G3, G5, G5.1, G10, G33.1, G76, or G87 to use it",
             ),
             (
@@ -339,17 +343,17 @@ impl Interp<'_> {
             ),
             (
                 b'r',
-                arc || g10 || cycle || ((810..=890).contains(&motion) && b.has_axis()) || m19 || g76,
+                arc || g10 || cycle || ((810..=890).contains(&motion) && b.has_axis()) || m19 || g76 || g7x,
                 "R word with no G code that uses it",
             ),
             (
                 b'e',
-                matches!(b.mcode(5), Some(66..=68)) || g76,
+                matches!(b.mcode(5), Some(66..=68)) || g76 || g7x,
                 "E word with no G70, G76, M66, M67 or M68 to use it",
             ),
             (
                 b'd',
-                b.gcode(14) == Some(960) || matches!(b.gcode(7), Some(410 | 411 | 420 | 421)),
+                b.gcode(14) == Some(960) || matches!(b.gcode(7), Some(410 | 411 | 420 | 421)) || g7x,
                 "D word with no G41, G41.1, G42, G42.1 or G96 to use it",
             ),
             (

@@ -16,6 +16,8 @@ mod mcodes;
 mod motion;
 mod ocode;
 mod persistent;
+mod roughing;
+mod roughing_geom;
 mod splines;
 mod state;
 mod thread_cycle;

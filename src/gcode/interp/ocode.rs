@@ -28,7 +28,7 @@ impl Interp<'_> {
     }
 
     /// Same-label statement lines of file `f`.
-    fn label_lines(&self, f: usize, label: &str) -> Vec<usize> {
+    pub(super) fn label_lines(&self, f: usize, label: &str) -> Vec<usize> {
         let src = &self.files[f];
         let mut v = src.by_label.get(label).cloned().unwrap_or_default();
         if !src.computed.is_empty() {

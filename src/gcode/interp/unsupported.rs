@@ -5,9 +5,6 @@
 /// The message for an unsupported G code (tenths), or None if hytask implements it.
 pub(crate) fn g_code(g: u16) -> Option<&'static str> {
     Some(match g {
-        700 => "G70 (lathe finishing cycle) is not supported by hytask",
-        710 | 711 => "G71/G71.1 (lathe roughing cycle) is not supported by hytask",
-        720 | 721 => "G72/G72.1 (lathe facing cycle) is not supported by hytask",
         870 => "G87 (back boring cycle) is not supported by hytask",
         _ => return None,
     })
@@ -22,7 +19,7 @@ mod tests {
         assert!(g_code(870).is_some_and(|m| m.starts_with("G87 ")));
         for implemented in [
             0, 10, 20, 30, 50, 51, 70, 80, 330, 331, 382, 400, 410, 411, 420, 421, 430, 431, 490,
-            760, 800, 810, 890,
+            700, 710, 711, 720, 721, 760, 800, 810, 890,
         ] {
             assert_eq!(g_code(implemented), None, "G{}", implemented / 10);
         }

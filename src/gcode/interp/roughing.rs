@@ -1,0 +1,497 @@
+//! LinuxCNC's lathe profile cycles: G71/G71.1 (roughing along Z), G72/G72.1 (roughing
+//! along X, facing) and G70 (finishing). The profile is the motion of the O-subroutine
+//! named by Q (G0/G1/G2/G3; G0 counts as G1, everything else in it is ignored), starting
+//! from the cycle's start point (the current position, or the X/Z of the block).
+//!
+//! Roughing: D is the finishing allowance left along the profile, I the depth of each
+//! pass (default 1), R the retract (default 0.5). Passes step down from the start point by
+//! I; each feeds until the (offset) profile rises to its level, retracts by R on both
+//! axes and traverses back. The last pass follows the profile, and G71/G72 then rough
+//! every pocket of the profile level by level from its lip; G71.1/G72.1 bridge pockets.
+//! G70: P passes (default 1) at allowances from D down to E (default 0 both).
+//! The calls match rs274 2.9's, including its zero-length feeds under G7x.1.
+
+use super::motion::pose6;
+use super::roughing_geom::{self as geom, El, Pt};
+use super::Interp;
+use crate::gcode::canon::{CanonCmd, Plane};
+use crate::gcode::modal::Block;
+use crate::gcode::parser::{self, OKind};
+use crate::gcode::GcodeError;
+
+/// Maps X/Z onto the cycle frame (u: pass level, v: feed direction) and back.
+#[derive(Clone, Copy)]
+struct Frame {
+    /// G72: u is Z and v is X.
+    swap: bool,
+    su: f64,
+    sv: f64,
+}
+
+impl Frame {
+    fn to(&self, x: f64, z: f64) -> Pt {
+        let (l, t) = if self.swap { (z, x) } else { (x, z) };
+        [self.su * l, self.sv * t]
+    }
+    fn from(&self, p: Pt) -> (f64, f64) {
+        let (l, t) = (p[0] * self.su, p[1] * self.sv);
+        if self.swap {
+            (t, l)
+        } else {
+            (l, t)
+        }
+    }
+    /// Counter-clockwise in (u, v) from counter-clockwise in rs274's (Z, X) arc plane.
+    fn ccw(&self, ccw_zx: bool) -> bool {
+        ccw_zx ^ !self.swap ^ (self.su < 0.0) ^ (self.sv < 0.0)
+    }
+}
+
+/// One move of the profile: end X, end Z and, for an arc, its centre (X, Z) and whether it
+/// turns counter-clockwise in the Z/X plane.
+type ProfileMove = (f64, f64, Option<((f64, f64), bool)>);
+
+/// The words of a G7x block.
+struct Words {
+    d: f64,
+    i: f64,
+    r: f64,
+}
+
+impl Interp<'_> {
+    /// G70, G71, G71.1, G72, G72.1 (`m` in tenths).
+    pub(super) fn profile_cycle(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+        let col = self.loc.col;
+        let name = match m {
+            700 => "G70",
+            710 => "G71",
+            711 => "G71.1",
+            720 => "G72",
+            _ => "G72.1",
+        };
+        if self.s.plane != Plane::Xz {
+            return Err(self.err(col, format!("{name} requires the XZ plane (G18)")));
+        }
+        if self.comp.active() {
+            return Err(self.err(
+                col,
+                format!("{name} cannot run with cutter radius compensation on (G41/G42)"),
+            ));
+        }
+        let Some(q) = b.get(b'q') else {
+            return Err(self.err(
+                col,
+                format!("{name} requires a Q word (profile subroutine)"),
+            ));
+        };
+        let start = self.find_ends(b);
+        let profile = self.read_profile(q, start, name, col)?;
+        let (Some(first), Some(last), true) = (profile.first(), profile.last(), profile.len() > 2)
+        else {
+            return Err(self.err(
+                col,
+                format!("{name}: profile subroutine o{q} needs at least two moves (a lead-in and the profile)"),
+            ));
+        };
+        let swap = m >= 720;
+        let lvl = |p: &ProfileMove| if swap { p.1 } else { p.0 };
+        let trv = |p: &ProfileMove| if swap { p.0 } else { p.1 };
+        let pstart = profile.get(1).unwrap_or(first);
+        let fr = Frame {
+            swap,
+            su: if lvl(last) < lvl(pstart) { -1.0 } else { 1.0 },
+            sv: if trv(last) > trv(pstart) { -1.0 } else { 1.0 },
+        };
+        let mut els = Vec::with_capacity(profile.len());
+        // The first move only brings the tool to the profile: it is not part of it.
+        let mut prev = fr.to(pstart.0, pstart.1);
+        for p in profile.iter().skip(2) {
+            let e = fr.to(p.0, p.1);
+            els.push(El {
+                a: prev,
+                b: e,
+                arc: p.2.map(|((cx, cz), ccw)| (fr.to(cx, cz), fr.ccw(ccw))),
+                whole: true,
+            });
+            prev = e;
+        }
+        if let Some(e) = els.iter().find(|e| !geom::monotonic(e)) {
+            let (x, z) = fr.from(e.a);
+            return Err(self.err(
+                col,
+                format!(
+                    "{name}: the profile is not monotonic along {} (it turns back after X{x:.4} Z{z:.4})",
+                    if swap { "X" } else { "Z" }
+                ),
+            ));
+        }
+        let w = Words {
+            d: b.get(b'd').unwrap_or(0.0),
+            i: b.get(b'i').unwrap_or(1.0),
+            r: b.get(b'r').unwrap_or(0.5),
+        };
+        self.s.motion = m;
+        let mut s0 = fr.to(start[0], start[2]);
+        let pose = |p: Pt| {
+            let (x, z) = fr.from(p);
+            let mut v = start;
+            v[0] = x;
+            v[2] = z;
+            v
+        };
+        let mut cy = Cycle {
+            out: Vec::new(),
+            pose: &pose,
+        };
+        cy.traverse(s0);
+        // A start beyond the profile's first point along the feed is brought level with
+        // it, as rs274 does; the passes (and G70's returns) start from there.
+        if let Some(e) = els.first() {
+            s0[1] = s0[1].max(e.a[1]);
+        }
+        cy.traverse(s0);
+        if m == 700 {
+            self.finish_passes(b, &els, s0, &mut cy)?;
+        } else {
+            if w.i <= 0.0 {
+                return Err(self.err(
+                    b.col_of(b'i'),
+                    format!("{name}: I (depth of cut) must be > 0"),
+                ));
+            }
+            let contour =
+                geom::offset(&els, w.d).map_err(|e| self.err(col, format!("{name}: {e}")))?;
+            rough(&contour, s0, &w, m.is_multiple_of(10), &mut cy);
+        }
+        let out = cy.out;
+        for c in out {
+            self.emit(match c {
+                Move::Traverse(p) => CanonCmd::StraightTraverse(pose6(&p)),
+                Move::Feed(p) => CanonCmd::StraightFeed(pose6(&p)),
+                Move::Arc { end, center, ccw } => CanonCmd::ArcFeed {
+                    first_end: end[2],
+                    second_end: end[0],
+                    first_center: center.1,
+                    second_center: center.0,
+                    rotation: if ccw { 1 } else { -1 },
+                    axis_end: end[1],
+                    plane: Plane::Xz,
+                    end: pose6(&end),
+                },
+            })?;
+            self.s.pos = match c {
+                Move::Traverse(p) | Move::Feed(p) => p,
+                Move::Arc { end, .. } => end,
+            };
+        }
+        Ok(())
+    }
+
+    /// G70's passes: from allowance D (farthest first) down to E.
+    fn finish_passes(
+        &mut self,
+        b: &Block,
+        els: &[El],
+        s0: Pt,
+        cy: &mut Cycle,
+    ) -> Result<(), GcodeError> {
+        let d = b.get(b'd').unwrap_or(0.0);
+        let e = b.get(b'e').unwrap_or(0.0);
+        let passes = b.get(b'p').unwrap_or(1.0).round().max(1.0) as u32;
+        for k in 1..=passes {
+            let allowance = e + f64::from(passes - k) * (d - e) / f64::from(passes);
+            let contour = geom::offset(els, allowance)
+                .map_err(|m| self.err(self.loc.col, format!("G70: {m}")))?;
+            if k > 1 {
+                cy.traverse(s0);
+            }
+            if let Some(f) = contour.first() {
+                cy.traverse(f.a);
+            }
+            for el in &contour {
+                cy.element(el);
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads the motion of subroutine `o<q>` from `start`: per move its end X, Z and, for
+    /// an arc, its centre and direction (counter-clockwise in the Z/X plane).
+    fn read_profile(
+        &mut self,
+        q: f64,
+        start: [f64; 6],
+        name: &str,
+        col: u32,
+    ) -> Result<Vec<ProfileMove>, GcodeError> {
+        let label = format!("{}", q.round() as i64);
+        let f = self.pc.0;
+        let lines = self.label_lines(f, &label);
+        let sub = lines.iter().copied().find(|&l| {
+            self.files[f]
+                .olines
+                .get(&l)
+                .is_some_and(|o| o.kind == OKind::Sub)
+        });
+        let end = sub.and_then(|s| {
+            lines.iter().copied().find(|&l| {
+                l > s
+                    && self.files[f]
+                        .olines
+                        .get(&l)
+                        .is_some_and(|o| o.kind == OKind::EndSub)
+            })
+        });
+        let (Some(s), Some(e)) = (sub, end) else {
+            return Err(self.err(
+                col,
+                format!(
+                    "{name}: profile subroutine o{label} (Q{label}) is not defined in this file"
+                ),
+            ));
+        };
+        let saved = (self.s.pos, self.s.absolute, self.loc.clone());
+        let mut out = vec![(start[0], start[2], None)];
+        self.s.pos = start;
+        let mut motion = 10;
+        let r = (|| {
+            for l in s + 1..e {
+                self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
+                if self.files[f].kind.get(l).copied() == Some(1) {
+                    return Err(self.err(
+                        1,
+                        format!("{name}: O-word statements inside the profile subroutine are not supported by hytask"),
+                    ));
+                }
+                let text = self.files[f].line_text(l).to_string();
+                let line = parser::parse_line(&text, self.opts.limits.max_expr_depth)
+                    .map_err(|(c, m)| self.err(c, m))?;
+                let mut b = self.block_of(&line.words)?;
+                self.diameter_words(&mut b);
+                if let Some(d) = b.gcode(3) {
+                    self.s.absolute = d == 900;
+                }
+                if let Some(g) = b.gcode(1) {
+                    motion = g;
+                }
+                if !b.has(b'x') && !b.has(b'z') {
+                    continue;
+                }
+                let p0 = self.s.pos;
+                let p = self.find_ends(&b);
+                let arc = match motion {
+                    20 | 30 => {
+                        let (i, k) = (b.get(b'i').unwrap_or(0.0), b.get(b'k').unwrap_or(0.0));
+                        let c = if let Some(r) = b.get(b'r') {
+                            r_center(p0, p, r, motion == 20)
+                        } else {
+                            (p0[0] + i, p0[2] + k)
+                        };
+                        Some((c, motion == 30))
+                    }
+                    _ => None,
+                };
+                out.push((p[0], p[2], arc));
+                self.s.pos = p;
+            }
+            Ok(())
+        })();
+        self.s.pos = saved.0;
+        self.s.absolute = saved.1;
+        self.loc = saved.2;
+        r?;
+        Ok(out)
+    }
+}
+
+/// Centre (X, Z) of an R-format arc in the Z/X plane (rs274: negative R, the long way).
+fn r_center(p0: [f64; 6], p: [f64; 6], r: f64, cw: bool) -> (f64, f64) {
+    let (a, b) = ((p0[2], p0[0]), (p[2], p[0]));
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let chord = dx.hypot(dy);
+    let h = (r * r - chord * chord / 4.0).max(0.0).sqrt();
+    let (mx, my) = ((a.0 + b.0) / 2.0, (a.1 + b.1) / 2.0);
+    let mut sgn = if cw { -1.0 } else { 1.0 };
+    if r < 0.0 {
+        sgn = -sgn;
+    }
+    let (cz, cx) = (mx - sgn * h * dy / chord, my + sgn * h * dx / chord);
+    (cx, cz)
+}
+
+enum Move {
+    Traverse([f64; 6]),
+    Feed([f64; 6]),
+    Arc {
+        end: [f64; 6],
+        center: (f64, f64),
+        ccw: bool,
+    },
+}
+
+/// The moves of one cycle, in the cycle frame, collected before they are emitted.
+struct Cycle<'f> {
+    out: Vec<Move>,
+    pose: &'f dyn Fn(Pt) -> [f64; 6],
+}
+
+impl Cycle<'_> {
+    fn traverse(&mut self, p: Pt) {
+        self.out.push(Move::Traverse((self.pose)(p)));
+    }
+    fn feed(&mut self, p: Pt) {
+        self.out.push(Move::Feed((self.pose)(p)));
+    }
+    fn element(&mut self, e: &El) {
+        match e.arc {
+            None => self.feed(e.b),
+            Some((c, ccw)) => {
+                let end = (self.pose)(e.b);
+                let cp = (self.pose)(c);
+                self.out.push(Move::Arc {
+                    end,
+                    center: (cp[0], cp[2]),
+                    ccw: self.zx_ccw(ccw),
+                });
+            }
+        }
+    }
+    fn zx_ccw(&self, ccw_uv: bool) -> bool {
+        // Probe the frame: map the u and v unit vectors and see the orientation in (Z, X).
+        let o = (self.pose)([0.0, 0.0]);
+        let pu = (self.pose)([1.0, 0.0]);
+        let pv = (self.pose)([0.0, 1.0]);
+        let (uz, ux) = (pu[2] - o[2], pu[0] - o[0]);
+        let (vz, vx) = (pv[2] - o[2], pv[0] - o[0]);
+        let det = uz * vx - ux * vz;
+        ccw_uv == (det > 0.0)
+    }
+}
+
+/// The roughing passes, then the finishing pass along the contour (with pockets roughed
+/// level by level when `pockets`).
+fn rough(contour: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
+    let Some(first) = contour.first() else {
+        return;
+    };
+    let mut els: Vec<El> = contour.iter().flat_map(geom::split_at_top).collect();
+    if let Some(last) = els.last().copied() {
+        if last.b[0] < s0[0] - 1e-7 {
+            els.push(El::line(last.b, [s0[0], last.b[1]]));
+        }
+    }
+    let ps = first.a;
+    let entry_v = |u: f64| {
+        if (ps[0] - s0[0]).abs() < geom::EPS {
+            s0[1]
+        } else {
+            s0[1] + (u - s0[0]) / (ps[0] - s0[0]) * (ps[1] - s0[1])
+        }
+    };
+    let level = |k: u32| s0[0] - f64::from(k) * w.i;
+    let mut k = 0;
+    while level(k) > ps[0] + 1e-7 {
+        let u = level(k);
+        let vk = entry_v(u);
+        cy.traverse([u, vk]);
+        let end = geom::first_reach(&els, 0, ps, u, false).map_or(els[els.len() - 1].b, |x| x.1);
+        let ve = end[1];
+        cy.feed([u, ve]);
+        let r = retract(w.r, vk, ve);
+        cy.traverse([u + r, ve + r]);
+        cy.traverse([u + r, vk - r]);
+        cy.traverse([u, vk]);
+        k += 1;
+    }
+    cy.traverse(ps);
+    finish_along(&els, s0, w, pockets, cy);
+}
+
+/// The retract after a pass fed from `v0` to `v1`: R, but at most half the pass, so the
+/// way back never runs forward (rs274 then retracts to the middle of the pass).
+fn retract(r: f64, v0: f64, v1: f64) -> f64 {
+    r.min((v0 - v1) / 2.0)
+}
+
+/// The last pass: along the contour, roughing (or bridging) each pocket on the way.
+fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
+    let mut i = 0;
+    let mut cur = els[0].a;
+    while i < els.len() {
+        let e = els[i];
+        if !pockets && e.whole && geom::same(cur, e.a) {
+            cy.feed(e.a);
+        }
+        cy.element(&e.piece(cur, e.b));
+        cur = e.b;
+        let lip = i + 1 < els.len() && els[i + 1].tangent(e.b)[0] < -geom::EPS;
+        if !lip {
+            i += 1;
+            continue;
+        }
+        let ul = e.b[0];
+        let Some((j, back)) = geom::first_reach(els, i + 1, e.b, ul, true) else {
+            i += 1;
+            continue;
+        };
+        if !pockets {
+            // G7x.1: straight across the pocket at the lip's level.
+            cy.feed(back);
+            (i, cur) = next_from(els, j, back);
+            continue;
+        }
+        let bottom = geom::min_between(els, i + 1, e.b, j, back);
+        let mut k = ((s0[0] - ul) / w.i - 1e-9).ceil().max(0.0) as u32;
+        let (mut ci, mut cp) = (i + 1, e.b);
+        loop {
+            let u = s0[0] - f64::from(k) * w.i;
+            if u <= bottom + 1e-7 {
+                break;
+            }
+            let Some((ai, a)) = geom::first_drop(els, ci, cp, u) else {
+                break;
+            };
+            feed_along(els, ci, cp, ai, a, cy);
+            let Some((_, bpt)) = geom::first_reach(els, ai, a, u, true) else {
+                break;
+            };
+            cy.feed(bpt);
+            let r = retract(w.r, a[1], bpt[1]);
+            cy.traverse([u + r, bpt[1] + r]);
+            cy.traverse([u + r, a[1] - r]);
+            cy.feed(a);
+            ci = ai;
+            cp = a;
+            k += 1;
+        }
+        // Continue along the contour from where the pocket passes left it.
+        (i, cur) = next_from(els, ci, cp);
+    }
+}
+
+/// The element and point to go on from after reaching `p` on element `j`.
+fn next_from(els: &[El], j: usize, p: Pt) -> (usize, Pt) {
+    if geom::same(p, els[j].b) {
+        (j + 1, els.get(j + 1).map_or(p, |e| e.a))
+    } else {
+        (j, p)
+    }
+}
+
+/// Feeds along the contour from (`i`, `p`) to (`j`, `q`).
+fn feed_along(els: &[El], i: usize, p: Pt, j: usize, q: Pt, cy: &mut Cycle) {
+    if i == j {
+        if geom::same(p, q) {
+            // rs274 feeds to the pocket level even when the lip is on it.
+            cy.feed(q);
+        } else {
+            cy.element(&els[i].piece(p, q));
+        }
+        return;
+    }
+    cy.element(&els[i].piece(p, els[i].b));
+    for e in &els[i + 1..j] {
+        cy.element(e);
+    }
+    cy.element(&els[j].piece(els[j].a, q));
+}

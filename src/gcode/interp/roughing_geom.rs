@@ -1,0 +1,407 @@
+//! Plane geometry of the lathe roughing and finishing cycles (G70, G71, G72), in a
+//! normalised frame: `u` is the axis the passes step along (the cut depth grows as `u`
+//! falls, the stock is at high `u`) and `v` the axis a pass feeds along (toward lower `v`).
+//! The interpreter maps X/Z onto this frame and back, so one set of rules serves outside
+//! and inside turning and facing alike.
+
+/// A point `[u, v]`.
+pub(super) type Pt = [f64; 2];
+
+/// Coordinates closer than this are the same point.
+pub(super) const EPS: f64 = 1e-9;
+
+/// One element of a profile: a line, or an arc about `c` (counter-clockwise in the (u, v)
+/// plane when `ccw`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct El {
+    pub a: Pt,
+    pub b: Pt,
+    pub arc: Option<(Pt, bool)>,
+    /// An element as programmed (or a corner or closing element), not a piece of one:
+    /// G7x.1 feeds to the start of these first, as rs274 does.
+    pub whole: bool,
+}
+
+fn sub(p: Pt, q: Pt) -> Pt {
+    [p[0] - q[0], p[1] - q[1]]
+}
+fn add(p: Pt, q: Pt) -> Pt {
+    [p[0] + q[0], p[1] + q[1]]
+}
+fn mul(p: Pt, k: f64) -> Pt {
+    [p[0] * k, p[1] * k]
+}
+fn norm(p: Pt) -> f64 {
+    p[0].hypot(p[1])
+}
+fn cross(p: Pt, q: Pt) -> f64 {
+    p[0] * q[1] - p[1] * q[0]
+}
+/// `p` turned a quarter counter-clockwise.
+fn left(p: Pt) -> Pt {
+    [-p[1], p[0]]
+}
+fn unit(p: Pt) -> Pt {
+    let n = norm(p);
+    if n > 0.0 {
+        mul(p, 1.0 / n)
+    } else {
+        p
+    }
+}
+pub(super) fn same(p: Pt, q: Pt) -> bool {
+    norm(sub(p, q)) < 1e-7
+}
+
+impl El {
+    pub(super) fn line(a: Pt, b: Pt) -> El {
+        El {
+            a,
+            b,
+            arc: None,
+            whole: true,
+        }
+    }
+
+    /// Unit tangent (direction of travel) at `p`.
+    pub(super) fn tangent(&self, p: Pt) -> Pt {
+        match self.arc {
+            None => unit(sub(self.b, self.a)),
+            Some((c, ccw)) => {
+                let t = unit(left(sub(p, c)));
+                if ccw {
+                    t
+                } else {
+                    mul(t, -1.0)
+                }
+            }
+        }
+    }
+
+    /// The same element shifted `d` to its left (the free side of the profile).
+    fn offset(&self, d: f64) -> Option<El> {
+        match self.arc {
+            None => {
+                let n = mul(left(self.tangent(self.a)), d);
+                Some(El {
+                    a: add(self.a, n),
+                    b: add(self.b, n),
+                    ..*self
+                })
+            }
+            Some((c, ccw)) => {
+                let r = norm(sub(self.a, c));
+                let r2 = if ccw { r - d } else { r + d };
+                if r2 <= EPS {
+                    return None;
+                }
+                let k = r2 / r;
+                Some(El {
+                    a: add(c, mul(sub(self.a, c), k)),
+                    b: add(c, mul(sub(self.b, c), k)),
+                    ..*self
+                })
+            }
+        }
+    }
+
+    /// Angle swept from `p` to `q` along the arc, in [0, 2π).
+    fn sweep(&self, p: Pt, q: Pt) -> f64 {
+        let Some((c, ccw)) = self.arc else {
+            return 0.0;
+        };
+        let (pa, qa) = (sub(p, c), sub(q, c));
+        let mut s = qa[1].atan2(qa[0]) - pa[1].atan2(pa[0]);
+        if !ccw {
+            s = -s;
+        }
+        if s < -1e-12 {
+            s += std::f64::consts::TAU;
+        }
+        s.max(0.0)
+    }
+
+    /// Points of the element with `u == level`, in travel order, after `from` (and at
+    /// `from` itself when `inclusive`).
+    fn at_level(&self, from: Pt, level: f64, inclusive: bool) -> Vec<Pt> {
+        match self.arc {
+            None => {
+                let (a, b) = (from, self.b);
+                let du = b[0] - a[0];
+                if du.abs() < EPS {
+                    return Vec::new();
+                }
+                let t = (level - a[0]) / du;
+                let lo = if inclusive { -EPS } else { EPS };
+                if t >= lo && t <= 1.0 + EPS {
+                    vec![[level, a[1] + t * (b[1] - a[1])]]
+                } else {
+                    Vec::new()
+                }
+            }
+            Some((c, _)) => {
+                let r = norm(sub(self.a, c));
+                let h = r * r - (level - c[0]).powi(2);
+                if h < -EPS {
+                    return Vec::new();
+                }
+                let dv = h.max(0.0).sqrt();
+                let total = self.sweep(from, self.b);
+                let mut v: Vec<(f64, Pt)> = [[level, c[1] + dv], [level, c[1] - dv]]
+                    .into_iter()
+                    .map(|p| (self.sweep(from, p), p))
+                    .filter(|&(s, p)| {
+                        (s > 1e-9 || (inclusive && same(p, from))) && s <= total + 1e-9
+                    })
+                    .collect();
+                v.sort_by(|x, y| x.0.total_cmp(&y.0));
+                v.into_iter().map(|x| x.1).collect()
+            }
+        }
+    }
+
+    /// The part of the element from `p` to `q` (both on it).
+    pub(super) fn piece(&self, p: Pt, q: Pt) -> El {
+        El {
+            a: p,
+            b: q,
+            arc: self.arc,
+            whole: false,
+        }
+    }
+
+    /// Lowest `u` on the element.
+    fn min_u(&self) -> f64 {
+        let m = self.a[0].min(self.b[0]);
+        match self.arc {
+            None => m,
+            Some((c, _)) => {
+                let r = norm(sub(self.a, c));
+                let bottom = [c[0] - r, c[1]];
+                let s = self.sweep(self.a, bottom);
+                if s > 0.0 && s < self.sweep(self.a, self.b) {
+                    m.min(bottom[0])
+                } else {
+                    m
+                }
+            }
+        }
+    }
+}
+
+/// An arc that passes over its highest `u` inside is cut there in two, as rs274 does for
+/// the walk along the contour; anything else stays whole.
+pub(super) fn split_at_top(e: &El) -> Vec<El> {
+    let Some((c, _)) = e.arc else {
+        return vec![*e];
+    };
+    let top = [c[0] + norm(sub(e.a, c)), c[1]];
+    let s = e.sweep(e.a, top);
+    if s > 1e-9 && s < e.sweep(e.a, e.b) - 1e-9 {
+        vec![El { b: top, ..*e }, El { a: top, ..*e }]
+    } else {
+        vec![*e]
+    }
+}
+
+/// The element never moves toward higher `v` (against the feed direction).
+pub(super) fn monotonic(e: &El) -> bool {
+    if e.tangent(e.a)[1] > 1e-7 || e.tangent(e.b)[1] > 1e-7 {
+        return false;
+    }
+    let Some((c, _)) = e.arc else {
+        return true;
+    };
+    let r = norm(sub(e.a, c));
+    let total = e.sweep(e.a, e.b);
+    [[c[0], c[1] + r], [c[0], c[1] - r]].into_iter().all(|p| {
+        let s = e.sweep(e.a, p);
+        s <= 1e-9 || s >= total - 1e-9
+    })
+}
+
+/// Intersections of the full line or circle carrying `e` with the one carrying `f`.
+fn meet(e: &El, f: &El) -> Vec<Pt> {
+    match (e.arc, f.arc) {
+        (None, None) => {
+            let (d1, d2) = (sub(e.b, e.a), sub(f.b, f.a));
+            let den = cross(d1, d2);
+            if den.abs() < EPS {
+                return Vec::new();
+            }
+            let t = cross(sub(f.a, e.a), d2) / den;
+            vec![add(e.a, mul(d1, t))]
+        }
+        (None, Some((c, _))) | (Some((c, _)), None) => {
+            let (l, circ) = if e.arc.is_none() { (e, f) } else { (f, e) };
+            let r = norm(sub(circ.a, c));
+            let d = unit(sub(l.b, l.a));
+            let w = sub(l.a, c);
+            let bq = w[0] * d[0] + w[1] * d[1];
+            let disc = bq * bq - (w[0] * w[0] + w[1] * w[1] - r * r);
+            if disc < -EPS {
+                return Vec::new();
+            }
+            let s = disc.max(0.0).sqrt();
+            vec![add(l.a, mul(d, -bq + s)), add(l.a, mul(d, -bq - s))]
+        }
+        (Some((c1, _)), Some((c2, _))) => {
+            let (r1, r2) = (norm(sub(e.a, c1)), norm(sub(f.a, c2)));
+            let dv = sub(c2, c1);
+            let dist = norm(dv);
+            if dist < EPS {
+                return Vec::new();
+            }
+            let a = (r1 * r1 - r2 * r2 + dist * dist) / (2.0 * dist);
+            let h2 = r1 * r1 - a * a;
+            if h2 < -EPS {
+                return Vec::new();
+            }
+            let h = h2.max(0.0).sqrt();
+            let m = add(c1, mul(dv, a / dist));
+            let n = mul(left(unit(dv)), h);
+            vec![add(m, n), sub(m, n)]
+        }
+    }
+}
+
+/// The profile shifted `d` toward its free (left) side: elements that no longer meet are
+/// trimmed to their crossing at inside corners, and joined by an arc of radius `d` about the
+/// programmed corner at outside corners.
+pub(super) fn offset(els: &[El], d: f64) -> Result<Vec<El>, String> {
+    if d == 0.0 {
+        return Ok(els.to_vec());
+    }
+    let mut out: Vec<El> = Vec::with_capacity(els.len() * 2);
+    for (i, e) in els.iter().enumerate() {
+        let Some(mut o) = e.offset(d) else {
+            return Err(format!(
+                "an arc of the profile is smaller than the finishing allowance D{d}"
+            ));
+        };
+        if let Some(prev) = out.last_mut() {
+            let q = e.a;
+            if !same(prev.b, o.a) {
+                let turn = cross(els[i - 1].tangent(q), e.tangent(q));
+                if turn > 0.0 {
+                    let x = meet(prev, &o)
+                        .into_iter()
+                        .min_by(|p1, p2| norm(sub(*p1, q)).total_cmp(&norm(sub(*p2, q))));
+                    let Some(x) = x else {
+                        return Err("the offset profile does not close at an inside corner".into());
+                    };
+                    prev.b = x;
+                    o.a = x;
+                } else {
+                    let corner = El {
+                        a: prev.b,
+                        b: o.a,
+                        arc: Some((q, false)),
+                        whole: true,
+                    };
+                    out.push(corner);
+                }
+            }
+        }
+        out.push(o);
+    }
+    Ok(out)
+}
+
+/// Where the contour, walked from `from` on element `i`, first reaches `u >= level` (when
+/// `strict`, the starting point itself does not count).
+pub(super) fn first_reach(
+    els: &[El],
+    i: usize,
+    from: Pt,
+    level: f64,
+    strict: bool,
+) -> Option<(usize, Pt)> {
+    for (j, e) in els.iter().enumerate().skip(i) {
+        let start = if j == i { from } else { e.a };
+        let at_start = !(j == i && strict);
+        if at_start && start[0] >= level - 1e-7 {
+            return Some((j, start));
+        }
+        for p in e.at_level(start, level, at_start) {
+            let t = e.tangent(p);
+            if t[0] > EPS || same(p, e.b) && e.b[0] >= level - 1e-7 {
+                return Some((j, p));
+            }
+        }
+        if e.b[0] >= level - 1e-7 && start[0] < level - 1e-7 {
+            return Some((j, e.b));
+        }
+    }
+    None
+}
+
+/// Where the contour, walked from `from` on element `i`, first comes down to `u <= level`.
+pub(super) fn first_drop(els: &[El], i: usize, from: Pt, level: f64) -> Option<(usize, Pt)> {
+    for (j, e) in els.iter().enumerate().skip(i) {
+        let start = if j == i { from } else { e.a };
+        if start[0] <= level + 1e-7 {
+            return Some((j, start));
+        }
+        if let Some(p) = e.at_level(start, level, false).into_iter().next() {
+            return Some((j, p));
+        }
+    }
+    None
+}
+
+/// Lowest `u` of the contour from (`i`, `from`) to (`j`, `to`).
+pub(super) fn min_between(els: &[El], i: usize, from: Pt, j: usize, to: Pt) -> f64 {
+    let mut m = from[0].min(to[0]);
+    for (k, e) in els.iter().enumerate().take(j + 1).skip(i) {
+        let a = if k == i { from } else { e.a };
+        let b = if k == j { to } else { e.b };
+        m = m.min(e.piece(a, b).min_u());
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outside_corner_gets_an_arc_inside_corner_a_crossing() {
+        // Shoulder: along -v at u=5, out to u=8, along -v again.
+        let els = [
+            El::line([5.0, 0.0], [5.0, -5.0]),
+            El::line([5.0, -5.0], [8.0, -5.0]),
+            El::line([8.0, -5.0], [8.0, -10.0]),
+        ];
+        let o = offset(&els, 1.0).unwrap();
+        assert_eq!(o.len(), 4);
+        assert!(same(o[0].b, [6.0, -4.0]) && same(o[1].a, [6.0, -4.0]));
+        assert!(same(o[1].b, [8.0, -4.0]));
+        assert_eq!(o[2].arc, Some(([8.0, -5.0], false)));
+        assert!(same(o[2].b, [9.0, -5.0]) && same(o[3].b, [9.0, -10.0]));
+    }
+
+    #[test]
+    fn reach_and_drop_on_lines_and_arcs() {
+        let els = [
+            El::line([5.0, 0.0], [9.0, -4.0]),
+            El {
+                a: [9.0, -4.0],
+                b: [9.0, -8.0],
+                arc: Some(([9.0, -6.0], true)),
+                whole: true,
+            },
+        ];
+        let (j, p) = first_reach(&els, 0, [5.0, 0.0], 7.0, false).unwrap();
+        assert_eq!(j, 0);
+        assert!(same(p, [7.0, -2.0]));
+        // The arc dips to u=7 at v=-6 and climbs back to 9.
+        let (j, p) = first_drop(&els, 1, [9.0, -4.0], 8.0).unwrap();
+        assert_eq!(j, 1);
+        assert!((p[0] - 8.0).abs() < 1e-9 && p[1] > -6.0);
+        let (_, p) = first_reach(&els, 1, p, 8.0, true).unwrap();
+        assert!((p[0] - 8.0).abs() < 1e-9 && p[1] < -6.0);
+        assert!((min_between(&els, 0, [5.0, 0.0], 1, [9.0, -8.0]) - 5.0).abs() < 1e-12);
+        assert!((els[1].min_u() - 7.0).abs() < 1e-12);
+    }
+}
