@@ -123,6 +123,8 @@ pub struct Machine {
     link_events: Mutex<Option<std::sync::mpsc::Receiver<crate::modbus::LinkEvent>>>,
     /// Scan statistics of the PLC task.
     plc_stats: Option<Arc<crate::plc::task::PlcStats>>,
+    /// The script host (tasks `cnc` and `scripts`) and its operator worker.
+    scripts: super::scripts::Scripts,
 }
 
 mod events;
@@ -392,7 +394,9 @@ impl Machine {
             link_events,
             plc_stats,
         } = build(&config)?;
+        let script_tasks = super::scripts::add(&mut app, &config)?;
         let report = app.configure()?;
+        let scripts = script_tasks.bind(&app, io_map.clone())?;
         for w in &report.warnings {
             tracing::warn!("topology: {w}");
         }
@@ -454,7 +458,13 @@ impl Machine {
             })),
             link_events: Mutex::new(link_events),
             plc_stats,
+            scripts,
         });
+        let api: std::sync::Weak<dyn MachineApi + Send + Sync> =
+            Arc::downgrade(&m) as std::sync::Weak<Machine>;
+        m.scripts.start(api).map_err(|e| {
+            DeployError::Invalid(format!("cannot start the script operator worker: {e}"))
+        })?;
         let weak = Arc::downgrade(&m);
         let stop = m.bridge_stop.clone();
         let bridge = std::thread::Builder::new()
@@ -759,6 +769,10 @@ impl Machine {
 }
 
 impl MachineApi for Machine {
+    fn scripts(&self) -> Option<&crate::script::ScriptHosts> {
+        Some(self.scripts.hosts())
+    }
+
     fn status(&self) -> Status {
         // One read: every value below belongs to servo cycle `st.cycle`.
         let st = self.snapshot();
@@ -1157,6 +1171,8 @@ impl crate::daemon::Deployed for Machine {
     }
 
     fn shutdown(&self) -> anyhow::Result<()> {
+        // No script command is carried out once the machine goes down.
+        self.scripts.stop();
         // A controlled stop of whatever moves, then drives off, then threads down.
         let snap = self.snapshot().machine;
         if snap.mode == Mode::Fault {

@@ -51,9 +51,18 @@ pub(crate) enum SOp {
 pub(crate) struct Call {
     pub peer: String,
     pub op: String,
-    /// One value fragment per argument.
-    pub args: Vec<(u32, Slot)>,
+    /// One argument per parameter.
+    pub args: Vec<CallArg>,
     pub span: Span,
+}
+
+/// An argument of a `DO` site.
+#[derive(Debug, Clone)]
+pub(crate) enum CallArg {
+    /// The value fragment computing it and the slot it leaves the value in.
+    Value(u32, Slot),
+    /// A string literal.
+    Str(String),
 }
 
 /// A transition.

@@ -268,8 +268,13 @@ impl Lower<'_, '_> {
             SKind::Do { peer, op, args } => {
                 let mut slots = Vec::new();
                 for a in args {
-                    let (f, slot) = self.fr.value(self.scope, a, None);
-                    slots.push((f as u32, slot));
+                    slots.push(match a {
+                        DoArg::Expr(e) => {
+                            let (f, slot) = self.fr.value(self.scope, e, None);
+                            CallArg::Value(f as u32, slot)
+                        }
+                        DoArg::Str(s) => CallArg::Str(s.clone()),
+                    });
                 }
                 self.calls.push(Call {
                     peer: peer.clone(),
