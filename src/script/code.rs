@@ -116,6 +116,9 @@ pub struct Script {
     pub(crate) entries: Vec<u32>,
     pub(crate) ops: Vec<SOp>,
     pub(crate) spans: Vec<Span>,
+    /// Per op: `(fragment, n)` when a run of `n` plain statements starts there whose
+    /// merged fragment may replace them (`(NONE, 0)` elsewhere).
+    pub(crate) runs: Vec<(u32, u32)>,
     pub(crate) items: Vec<ItemDef>,
     pub(crate) calls: Vec<Call>,
     /// Event names (full) and where first used.

@@ -319,6 +319,15 @@ fn exec(l: &mut Loaded, i: usize, base: u32, now: u64, budget: &mut u32) -> Flow
         let pc = insts[i].pc as usize;
         let span = script.spans[pc];
         let mut next = pc as u32 + 1;
+        // A run of plain statements the budget covers: its merged fragment, one VM entry.
+        // (Single-stepping has a budget of 1: statement by statement.)
+        let (run, n) = script.runs[pc];
+        if n > 1 && n - 1 <= *budget {
+            *budget -= n - 1;
+            frag!(run);
+            insts[i].pc = pc as u32 + n;
+            continue;
+        }
         match script.ops[pc] {
             SOp::Exec(f) => frag!(f),
             SOp::JumpIfNot { frag, cell, target } => {
