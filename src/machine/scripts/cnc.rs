@@ -160,6 +160,9 @@ pub const REASONS: &[&str] = &[
     "the machine is gone",
 ];
 
+/// The worker's end of the request buffer: `(sequence number, command)`.
+pub type Requests = BufferReader<(u32, CncCmd)>;
+
 /// Result code of a command: 0 done, else an index into [`REASONS`].
 pub type Outcome = u8;
 
@@ -211,7 +214,7 @@ pub const EVENTS: [&str; 5] = ["job_done", "job_failed", "homed", "estop", "faul
 
 impl CncTask {
     /// The task and the worker's end of its request buffer.
-    pub(super) fn new(shared: Arc<Shared>) -> (Self, BufferReader<(u32, CncCmd)>) {
+    pub(super) fn new(shared: Arc<Shared>) -> (Self, Requests) {
         let (tx, rx) = buffer(4, FullPolicy::DropNewest);
         let task = CncTask {
             shared,

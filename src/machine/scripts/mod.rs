@@ -59,7 +59,7 @@ pub struct Added {
     control: Arc<ScriptControl>,
     cnc: TaskInfo,
     shared: Arc<cnc::Shared>,
-    rx: BufferReader<(u32, cnc::CncCmd)>,
+    rx: cnc::Requests,
 }
 
 /// Adds tasks `cnc` and `scripts` to `app`.
@@ -82,7 +82,7 @@ pub fn add(app: &mut Deployment, config: &MachineConfig) -> Result<Added, Deploy
 /// The machine's script hosts and the operator worker.
 pub struct Scripts {
     hosts: ScriptHosts,
-    pending: Mutex<Option<(BufferReader<(u32, cnc::CncCmd)>, IoMap)>>,
+    pending: Mutex<Option<(cnc::Requests, IoMap)>>,
     shared: Arc<cnc::Shared>,
     stop: Arc<AtomicBool>,
     worker: Mutex<Option<std::thread::JoinHandle<()>>>,

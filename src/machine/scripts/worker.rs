@@ -2,11 +2,10 @@
 //! through [`MachineApi`], as an operator at the control socket would, and waits for their
 //! completion (homed, job finished) by watching the machine's status.
 
-use super::cnc::{CncCmd, Outcome, Shared};
+use super::cnc::{CncCmd, Outcome, Requests, Shared};
 use crate::config::IoKind;
 use crate::machine::api::{ApiError, JobSource, MachineApi, Mode, Status};
 use crate::machine::devices::IoMap;
-use crate::rt::prelude::BufferReader;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Weak};
 use std::time::Duration;
@@ -17,7 +16,7 @@ const POLL: Duration = Duration::from_millis(5);
 /// What the worker thread needs.
 pub(super) struct Worker {
     pub shared: Arc<Shared>,
-    pub rx: BufferReader<(u32, CncCmd)>,
+    pub rx: Requests,
     pub machine: Weak<dyn MachineApi + Send + Sync>,
     pub io_map: IoMap,
     pub stop: Arc<AtomicBool>,
