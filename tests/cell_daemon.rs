@@ -186,3 +186,21 @@ fn run_cell_prints_the_counts_and_fails_on_an_injected_drop() {
     assert!(stdout.contains("sorted:        2 of 5"), "{stdout}");
     assert!(stdout.contains("error:         object lost"), "{stdout}");
 }
+
+/// `realtime` of a cell on real-time threads is read once every thread has set itself up:
+/// as root (SCHED_FIFO and mlockall allowed) it must say true; it said false when read right
+/// after the start, and `hytask run-cell` printed "not realtime". Without the privileges
+/// both sides are false.
+#[test]
+fn realtime_is_read_after_the_threads_set_themselves_up() {
+    use hytask::daemon::Deployed;
+    let file = hytask::cell::config::load(Path::new("config/pickplace.toml")).unwrap();
+    assert!(
+        file.cell.sim_speed.is_none(),
+        "the shipped cell runs on real time"
+    );
+    let d = hytask::cell::daemon::CellDaemon::deploy(&file).unwrap();
+    let possible = hytask::rt::system::capabilities().realtime;
+    assert_eq!(d.realtime(), possible);
+    d.shutdown().unwrap();
+}

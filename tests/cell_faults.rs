@@ -177,3 +177,28 @@ fn tracking_error_faults_the_robot_and_the_selection_detects_it() {
         rig.state()
     );
 }
+
+#[test]
+fn sensor_range_error_faults_the_robot_and_the_selection_detects_it() {
+    let mut rig = Rig::start(&CellConfig::with_seed(11));
+    let mut range = rig
+        .rt
+        .event::<hytask::cell::types::RangeError>(names::RANGE_ERROR_EVENT)
+        .unwrap()
+        .subscribe(8);
+    rig.until_homed();
+    assert!(range.pop().is_none(), "no range error while homing");
+    let run = rig.cell_selection.send(SelectionCmd::Run(3)).unwrap();
+    rig.run_until(20 * SECOND, |r| {
+        r.state().state == SelectionState::MovingWithoutObject
+    });
+    rig.rt.run_cycles(100);
+    let glitch = rig.hw.send(HwCmd::EncoderGlitch).unwrap();
+    rig.rt.run_cycles(3);
+    assert_eq!(glitch.status(), CommandStatus::Done);
+    let e = range.pop().expect("sensor.range_error was raised");
+    assert_eq!(e.axis, 0);
+    assert_eq!(e.position_mm, hytask::cell::hw::GLITCH_MM);
+    assert!(range.pop().is_none(), "once per excursion");
+    expect_error_then_recover(&mut rig, &run, "robot stopped");
+}

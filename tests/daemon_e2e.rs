@@ -211,7 +211,9 @@ fn tasks_are_listed_and_operations_callable_by_name() {
             "axis.X",
             "axis.Y",
             "axis.Z",
-            "monitor"
+            "monitor",
+            "cnc",
+            "scripts"
         ]
     );
     let machine = &tasks[1];

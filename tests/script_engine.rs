@@ -376,3 +376,20 @@ END_STATE_MACHINE
     assert_eq!(c.status("long").status, "finished");
     assert_eq!(c.status("long").state.as_deref(), Some("done"));
 }
+
+/// Consecutive plain statements run as one merged fragment when the budget covers them; a
+/// fault inside still names its own statement, and stepping stays statement by statement
+/// (`step_runs_one_statement_at_a_time`).
+#[test]
+fn a_fault_inside_a_run_of_plain_statements_names_its_statement() {
+    let mut c = cell();
+    let slot = c.load(
+        "VAR_GLOBAL n : INT; z : INT; END_VAR\nPROGRAM p\n  n := 1;\n  n := 10 / z;\n  n := 3;\nEND_PROGRAM\n",
+    );
+    c.control.control(slot, "p", Ctl::Start).unwrap();
+    c.rt.run_cycles(3);
+    assert_eq!(
+        c.status("p").error.as_deref(),
+        Some("test.st:4:11: division by zero")
+    );
+}

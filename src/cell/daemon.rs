@@ -49,6 +49,27 @@ pub struct CellDaemon {
     bridge: Mutex<Option<std::thread::JoinHandle<()>>>,
     /// The selection task's script host (empty with the Rust selection).
     scripts: crate::script::ScriptHosts,
+    /// Threads on simulated time (never realtime).
+    simulated: bool,
+}
+
+/// How long [`CellDaemon`]'s `realtime` waits for every thread's first cycle (a hang
+/// guard: a thread's first cycle comes one period after the start).
+const THREADS_REPORT: Duration = Duration::from_secs(5);
+
+/// Whether every thread of `threads` runs realtime, read once each has reported. A thread
+/// sets its flag in its own setup, before its first cycle: read right after `start`, it
+/// said `false` for threads that had not run yet (`hytask run-cell` as root printed "not
+/// realtime"). A counted wake-up means the setup is over.
+pub fn threads_realtime(
+    threads: &[Arc<crate::rt::activity::ThreadInfo>],
+    timeout: Duration,
+) -> bool {
+    let t0 = std::time::Instant::now();
+    while threads.iter().any(|t| t.stats.summary().wakeup.count == 0) && t0.elapsed() < timeout {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    threads.iter().all(|t| t.realtime())
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -166,6 +187,7 @@ impl CellDaemon {
             stop_bridge,
             bridge: Mutex::new(Some(thread)),
             scripts: cell.scripts,
+            simulated: cfg.sim_speed.is_some(),
         }))
     }
 
@@ -375,7 +397,11 @@ impl Deployed for CellDaemon {
         self.name.clone()
     }
     fn realtime(&self) -> bool {
-        lock(&self.runtime).as_ref().is_some_and(Runtime::realtime)
+        if self.simulated {
+            return false;
+        }
+        let threads = lock(&self.runtime).as_ref().map(Runtime::threads);
+        threads.is_some_and(|t| threads_realtime(&t, THREADS_REPORT))
     }
     fn servo_cycles(&self) -> u64 {
         lock(&self.runtime).as_ref().map_or(0, |rt| {

@@ -18,7 +18,13 @@ pub enum HwCmd {
     ReleaseEstop,
     /// The gripper loses the object it holds, now.
     DropObject,
+    /// The X encoder reads garbage for one cycle (a broken cable, a glitch): a reading far
+    /// outside the sensor's range, the sensor's `range_error` path.
+    EncoderGlitch,
 }
+
+/// What a glitching encoder reads, mm: far outside any cell's range.
+pub const GLITCH_MM: f64 = 1.0e6;
 
 const OPS: &[OperationDescriptor] = &[
     OperationDescriptor {
@@ -39,6 +45,12 @@ const OPS: &[OperationDescriptor] = &[
         params: &[],
         next: NextCommand::AfterAcceptance,
     },
+    OperationDescriptor {
+        name: "encoder_glitch",
+        doc: "Simulation: the X encoder reads far out of range for one cycle.",
+        params: &[],
+        next: NextCommand::AfterAcceptance,
+    },
 ];
 
 impl Commands for HwCmd {
@@ -53,7 +65,8 @@ impl Commands for HwCmd {
         Ok(match a.operation() {
             "press_estop" => Self::PressEstop,
             "release_estop" => Self::ReleaseEstop,
-            _ => Self::DropObject,
+            "drop_object" => Self::DropObject,
+            _ => Self::EncoderGlitch,
         })
     }
 }
@@ -66,6 +79,8 @@ pub struct Hardware {
     scene_out: Option<DataWriter<CameraScene>>,
     tally_out: Option<DataWriter<WorldTally>>,
     drive: DriveOutput,
+    /// The next published reading glitches.
+    glitch: bool,
 }
 
 impl Hardware {
@@ -78,6 +93,7 @@ impl Hardware {
             scene_out: None,
             tally_out: None,
             drive: DriveOutput::default(),
+            glitch: false,
         }
     }
 
@@ -115,7 +131,10 @@ impl Task for Hardware {
         }
     }
     fn update(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
-        let fb = self.world.step(ctx.period_ns as f64 * 1e-9, &self.drive);
+        let mut fb = self.world.step(ctx.period_ns as f64 * 1e-9, &self.drive);
+        if std::mem::take(&mut self.glitch) {
+            fb.position_mm[0] = GLITCH_MM;
+        }
         self.publish(fb);
         Ok(())
     }
@@ -128,6 +147,7 @@ impl Task for Hardware {
                     return Err(RejectReason::Other("the gripper holds no object"));
                 }
             }
+            HwCmd::EncoderGlitch => self.glitch = true,
         }
         Ok(())
     }

@@ -11,6 +11,7 @@ pub mod mode;
 pub mod probing;
 pub mod runtime;
 pub mod safety;
+pub mod scripts;
 pub mod servo;
 pub mod task_api;
 

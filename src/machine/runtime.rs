@@ -127,6 +127,8 @@ pub struct Machine {
     plc_stats: Option<Arc<crate::plc::task::PlcStats>>,
     /// Online access to the PLC (`plc.*` methods).
     plc_online: Option<Arc<crate::plc::online::PlcOnline>>,
+    /// The script host (tasks `cnc` and `scripts`) and its operator worker.
+    scripts: super::scripts::Scripts,
 }
 
 mod events;
@@ -424,7 +426,9 @@ impl Machine {
             plc_stats,
             plc_online,
         } = build(&config)?;
+        let script_tasks = super::scripts::add(&mut app, &config)?;
         let report = app.configure()?;
+        let scripts = script_tasks.bind(&app, io_map.clone())?;
         for w in &report.warnings {
             tracing::warn!("topology: {w}");
         }
@@ -488,7 +492,13 @@ impl Machine {
             link_events: Mutex::new(link_events),
             plc_stats,
             plc_online,
+            scripts,
         });
+        let api: std::sync::Weak<dyn MachineApi + Send + Sync> =
+            Arc::downgrade(&m) as std::sync::Weak<Machine>;
+        m.scripts.start(api).map_err(|e| {
+            DeployError::Invalid(format!("cannot start the script operator worker: {e}"))
+        })?;
         let weak = Arc::downgrade(&m);
         let stop = m.bridge_stop.clone();
         let bridge = std::thread::Builder::new()
@@ -795,6 +805,10 @@ impl Machine {
 impl MachineApi for Machine {
     fn plc(&self) -> Option<&crate::plc::online::PlcOnline> {
         self.plc_online.as_deref()
+    }
+
+    fn scripts(&self) -> Option<&crate::script::ScriptHosts> {
+        Some(self.scripts.hosts())
     }
 
     fn status(&self) -> Status {
@@ -1197,6 +1211,8 @@ impl crate::daemon::Deployed for Machine {
     }
 
     fn shutdown(&self) -> anyhow::Result<()> {
+        // No script command is carried out once the machine goes down.
+        self.scripts.stop();
         // A controlled stop of whatever moves, then drives off, then threads down.
         let snap = self.snapshot().machine;
         if snap.mode == Mode::Fault {

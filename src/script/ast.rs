@@ -52,7 +52,7 @@ pub enum SKind {
         /// Operation.
         op: Ident,
         /// Arguments.
-        args: Vec<Expr>,
+        args: Vec<DoArg>,
     },
     /// `TRY ... CATCH ... END_TRY`
     Try(Vec<SStmt>, Vec<SStmt>),
@@ -140,4 +140,14 @@ pub struct ScriptFile {
     pub unit: Unit,
     /// Programs and state machines in source order.
     pub items: Vec<Item>,
+}
+
+/// An argument of `DO peer.op(...)`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DoArg {
+    /// An ST expression, evaluated when the command is sent.
+    Expr(Expr),
+    /// A string literal (`'G0 X10'`), for operations with text parameters (a G-code line,
+    /// a file name): constant, so sending it copies no text at runtime.
+    Str(String),
 }

@@ -3,7 +3,7 @@
 //! (command senders, event counters, emit flags). Unknown names are errors with
 //! `file:line:col`; after binding nothing is looked up by name again.
 
-use super::code::Script;
+use super::code::{CallArg, Script};
 use super::engine::Inst;
 use crate::plc::diag::{Diag, Diags};
 use crate::rt::command::{ArgType, ArgValue, DynCommandSender};
@@ -115,18 +115,36 @@ impl Script {
                     ),
                 )),
                 Some(o) => {
-                    // Preallocated argument vector: the step overwrites the values in place.
-                    args.push(
-                        o.params
-                            .iter()
-                            .map(|p| match p.ty {
-                                ArgType::Bool => ArgValue::Bool(false),
-                                ArgType::Int => ArgValue::Int(0),
-                                ArgType::Float => ArgValue::Float(0.0),
-                                ArgType::Str => ArgValue::Str(String::new()),
-                            })
-                            .collect(),
-                    );
+                    // Preallocated argument vector: the step overwrites the values in place;
+                    // string literals are set here, once.
+                    let mut v = Vec::with_capacity(o.params.len());
+                    for (k, (p, a)) in o.params.iter().zip(&c.args).enumerate() {
+                        v.push(match (p.ty, a) {
+                            (ArgType::Str, CallArg::Str(s)) => ArgValue::Str(s.clone()),
+                            (ArgType::Str, CallArg::Value(..)) | (_, CallArg::Str(_)) => {
+                                let want = if p.ty == ArgType::Str {
+                                    "a string literal"
+                                } else {
+                                    "a value, not a string"
+                                };
+                                errs.push(Diag::new(
+                                    c.span,
+                                    format!(
+                                        "argument {} ('{}') of '{}.{}' must be {want}",
+                                        k + 1,
+                                        p.name,
+                                        c.peer,
+                                        c.op
+                                    ),
+                                ));
+                                ArgValue::Bool(false)
+                            }
+                            (ArgType::Bool, _) => ArgValue::Bool(false),
+                            (ArgType::Int, _) => ArgValue::Int(0),
+                            (ArgType::Float, _) => ArgValue::Float(0.0),
+                        });
+                    }
+                    args.push(v);
                     senders.push(s.clone());
                 }
             }
@@ -149,8 +167,8 @@ impl Script {
             }
         }
         for c in &self.calls {
-            for (_, slot) in &c.args {
-                if !slot.ty.scalar() {
+            for a in &c.args {
+                if matches!(a, CallArg::Value(_, slot) if !slot.ty.scalar()) {
                     errs.push(Diag::new(c.span, "arguments must be elementary values"));
                 }
             }

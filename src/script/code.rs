@@ -51,9 +51,18 @@ pub(crate) enum SOp {
 pub(crate) struct Call {
     pub peer: String,
     pub op: String,
-    /// One value fragment per argument.
-    pub args: Vec<(u32, Slot)>,
+    /// One argument per parameter.
+    pub args: Vec<CallArg>,
     pub span: Span,
+}
+
+/// An argument of a `DO` site.
+#[derive(Debug, Clone)]
+pub(crate) enum CallArg {
+    /// The value fragment computing it and the slot it leaves the value in.
+    Value(u32, Slot),
+    /// A string literal.
+    Str(String),
 }
 
 /// A transition.
@@ -107,6 +116,9 @@ pub struct Script {
     pub(crate) entries: Vec<u32>,
     pub(crate) ops: Vec<SOp>,
     pub(crate) spans: Vec<Span>,
+    /// Per op: `(fragment, n)` when a run of `n` plain statements starts there whose
+    /// merged fragment may replace them (`(NONE, 0)` elsewhere).
+    pub(crate) runs: Vec<(u32, u32)>,
     pub(crate) items: Vec<ItemDef>,
     pub(crate) calls: Vec<Call>,
     /// Event names (full) and where first used.

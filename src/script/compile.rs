@@ -33,6 +33,7 @@ pub fn compile_with(file: &str, src: &str, opts: Options) -> Result<Script, Diag
         scope: 0,
         loops: Vec::new(),
         tries: Vec::new(),
+        runs: Vec::new(),
     };
     for (i, it) in parsed.items.iter().enumerate() {
         let prog = matches!(it.kind, ItemKind::Program(_));
@@ -66,8 +67,13 @@ pub fn compile_with(file: &str, src: &str, opts: Options) -> Result<Script, Diag
         calls,
         events,
         emits,
+        runs: run_list,
         ..
     } = l;
+    let mut runs = vec![(NONE, 0u32); ops.len()];
+    for (pc, f, n) in run_list {
+        runs[pc] = (f, n);
+    }
     let compiled = fr.finish(file, opts)?;
     Ok(Script {
         file: Arc::from(file),
@@ -75,6 +81,7 @@ pub fn compile_with(file: &str, src: &str, opts: Options) -> Result<Script, Diag
         entries: compiled.entries,
         ops,
         spans,
+        runs,
         items,
         calls,
         events,
@@ -101,6 +108,8 @@ struct Lower<'a, 'u> {
     loops: Vec<LoopL>,
     /// Per enclosing TRY: the ops whose catch target is its CATCH.
     tries: Vec<Vec<usize>>,
+    /// Runs of consecutive plain statements: (first op, merged fragment, statements).
+    runs: Vec<(usize, u32, u32)>,
 }
 
 fn intern(list: &mut Vec<(String, Span)>, name: &str, span: Span) -> u32 {
@@ -179,9 +188,39 @@ impl Lower<'_, '_> {
     }
 
     fn stmts(&mut self, list: &[SStmt]) {
-        for s in list {
-            self.stmt(s);
+        let mut k = 0;
+        while k < list.len() {
+            let n = list[k..]
+                .iter()
+                .take_while(|s| matches!(s.kind, SKind::Plain(_)))
+                .count();
+            if n >= 2 {
+                self.plain_run(&list[k..k + n]);
+                k += n;
+            } else {
+                self.stmt(&list[k]);
+                k += 1;
+            }
         }
+    }
+
+    /// Consecutive plain statements: one op (one fragment) each, for single-stepping and
+    /// the current line, plus one fragment of them all that the engine runs instead when
+    /// its budget covers the run: one VM entry for the run instead of one per statement.
+    fn plain_run(&mut self, list: &[SStmt]) {
+        let plain: Vec<Stmt> = list
+            .iter()
+            .filter_map(|s| match &s.kind {
+                SKind::Plain(p) => Some(p.clone()),
+                _ => None,
+            })
+            .collect();
+        let start = self.here() as usize;
+        let merged = self.fr.stmts(self.scope, &plain, list[0].span);
+        for p in &plain {
+            self.plain(p);
+        }
+        self.runs.push((start, merged as u32, plain.len() as u32));
     }
 
     fn stmt(&mut self, s: &SStmt) {
@@ -268,8 +307,13 @@ impl Lower<'_, '_> {
             SKind::Do { peer, op, args } => {
                 let mut slots = Vec::new();
                 for a in args {
-                    let (f, slot) = self.fr.value(self.scope, a, None);
-                    slots.push((f as u32, slot));
+                    slots.push(match a {
+                        DoArg::Expr(e) => {
+                            let (f, slot) = self.fr.value(self.scope, e, None);
+                            CallArg::Value(f as u32, slot)
+                        }
+                        DoArg::Str(s) => CallArg::Str(s.clone()),
+                    });
                 }
                 self.calls.push(Call {
                     peer: peer.clone(),

@@ -14,7 +14,7 @@
 //! [`CommandHandle`] on later steps. Events are seen through their emission counters.
 
 use super::bind::Loaded;
-use super::code::{ItemCode, SOp, NONE};
+use super::code::{CallArg, ItemCode, SOp, NONE};
 use crate::plc::diag::Span;
 use crate::plc::vm::{FaultKind, Vm};
 use crate::plc::{Program, Ty, Value};
@@ -75,6 +75,8 @@ pub enum ScriptErrorKind {
     Fault(FaultKind),
     /// A state's precondition was false and the machine has no ERROR STATE.
     Precondition,
+    /// The host's machine went into e-stop (every running item is stopped there).
+    Estop,
 }
 
 impl std::fmt::Display for ScriptErrorKind {
@@ -87,6 +89,7 @@ impl std::fmt::Display for ScriptErrorKind {
             Self::Timeout => write!(f, "WAIT timed out"),
             Self::Fault(k) => write!(f, "{k}"),
             Self::Precondition => write!(f, "precondition violated (no ERROR STATE)"),
+            Self::Estop => write!(f, "stopped by the e-stop"),
         }
     }
 }
@@ -316,6 +319,15 @@ fn exec(l: &mut Loaded, i: usize, base: u32, now: u64, budget: &mut u32) -> Flow
         let pc = insts[i].pc as usize;
         let span = script.spans[pc];
         let mut next = pc as u32 + 1;
+        // A run of plain statements the budget covers: its merged fragment, one VM entry.
+        // (Single-stepping has a budget of 1: statement by statement.)
+        let (run, n) = script.runs[pc];
+        if n > 1 && n - 1 <= *budget {
+            *budget -= n - 1;
+            frag!(run);
+            insts[i].pc = pc as u32 + n;
+            continue;
+        }
         match script.ops[pc] {
             SOp::Exec(f) => frag!(f),
             SOp::JumpIfNot { frag, cell, target } => {
@@ -328,7 +340,11 @@ fn exec(l: &mut Loaded, i: usize, base: u32, now: u64, budget: &mut u32) -> Flow
             SOp::Do { call, catch } => {
                 if !insts[i].started {
                     let c = &script.calls[call as usize];
-                    for (k, &(f, slot)) in c.args.iter().enumerate() {
+                    for (k, a) in c.args.iter().enumerate() {
+                        // String literals were put in place at bind time.
+                        let CallArg::Value(f, slot) = *a else {
+                            continue;
+                        };
                         frag!(f);
                         let cell = script.program.mem[slot.addr as usize];
                         arg_value(slot.ty, cell, &mut args[call as usize][k]);
@@ -748,6 +764,21 @@ impl Engine {
             for inst in &mut l.insts {
                 if matches!(inst.status, RunStatus::Running | RunStatus::Paused) {
                     inst.halt(RunStatus::Stopped);
+                }
+            }
+        }
+    }
+
+    /// Stops every running or paused item in error `kind`, placed at the statement it was
+    /// at: the host's machine e-stopped, and a script must not carry on with what it was
+    /// doing once the e-stop is released. Realtime safe.
+    pub fn fail_all(&mut self, kind: ScriptErrorKind) {
+        for l in self.slots.iter_mut().flatten() {
+            for inst in &mut l.insts {
+                if matches!(inst.status, RunStatus::Running | RunStatus::Paused) {
+                    let span = l.script.spans.get(inst.pc as usize).copied();
+                    inst.error = Some((kind, span.unwrap_or_default()));
+                    inst.halt(RunStatus::Error);
                 }
             }
         }

@@ -116,6 +116,13 @@ impl ScriptHost {
         self.engine.publish();
     }
 
+    /// Stops every running program and machine in error `kind` (the host's machine
+    /// e-stopped) and publishes it.
+    pub fn fail_all(&mut self, kind: ScriptErrorKind) {
+        self.engine.fail_all(kind);
+        self.engine.publish();
+    }
+
     /// Stops every program and machine. Call from `Task::stop`.
     pub fn stop(&mut self) {
         self.engine.stop_all();

@@ -382,7 +382,13 @@ impl SParser {
                 self.p.expect_p("(");
                 if !self.p.eat_p(")") {
                     loop {
-                        args.push(self.p.expr()?);
+                        if let Tok::Str(s) = self.p.peek() {
+                            let s = s.clone();
+                            self.p.bump();
+                            args.push(DoArg::Str(s));
+                        } else {
+                            args.push(DoArg::Expr(self.p.expr()?));
+                        }
                         if !self.p.eat_p(",") {
                             break;
                         }
