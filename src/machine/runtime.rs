@@ -371,6 +371,8 @@ impl Machine {
     /// Deploys `config`: builds backends and tasks, checks the topology, starts the servo
     /// thread. The machine starts in e-stop.
     pub fn deploy(config: MachineConfig) -> Result<Arc<Machine>, DeployError> {
+        // Exporters (the Zenoh bridge) read the servo tasks' ports and events as JSON.
+        super::servo::json_views::register();
         if crate::rt::system::lock_memory().is_err() {
             crate::rt::system::warn_not_realtime(
                 "mlockall failed (no CAP_IPC_LOCK or RLIMIT_MEMLOCK too low)",
@@ -1040,6 +1042,28 @@ impl MachineApi for Machine {
             .as_ref()
             .map(|rt| super::task_api::task_infos(rt.tasks()))
             .unwrap_or_default()
+    }
+
+    fn port_json(&self, name: &str) -> Result<Box<dyn crate::rt::json::JsonPortReader>, ApiError> {
+        let rt = lock(&self.runtime);
+        let rt = rt
+            .as_ref()
+            .ok_or_else(|| ApiError::Rejected("the machine is stopped".into()))?;
+        rt.json_reader(name)
+            .map_err(|e| ApiError::InvalidParams(e.to_string()))
+    }
+
+    fn event_json(
+        &self,
+        name: &str,
+        capacity: usize,
+    ) -> Result<Box<dyn crate::rt::json::JsonEventReceiver>, ApiError> {
+        let rt = lock(&self.runtime);
+        let rt = rt
+            .as_ref()
+            .ok_or_else(|| ApiError::Rejected("the machine is stopped".into()))?;
+        rt.json_events(name, capacity)
+            .map_err(|e| ApiError::InvalidParams(e.to_string()))
     }
 
     fn sdo_read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, ApiError> {
