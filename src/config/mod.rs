@@ -46,6 +46,7 @@ mod root;
 mod settings;
 mod spindle;
 mod thread;
+pub mod zenoh;
 
 pub use axis::{AxisConfig, AxisName, HomeConfig, HomeMethod};
 pub use drive::{
@@ -63,6 +64,7 @@ pub use settings::{
 };
 pub use spindle::{CoolantConfig, SpindleConfig};
 pub use thread::{ThreadClock, ThreadConfig, MAX_PERIOD_US, MIN_PERIOD_US};
+pub use zenoh::{ZenohConfig, ZenohRole};
 
 use std::path::Path;
 
