@@ -20,6 +20,8 @@
 // Under `--cfg loom` (model checking of rt's lock-free primitives) tokio compiles out its
 // networking and signals, so the modules built on them are left out of that build.
 #[cfg(not(loom))]
+pub mod bridge;
+#[cfg(not(loom))]
 pub mod cell;
 #[cfg(not(loom))]
 pub mod cli;

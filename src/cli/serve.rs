@@ -34,9 +34,22 @@ pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
     // it locks memory, starts realtime threads or opens the buses the first one drives.
     let claim = listen::claim(&socket)?;
     let machine = crate::machine::deploy_from(args.config.as_deref())?;
+    // The Zenoh bridge (if configured) exports the machine once it runs; it stops after the
+    // machine has, so remote peers see its last status and events.
+    let bridge = match &config.zenoh {
+        Some(z) => Some(crate::bridge::Bridge::start(
+            machine.clone(),
+            &config.machine.name,
+            z,
+        )?),
+        None => None,
+    };
     let listener = claim.bind()?;
     tracing::info!("control socket at {}", socket.path.display());
     crate::daemon::run_with(machine, listener, options, std::future::pending())?;
+    if let Some(b) = bridge {
+        b.stop();
+    }
     tracing::info!("machine stopped; exiting");
     Ok(ExitCode::SUCCESS)
 }

@@ -48,6 +48,7 @@ mod root;
 mod settings;
 mod spindle;
 mod thread;
+pub mod zenoh;
 
 pub use axis::{AxisConfig, AxisName, HomeConfig, HomeMethod};
 pub use drive::{
@@ -66,6 +67,7 @@ pub use settings::{
 };
 pub use spindle::{CoolantConfig, SpindleConfig};
 pub use thread::{ThreadClock, ThreadConfig, MAX_PERIOD_US, MIN_PERIOD_US};
+pub use zenoh::{ZenohConfig, ZenohRole};
 
 use std::path::Path;
 

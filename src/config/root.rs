@@ -58,6 +58,9 @@ pub struct MachineConfig {
     /// `[plc]`: absent for a machine without a PLC program.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plc: Option<super::PlcConfig>,
+    /// `[zenoh]`: export the task interfaces over Zenoh; absent: no bridge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zenoh: Option<super::ZenohConfig>,
 }
 
 impl MachineConfig {
@@ -148,6 +151,9 @@ impl MachineConfig {
                     ),
                 );
             }
+        }
+        if let Some(z) = &self.zenoh {
+            z.validate(&mut issues);
         }
         issues.into_vec()
     }

@@ -403,6 +403,25 @@ pub trait MachineApi: Send + Sync + 'static {
     fn sim_fault(&self, fault: &SimFault) -> Result<(), ApiError>;
     /// A receiver of machine events (for `subscribe`).
     fn subscribe(&self) -> tokio::sync::broadcast::Receiver<MachineEvent>;
+    /// A JSON reader of data object `name` (exporters such as the Zenoh bridge; the reader
+    /// is an ordinary lock-free data-object reader, used off the realtime threads).
+    fn port_json(&self, name: &str) -> Result<Box<dyn crate::rt::json::JsonPortReader>, ApiError> {
+        Err(ApiError::NotSupported(format!(
+            "no exportable port '{name}'"
+        )))
+    }
+    /// A JSON subscription to realtime event `name` (`task.event`), queueing up to
+    /// `capacity` events (a deferred subscription: the emitter never waits for it).
+    fn event_json(
+        &self,
+        name: &str,
+        capacity: usize,
+    ) -> Result<Box<dyn crate::rt::json::JsonEventReceiver>, ApiError> {
+        let _ = capacity;
+        Err(ApiError::NotSupported(format!(
+            "no exportable event '{name}'"
+        )))
+    }
     /// The machine's script hosts (programs and state machines), if it deploys any.
     fn scripts(&self) -> Option<&crate::script::ScriptHosts> {
         None

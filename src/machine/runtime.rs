@@ -397,6 +397,8 @@ impl Machine {
     /// Deploys `config`: builds backends and tasks, checks the topology, starts the servo
     /// thread. The machine starts in e-stop.
     pub fn deploy(config: MachineConfig) -> Result<Arc<Machine>, DeployError> {
+        // Exporters (the Zenoh bridge) read the servo tasks' ports and events as JSON.
+        super::servo::json_views::register();
         let params = match &config.gcode.var_file {
             Some(p) => Some(Arc::new(
                 crate::gcode::varfile::ParamStore::load(p)
@@ -1094,6 +1096,28 @@ impl MachineApi for Machine {
             .as_ref()
             .map(|rt| super::task_api::task_infos(rt.tasks()))
             .unwrap_or_default()
+    }
+
+    fn port_json(&self, name: &str) -> Result<Box<dyn crate::rt::json::JsonPortReader>, ApiError> {
+        let rt = lock(&self.runtime);
+        let rt = rt
+            .as_ref()
+            .ok_or_else(|| ApiError::Rejected("the machine is stopped".into()))?;
+        rt.json_reader(name)
+            .map_err(|e| ApiError::InvalidParams(e.to_string()))
+    }
+
+    fn event_json(
+        &self,
+        name: &str,
+        capacity: usize,
+    ) -> Result<Box<dyn crate::rt::json::JsonEventReceiver>, ApiError> {
+        let rt = lock(&self.runtime);
+        let rt = rt
+            .as_ref()
+            .ok_or_else(|| ApiError::Rejected("the machine is stopped".into()))?;
+        rt.json_events(name, capacity)
+            .map_err(|e| ApiError::InvalidParams(e.to_string()))
     }
 
     fn sdo_read(&self, drive: &str, index: u16, sub: u8) -> Result<Vec<u8>, ApiError> {

@@ -27,6 +27,7 @@ use super::command::{command_queue, CommandHandle, CommandSender, Commands, Send
 use super::data_object::{DataObject, DataObjectError, DataReader, DataWriter};
 use super::event::{Event, EventCounter, EventReceiver, EventSource};
 use super::interface::{EventDescriptor, PortDescriptor, PortDirection, PortKind, TaskInterface};
+use super::json::{JsonEventReceiver, JsonPortReader};
 use super::runner::{Runnable, TaskInfo, TaskRunner, TaskShared};
 use super::stats::TimingStats;
 use super::system;
@@ -223,6 +224,15 @@ pub enum DeployError {
     /// A data object refused a handle.
     #[error(transparent)]
     DataObject(#[from] DataObjectError),
+    /// A port or event whose value type was not registered for export
+    /// ([`super::json::register_data`]), or a data object without a free reader slot.
+    #[error("'{name}' ({type_name}) cannot be exported: type not registered for JSON, or no reader slot left")]
+    NotExportable {
+        /// Port or event name.
+        name: String,
+        /// Its value type.
+        type_name: &'static str,
+    },
 }
 
 /// Result of the topology check that did not prevent starting.
@@ -476,6 +486,41 @@ impl Registry {
                 name: name.to_owned(),
                 type_name: "any",
             })
+    }
+
+    /// A JSON reader of data object `name` (its type registered in [`super::json`]).
+    fn json_reader(&self, name: &str) -> Result<Box<dyn JsonPortReader>, DeployError> {
+        let o = self
+            .objects
+            .get(name)
+            .ok_or_else(|| DeployError::NotFound {
+                kind: "data object",
+                name: name.to_owned(),
+                type_name: "any",
+            })?;
+        super::json::port_reader(o.handle.as_ref()).ok_or_else(|| DeployError::NotExportable {
+            name: name.to_owned(),
+            type_name: o.type_name,
+        })
+    }
+
+    /// A JSON subscription to event `name` (its payload type registered in [`super::json`]).
+    fn json_events(
+        &self,
+        name: &str,
+        capacity: usize,
+    ) -> Result<Box<dyn JsonEventReceiver>, DeployError> {
+        let e = self.events.get(name).ok_or_else(|| DeployError::NotFound {
+            kind: "event",
+            name: name.to_owned(),
+            type_name: "any",
+        })?;
+        super::json::event_receiver(e.handle.as_ref(), capacity).ok_or_else(|| {
+            DeployError::NotExportable {
+                name: name.to_owned(),
+                type_name: e.type_name,
+            }
+        })
     }
 
     fn find_event<T: Clone + Send + 'static>(&self, name: &str) -> Result<Event<T>, DeployError> {
@@ -1246,6 +1291,18 @@ impl Runtime {
         name: &str,
     ) -> Result<DataReader<T>, DeployError> {
         self.core.reg.reader(name)
+    }
+    /// A JSON reader of data object `name`, for exporters (see [`super::json`]).
+    pub fn json_reader(&self, name: &str) -> Result<Box<dyn JsonPortReader>, DeployError> {
+        self.core.reg.json_reader(name)
+    }
+    /// A JSON subscription to event `name` queueing up to `capacity` events, for exporters.
+    pub fn json_events(
+        &self,
+        name: &str,
+        capacity: usize,
+    ) -> Result<Box<dyn JsonEventReceiver>, DeployError> {
+        self.core.reg.json_events(name, capacity)
     }
     /// Event `name`: a non-realtime consumer may subscribe (its queue is picked up by the
     /// emitter at its next emit, without blocking it).

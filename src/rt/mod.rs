@@ -110,6 +110,7 @@ pub mod data_object;
 pub mod deploy;
 pub mod event;
 pub mod interface;
+pub mod json;
 mod ring;
 pub mod runner;
 pub mod stats;

@@ -32,6 +32,7 @@ pub mod can_pdo_names;
 pub mod can_setup;
 pub mod interp_task;
 pub mod io_task;
+pub mod json_views;
 pub mod machine_task;
 pub mod monitor_task;
 #[cfg(test)]
