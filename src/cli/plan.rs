@@ -193,6 +193,7 @@ pub fn report(
     let plan = crate::motion::plan(canon, cfg)?;
     let plan_s = t0.elapsed().as_secs_f64();
     let b = bounds::bounds(canon, cfg)?;
+    let optimal = bounds::time_optimal_s(&plan, canon, cfg)?;
     let periods = (plan.duration_s * 10.0 / cfg.servo_period_s) as usize + 100_000;
     let tr = trace::measure(&plan, cfg, periods);
     let pk = tr.peaks;
@@ -238,9 +239,15 @@ pub fn report(
     )?;
     writeln!(
         out,
-        "accel bound:     {:.3} s  (plan = {:.3}x)",
-        b.accel_aware_s,
-        ratio(b.accel_aware_s)
+        "optimal bound:   {:.3} s  (plan = {:.3}x; time-optimal on the planned path, no jerk limit)",
+        optimal,
+        ratio(optimal)
+    )?;
+    writeln!(
+        out,
+        "corner estimate: {:.3} s  (plan = {:.3}x; programmed polyline, not a bound)",
+        b.corner_estimate_s,
+        ratio(b.corner_estimate_s)
     )?;
     writeln!(
         out,
