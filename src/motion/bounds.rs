@@ -18,7 +18,7 @@
 //!   uses: the largest acceleration any direction allows. On quantised CAM output the
 //!   turning angles of the programmed chords are noise that the planner's merging and
 //!   blending smooth away within the G64 tolerance, so this is *not* a lower bound there
-//!   (a contour job: estimate 16.8 s, plan 3.6 s); it is kept as an estimate of what the
+//!   (issue 14: a contour job, estimate 16.8 s against a 3.6 s plan); it is kept as an estimate of what the
 //!   programmed polyline itself allows.
 //! - **Naive planner**: every move from rest to rest with the same S-curve limits (what G61
 //!   exact stop gives).
@@ -186,8 +186,7 @@ const NODE_SPACING_MM: f64 = 1e-4;
 /// is added to the dwells. Cartesian limits: exact for identity kinematics.
 pub fn time_optimal_s(plan: &Plan, canon: &[Canon], cfg: &MotionConfig) -> Result<f64, PlanError> {
     let feed = feed_by_line(canon, cfg, plan.start_mm)?;
-    let periods = (plan.duration_s * 10.0 / cfg.servo_period_s) as usize + 100_000;
-    let tr = trace::run(plan, cfg, periods, |_, _| {});
+    let tr = trace::run_all(plan, cfg);
     let nodes = path_nodes(&tr, &feed);
     let lim = topp::AxisLimits {
         vel: std::array::from_fn(|a| cfg.axes[a].max_vel_mm_s),
