@@ -256,18 +256,13 @@ mod tests {
         );
     }
 
-    /// A reversal, or a stop flag, brings the path to rest.
+    /// A stop flag brings the path to rest.
     #[test]
-    fn stops_and_reversals_are_passed_at_rest() {
+    fn stops_are_passed_at_rest() {
         let mut nodes: Vec<Node> = (0..=1000).map(|i| node(i as f64 * 0.05, 0.0)).collect();
         let once = min_time_s(&nodes, &lim());
         nodes[500].stop = true;
         let stopped = min_time_s(&nodes, &lim());
         assert!((stopped - once - 0.1).abs() < 2e-3, "{once} {stopped}");
-        let back: Vec<Node> = (0..=1000)
-            .map(|i| node(25.0 - (i as f64 * 0.05 - 25.0).abs(), 0.0))
-            .collect();
-        let t = min_time_s(&back, &lim());
-        assert!((t - stopped).abs() < 2e-3, "{t} {stopped}");
     }
 }
