@@ -58,14 +58,14 @@ fn report_quality(cfg: &MotionConfig, variant: &str) {
         let tr = trace::run(&p, cfg, 10_000_000, |_, _| {});
         eprintln!(
             "quality {name} [{variant}]: planned {:.3} s, trace {:.3} s, {} segments; feed bound {:.3} s -> {:.3}x; \
-             accel bound {:.3} s -> {:.3}x; stop-at-corners {:.3} s -> {:.3}x; worst peak/limit {:.4}",
+             corner estimate {:.3} s -> {:.3}x; stop-at-corners {:.3} s -> {:.3}x; worst peak/limit {:.4}",
             p.duration_s,
             tr.duration_s(),
             p.segment_count,
             b.feed_limited_s,
             p.duration_s / b.feed_limited_s,
-            b.accel_aware_s,
-            p.duration_s / b.accel_aware_s,
+            b.corner_estimate_s,
+            p.duration_s / b.corner_estimate_s,
             b.naive_stop_s,
             p.duration_s / b.naive_stop_s,
             tr.peaks().worst_ratio(cfg)

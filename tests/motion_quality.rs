@@ -37,19 +37,19 @@ fn report(name: &str, canon: &[Canon], cfg: &MotionConfig) -> (f64, f64) {
     let tr = run(&p, cfg);
     assert_within_limits(&tr, cfg);
     eprintln!(
-        "{name}: planned {:.3} s (trace {:.3} s), feed bound {:.3} s ({:.3}x), accel bound {:.3} s ({:.3}x), naive {:.3} s ({:.3}x)",
+        "{name}: planned {:.3} s (trace {:.3} s), feed bound {:.3} s ({:.3}x), corner estimate {:.3} s ({:.3}x), naive {:.3} s ({:.3}x)",
         p.duration_s,
         tr.duration_s(),
         b.feed_limited_s,
         p.duration_s / b.feed_limited_s,
-        b.accel_aware_s,
-        p.duration_s / b.accel_aware_s,
+        b.corner_estimate_s,
+        p.duration_s / b.corner_estimate_s,
         b.naive_stop_s,
         p.duration_s / b.naive_stop_s
     );
     (
         p.duration_s / b.feed_limited_s,
-        p.duration_s / b.accel_aware_s,
+        p.duration_s / b.corner_estimate_s,
     )
 }
 

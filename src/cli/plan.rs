@@ -14,6 +14,10 @@ use std::process::ExitCode;
 pub struct PlanArgs {
     /// G-code file to plan.
     pub file: PathBuf,
+    /// Also write the servo-period trace as CSV: time, then per axis position, velocity,
+    /// acceleration and jerk (header row with units).
+    #[arg(long, value_name = "OUT.csv")]
+    pub trace: Option<PathBuf>,
     /// Motion limits and planner settings.
     #[command(flatten)]
     pub motion: MotionArgs,
@@ -173,11 +177,32 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     let mut out = String::new();
     let within = report(&args.file.display().to_string(), &canon, &cfg, &mut out)?;
     print!("{out}");
+    if let Some(path) = &args.trace {
+        write_trace(&canon, &cfg, path)?;
+        println!("trace:           written to {}", path.display());
+    }
     Ok(if within {
         ExitCode::SUCCESS
     } else {
         ExitCode::FAILURE
     })
+}
+
+/// Plans `canon`, runs it through the interpolator at the servo period and writes the
+/// trace to `path` as CSV (see [`trace::Trace::write_csv`]).
+pub fn write_trace(
+    canon: &[crate::gcode::Canon],
+    cfg: &MotionConfig,
+    path: &Path,
+) -> anyhow::Result<()> {
+    let plan = crate::motion::plan(canon, cfg)?;
+    let tr = trace::run_all(&plan, cfg);
+    let file =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    tr.write_csv(&mut w)
+        .and_then(|()| std::io::Write::flush(&mut w))
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// Plans `canon`, interpolates it at the servo period and writes the report; returns false
@@ -193,8 +218,8 @@ pub fn report(
     let plan = crate::motion::plan(canon, cfg)?;
     let plan_s = t0.elapsed().as_secs_f64();
     let b = bounds::bounds(canon, cfg)?;
-    let periods = (plan.duration_s * 10.0 / cfg.servo_period_s) as usize + 100_000;
-    let tr = trace::measure(&plan, cfg, periods);
+    let optimal = bounds::time_optimal_s(&plan, canon, cfg)?;
+    let tr = trace::measure(&plan, cfg, trace::max_periods(&plan, cfg));
     let pk = tr.peaks;
     writeln!(out, "file:            {name}")?;
     writeln!(
@@ -238,9 +263,15 @@ pub fn report(
     )?;
     writeln!(
         out,
-        "accel bound:     {:.3} s  (plan = {:.3}x)",
-        b.accel_aware_s,
-        ratio(b.accel_aware_s)
+        "optimal bound:   {:.3} s  (plan = {:.3}x; time-optimal on the planned path, no jerk limit)",
+        optimal,
+        ratio(optimal)
+    )?;
+    writeln!(
+        out,
+        "corner estimate: {:.3} s  (plan = {:.3}x; programmed polyline, not a bound)",
+        b.corner_estimate_s,
+        ratio(b.corner_estimate_s)
     )?;
     writeln!(
         out,

@@ -2,6 +2,7 @@
 //! planned toolpath as a picture (see `motion::draw`): planned from where the machine
 //! starts, fitted to the cutting moves, on a labelled mm grid, with start/end, plunge and
 //! drill marks and the legend inside. `.png` rasterises the same SVG (pure Rust).
+//! `--velocity` draws the feed along the path instead (see `motion::draw::feed`).
 
 use super::plan::{load, MotionArgs};
 use crate::gcode::NUM_AXES;
@@ -25,6 +26,10 @@ pub struct PlotArgs {
     /// starts it, the home position of the machine (`--config`, else the built-in sim mill).
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub from: Option<String>,
+    /// Draw the feed along the path instead of the toolpath: the path speed of the
+    /// servo-period trace against time, with the programmed feed and the velocity limit.
+    #[arg(long)]
+    pub velocity: bool,
     /// Picture width in pixels (the height follows the drawing).
     #[arg(long, default_value_t = 1000)]
     pub width: u32,
@@ -53,18 +58,20 @@ pub fn run(args: PlotArgs) -> anyhow::Result<ExitCode> {
     if !(300..=8000).contains(&args.width) {
         bail!("--width {} px: give 300 to 8000", args.width);
     }
-    let svg = draw::render(
-        &plan,
-        &Options {
-            title: args
-                .file
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            view: args.view,
-            width_px: f64::from(args.width),
-        },
-    );
+    let options = Options {
+        title: args
+            .file
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        view: args.view,
+        width_px: f64::from(args.width),
+    };
+    let svg = if args.velocity {
+        feed_chart(&plan, &canon, &cfg, start, &options)?
+    } else {
+        draw::render(&plan, &options)
+    };
     let png = args
         .output
         .extension()
@@ -87,6 +94,36 @@ pub fn run(args: PlotArgs) -> anyhow::Result<ExitCode> {
         args.output.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// The feed chart of `--velocity`: the plan run at the servo period, each period's
+/// programmed feed from its source line, the smallest X Y Z velocity limit.
+fn feed_chart(
+    plan: &crate::motion::Plan,
+    canon: &[crate::gcode::Canon],
+    cfg: &crate::motion::MotionConfig,
+    start: [f64; NUM_AXES],
+    options: &Options,
+) -> anyhow::Result<String> {
+    let tr = crate::motion::trace::run_all(plan, cfg);
+    let feed = crate::motion::bounds::feed_by_line(canon, cfg, start)?;
+    let programmed: Vec<f64> = tr
+        .lines
+        .iter()
+        .map(|l| feed.get(l).copied().unwrap_or(f64::INFINITY))
+        .collect();
+    let limit = cfg.axes[0..3]
+        .iter()
+        .map(|a| a.max_vel_mm_s)
+        .fold(f64::INFINITY, f64::min);
+    Ok(draw::feed::render(
+        &tr,
+        draw::feed::Marks {
+            programmed_mm_s: &programmed,
+            limit_mm_s: limit,
+        },
+        options,
+    ))
 }
 
 /// `X,Y,Z` in mm; the other axes at 0.

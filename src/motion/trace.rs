@@ -54,6 +54,75 @@ impl Trace {
     }
 }
 
+/// Unit of axis `a`'s position: mm, deg for the rotary axes A B C.
+pub fn axis_unit(a: usize) -> &'static str {
+    if (3..6).contains(&a) {
+        "deg"
+    } else {
+        "mm"
+    }
+}
+
+impl Trace {
+    /// Velocity, acceleration and jerk of axis `a` at period `i` by backward differences
+    /// (the same differences as [`Trace::peaks`]; 0 where the trace has too few periods
+    /// before `i`).
+    pub fn derivatives(&self, i: usize, a: usize) -> [f64; 3] {
+        let p = |k: usize| self.poses_mm[i - k][a];
+        let dt = self.dt_s;
+        let mut d = [0.0; 3];
+        if i >= 1 {
+            d[0] = (p(0) - p(1)) / dt;
+        }
+        if i >= 2 {
+            d[1] = (p(0) - 2.0 * p(1) + p(2)) / (dt * dt);
+        }
+        if i >= 3 {
+            d[2] = (p(0) - 3.0 * p(1) + 3.0 * p(2) - p(3)) / (dt * dt * dt);
+        }
+        d
+    }
+
+    /// XYZ path speed at period `i` (backward difference), mm/s.
+    pub fn speed_mm_s(&self, i: usize) -> f64 {
+        (0..3)
+            .map(|a| self.derivatives(i, a)[0].powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// The axes a CSV shows: X Y Z, and every other axis that moves.
+    pub fn shown_axes(&self) -> Vec<usize> {
+        let first = self.poses_mm.first().copied().unwrap_or([0.0; NUM_AXES]);
+        (0..NUM_AXES)
+            .filter(|&a| a < 3 || self.poses_mm.iter().any(|p| p[a] != first[a]))
+            .collect()
+    }
+
+    /// Writes the trace as CSV: a header naming every column with its unit (`t_s`, then
+    /// per axis `X_mm,X_vel_mm_s,X_acc_mm_s2,X_jerk_mm_s3`, deg for A B C), then one row per
+    /// servo period with the setpoint and its [`derivatives`](Self::derivatives), numbers
+    /// in Rust's shortest round-trip form (a reader gets the planner's exact values).
+    pub fn write_csv(&self, out: &mut impl std::io::Write) -> std::io::Result<()> {
+        let axes = self.shown_axes();
+        write!(out, "t_s")?;
+        for &a in &axes {
+            let (n, u) = (super::AXIS_NAMES[a], axis_unit(a));
+            write!(out, ",{n}_{u},{n}_vel_{u}_s,{n}_acc_{u}_s2,{n}_jerk_{u}_s3")?;
+        }
+        writeln!(out)?;
+        for i in 0..self.poses_mm.len() {
+            write!(out, "{}", i as f64 * self.dt_s)?;
+            for &a in &axes {
+                let [v, acc, j] = self.derivatives(i, a);
+                write!(out, ",{},{v},{acc},{j}", self.poses_mm[i][a])?;
+            }
+            writeln!(out)?;
+        }
+        Ok(())
+    }
+}
+
 /// Per-axis peaks of a trace.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Peaks {
@@ -112,6 +181,17 @@ pub fn run(
         }
     }
     tr
+}
+
+/// Runs `plan` to its end without intervention, with room for ten times its planned
+/// duration (a runaway trace stops there instead of filling memory).
+pub fn run_all(plan: &Plan, cfg: &MotionConfig) -> Trace {
+    run(plan, cfg, max_periods(plan, cfg), |_, _| {})
+}
+
+/// Period budget of a trace of `plan`.
+pub fn max_periods(plan: &Plan, cfg: &MotionConfig) -> usize {
+    (plan.duration_s * 10.0 / cfg.servo_period_s) as usize + 100_000
 }
 
 /// Peaks of a whole job measured on the fly (constant memory, for long programs).

@@ -50,9 +50,29 @@ fn ticks(lo: f64, hi: f64, step: f64) -> impl Iterator<Item = f64> {
 pub fn plane(doc: &mut Doc, f: &Frame, u_name: &str, v_name: &str, unit: &str) -> f64 {
     let d = f.data;
     let step = nice_step((d.u1 - d.u0).max(d.v1 - d.v0));
+    lines(
+        doc,
+        f,
+        (step, step),
+        &format!("{u_name} ({unit})"),
+        &format!("{v_name} ({unit})"),
+    );
+    step
+}
+
+/// A chart's grid: each direction with its own step, labelled `u_title` (below, right)
+/// and `v_title` (above the left edge), e.g. "time (s)" and "feed (mm/s)".
+pub fn chart(doc: &mut Doc, f: &Frame, u_title: &str, v_title: &str) {
+    let d = f.data;
+    let steps = (nice_step(d.u1 - d.u0), nice_step(d.v1 - d.v0));
+    lines(doc, f, steps, u_title, v_title);
+}
+
+fn lines(doc: &mut Doc, f: &Frame, (su, sv): (f64, f64), u_title: &str, v_title: &str) {
+    let d = f.data;
     let (ax, ay, aw, ah) = f.area;
     doc.open(r##"id="grid" stroke="#ddd" stroke-width="1""##);
-    for u in ticks(d.u0, d.u1, step) {
+    for u in ticks(d.u0, d.u1, su) {
         let (x, _) = f.px((u, d.v0));
         doc.line((x, ay), (x, ay + ah), "");
         doc.text(
@@ -60,10 +80,10 @@ pub fn plane(doc: &mut Doc, f: &Frame, u_name: &str, v_name: &str, unit: &str) -
             12.0,
             "middle",
             "grid-label",
-            &label(u, step),
+            &label(u, su),
         );
     }
-    for v in ticks(d.v0, d.v1, step) {
+    for v in ticks(d.v0, d.v1, sv) {
         let (_, y) = f.px((d.u0, v));
         doc.line((ax, y), (ax + aw, y), "");
         doc.text(
@@ -71,23 +91,11 @@ pub fn plane(doc: &mut Doc, f: &Frame, u_name: &str, v_name: &str, unit: &str) -
             12.0,
             "end",
             "grid-label",
-            &label(v, step),
+            &label(v, sv),
         );
     }
-    doc.text(
-        (ax + aw, ay + ah + 32.0),
-        12.0,
-        "end",
-        "axis-name",
-        &format!("{u_name} ({unit})"),
-    );
-    doc.text(
-        (ax, ay - 8.0),
-        12.0,
-        "middle",
-        "axis-name",
-        &format!("{v_name} ({unit})"),
-    );
+    doc.text((ax + aw, ay + ah + 32.0), 12.0, "end", "axis-name", u_title);
+    doc.text((ax, ay - 8.0), 12.0, "middle", "axis-name", v_title);
     doc.close();
     doc.rect(
         ax,
@@ -96,7 +104,6 @@ pub fn plane(doc: &mut Doc, f: &Frame, u_name: &str, v_name: &str, unit: &str) -
         ah,
         r##"fill="none" stroke="#888" stroke-width="1""##,
     );
-    step
 }
 
 /// A grid on the machine's XY plane at height `z` over [x0, x1] × [y0, y1] mm, projected by

@@ -7,8 +7,10 @@
 //! [`grid`] draws labelled grids, [`doc`] writes SVG elements, [`legend`] the key, [`png`]
 //! rasterises. The toolpath itself: [`path`] samples the plan into coloured runs and finds
 //! the marks, [`view`] projects 3-D points with nalgebra, [`toolpath`] puts it together.
+//! [`feed`] is the feed-along-the-path chart of `hytask plot --velocity`.
 
 pub mod doc;
+pub mod feed;
 pub mod frame;
 pub mod grid;
 pub mod legend;
