@@ -111,17 +111,16 @@ fn shutdown(m: &Machine) {
 
 const SQUARE: &str = "G21 G90\nG1 X20 Y10 Z-5 F3000\nG1 X40 Y30\nG1 X12.5 Y7.25 Z-2\nM2\n";
 
-#[test]
-fn homes_and_runs_a_job_to_completion_on_canopen_drives() {
-    let (_dir, m) = machine();
-    ready(&m);
+/// Runs [`SQUARE`] on a ready machine to the end and checks every axis at rest on the
+/// program's end point.
+fn run_square(m: &Machine) -> Status {
     m.job_load(&job(SQUARE)).unwrap();
     m.job_run().unwrap();
-    let s = wait(&m, "job done", |s| {
+    let s = wait(m, "job done", |s| {
         s.job.state == "done" || s.job.state == "failed"
     });
     assert_eq!(s.job.state, "done", "{:?} {:?}", s.job, s.faults);
-    let s = wait(&m, "at rest", |s| {
+    let s = wait(m, "at rest", |s| {
         s.axes.iter().all(|a| a.velocity.abs() < 1e-6)
     });
     for (a, want) in s.axes.iter().zip([12.5, 7.25, -2.0]) {
@@ -132,6 +131,14 @@ fn homes_and_runs_a_job_to_completion_on_canopen_drives() {
             a.actual
         );
     }
+    s
+}
+
+#[test]
+fn homes_and_runs_a_job_to_completion_on_canopen_drives() {
+    let (_dir, m) = machine();
+    ready(&m);
+    run_square(&m);
     // The drives themselves report the final target, in counts (scale 1000/mm).
     let counts = m.can_sdo().read("x-servo", 0x6064, 0).unwrap();
     let counts = i32::from_le_bytes(counts[..4].try_into().unwrap());
@@ -366,20 +373,7 @@ fn a_canopen_axis_homes_in_the_drive_then_runs_a_job() {
         s.axes[0].actual
     );
     assert_eq!(sdo(0x6061, 0), [8], "back in CSP");
-    m.job_load(&job(SQUARE)).unwrap();
-    m.job_run().unwrap();
-    let s = wait(&m, "job done", |s| {
-        s.job.state == "done" || s.job.state == "failed"
-    });
-    assert_eq!(s.job.state, "done", "{:?} {:?}", s.job, s.faults);
-    let s = wait(&m, "at rest", |s| {
-        s.axes.iter().all(|a| a.velocity.abs() < 1e-6)
-    });
-    assert!(
-        (s.axes[0].actual - 12.5).abs() < 1e-3,
-        "X at {}",
-        s.axes[0].actual
-    );
+    run_square(&m);
     let counts = i32::from_le_bytes(sdo(0x6064, 0)[..4].try_into().unwrap());
     assert!((counts - 12_500).abs() <= 1, "0x6064 = {counts}");
     shutdown(&m);
@@ -565,20 +559,7 @@ fn pdos_mapped_by_eds_names_configure_the_drive_and_run_a_job() {
     assert_eq!(sdo(0x1A00, 0), [3]);
     assert_eq!(sdo(0x1A00, 3), 0x603F_0010u32.to_le_bytes());
     ready(&m);
-    m.job_load(&job(SQUARE)).unwrap();
-    m.job_run().unwrap();
-    let s = wait(&m, "job done", |s| {
-        s.job.state == "done" || s.job.state == "failed"
-    });
-    assert_eq!(s.job.state, "done", "{:?} {:?}", s.job, s.faults);
-    let s = wait(&m, "at rest", |s| {
-        s.axes.iter().all(|a| a.velocity.abs() < 1e-6)
-    });
-    assert!(
-        (s.axes[0].actual - 12.5).abs() < 1e-3,
-        "X at {}",
-        s.axes[0].actual
-    );
+    run_square(&m);
     shutdown(&m);
 }
 
