@@ -48,8 +48,17 @@ fn shutdown_puts_the_spindle_coolant_and_every_output_in_the_safe_state() {
                 && s["job"]["state"] == json!("done")
         },
     );
+    // The status shows the machine's output image; the I/O task writes it to the device at
+    // the start of the next servo cycle, so the device may be a cycle behind the reply.
     let io = machine.sim_io(0).unwrap();
-    assert!(io.digital_output(0).unwrap() && io.digital_output(2).unwrap());
+    let t0 = std::time::Instant::now();
+    while !(io.digital_output(0).unwrap() && io.digital_output(2).unwrap()) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "spindle and coolant outputs never reached the device"
+        );
+        std::thread::sleep(Duration::from_millis(1));
+    }
     drop(c);
 
     stop_tx.send(()).unwrap();
