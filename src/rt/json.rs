@@ -208,7 +208,8 @@ impl<T: Clone + Send, C: ToJson<T>> JsonEventReceiver for EventJson<T, C> {
     }
 }
 
-#[cfg(test)]
+// Not under loom: these build data objects and events outside a loom model.
+#[cfg(all(test, not(loom)))]
 mod tests {
     use super::*;
 
