@@ -64,11 +64,14 @@ fn coils_follow_the_job_the_estop_input_stops_it_and_a_lost_link_needs_a_reset()
         json!({"path": job.display().to_string()}),
     );
     ok(&mut c, "job.run", Value::Null);
-    sim.expect_line("out spindle_on 1");
-    sim.expect_line("out spindle_speed 1200");
-    sim.expect_line("out coolant_flood 1");
-    sim.expect_line("out coolant_flood 0");
-    sim.expect_line("out spindle_on 0");
+    // The simulator reports the changes of one poll cycle in map order, not program order.
+    sim.expect_lines(&[
+        "out spindle_on 1",
+        "out spindle_speed 1200",
+        "out coolant_flood 1",
+    ]);
+    // M9 and M5 often land in one poll cycle: either order is right.
+    sim.expect_lines(&["out coolant_flood 0", "out spindle_on 0"]);
     wait_status(&mut c, "job done", GUARD, |s| {
         s["job"]["state"] == json!("done")
     });

@@ -71,6 +71,25 @@ impl Proc {
     pub fn expect_line(&self, want: &str) {
         self.expect(want, |l| l == want);
     }
+
+    /// Waits for every line of `want`, in any order: changes that land in the same poll
+    /// cycle (M9 then M5, or M3 with its S word) are reported in map order, not program order.
+    pub fn expect_lines(&self, want: &[&str]) {
+        let mut missing: Vec<&str> = want.to_vec();
+        let t0 = Instant::now();
+        let mut seen = Vec::new();
+        while !missing.is_empty() && t0.elapsed() < GUARD {
+            if let Ok(l) = self.lines.recv_timeout(Duration::from_millis(100)) {
+                match missing.iter().position(|m| *m == l) {
+                    Some(k) => {
+                        missing.swap_remove(k);
+                    }
+                    None => seen.push(l),
+                }
+            }
+        }
+        assert!(missing.is_empty(), "never saw {missing:?}; saw {seen:#?}");
+    }
 }
 
 impl Drop for Proc {
