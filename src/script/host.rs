@@ -18,6 +18,8 @@ use crate::plc::{Value, VarId};
 use crate::rt::buffer::{buffer, BufferReader, BufferWriter, FullPolicy};
 use crate::rt::command::NoCommands;
 use crate::rt::data_object::{DataObject, DataReader};
+use crate::rt::deploy::Configure;
+use crate::rt::event::EventReceiver;
 use crate::rt::runner::TaskInfo;
 use crate::rt::task::{StepContext, Task, TaskError, TaskState};
 use std::sync::Mutex;
@@ -387,20 +389,69 @@ impl ScriptControl {
 }
 
 /// A task that only hosts scripts (peers and events are bound at load by the caller).
-pub struct ScriptTask {
+///
+/// [`ScriptTask::fail_all_on`] makes it also stop every running script in error when an
+/// event it subscribes to says so: the mill's `scripts` task stops them when the machine
+/// e-stops, so that nothing a script was doing resumes by itself once the e-stop is
+/// released. `E` is that event's type (`()`: no such event).
+pub struct ScriptTask<E = ()> {
     host: ScriptHost,
+    fail_on: Option<FailOn<E>>,
 }
+
+/// The event that stops every running script, and in which error.
+struct FailOn<E> {
+    event: String,
+    when: fn(&E) -> bool,
+    kind: ScriptErrorKind,
+    rx: Option<EventReceiver<E>>,
+}
+
+/// Events queued for the task between two steps, enough for a burst of news on the event.
+const FAIL_EVENT_QUEUE: usize = 64;
 
 impl ScriptTask {
     /// A script task and its control half.
     pub fn new(name: &str, limits: Limits) -> (ScriptTask, ScriptControl) {
         let (host, control) = ScriptHost::new(name, limits);
-        (ScriptTask { host }, control)
+        (
+            ScriptTask {
+                host,
+                fail_on: None,
+            },
+            control,
+        )
+    }
+
+    /// This task, subscribed (when configured) to `event` (full name): every step in
+    /// which one of its events satisfies `when` stops every running script in error
+    /// `kind`, at the statement it was at.
+    pub fn fail_all_on<E>(
+        self,
+        event: &str,
+        when: fn(&E) -> bool,
+        kind: ScriptErrorKind,
+    ) -> ScriptTask<E> {
+        ScriptTask {
+            host: self.host,
+            fail_on: Some(FailOn {
+                event: event.to_owned(),
+                when,
+                kind,
+                rx: None,
+            }),
+        }
     }
 }
 
-impl Task for ScriptTask {
+impl<E: Clone + Send + 'static> Task for ScriptTask<E> {
     type Command = NoCommands;
+    fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
+        if let Some(f) = &mut self.fail_on {
+            f.rx = Some(ctx.subscribe(&f.event, FAIL_EVENT_QUEUE));
+        }
+        Ok(())
+    }
     fn update(&mut self, _: &StepContext) -> Result<(), TaskError> {
         Ok(())
     }
@@ -409,6 +460,24 @@ impl Task for ScriptTask {
     }
     fn programs(&mut self, ctx: &StepContext) {
         self.host.programs(ctx.now_ns);
+    }
+    fn process_events(&mut self, _: &StepContext) {
+        let Some(FailOn {
+            when,
+            kind,
+            rx: Some(rx),
+            ..
+        }) = &mut self.fail_on
+        else {
+            return;
+        };
+        let mut fail = false;
+        while let Some(e) = rx.pop() {
+            fail |= when(&e);
+        }
+        if fail {
+            self.host.fail_all(*kind);
+        }
     }
     fn stop(&mut self) {
         self.host.stop();

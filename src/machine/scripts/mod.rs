@@ -7,22 +7,24 @@
 //! - `cnc` ([`cnc`]): the operator operations as a peer (`DO cnc.home();`, `DO
 //!   cnc.run('part.ngc');`) and the machine's news as events (`WAIT cnc.job_done;`), carried
 //!   out by the operator worker thread ([`worker`]);
-//! - `scripts` ([`host`]): hosts the scripts, stops every running one in error when the
-//!   machine e-stops.
+//! - `scripts` (a [`ScriptTask`]): hosts the scripts, stops every running one in error
+//!   ("stopped by the e-stop", at the statement it was at) when the machine e-stops, so
+//!   that nothing a script was doing resumes by itself once the e-stop is released.
 //!
 //! Registered as the machine's [`ScriptHosts`], so `script.*` on the control socket and
 //! `hytask script ...` load, run and show them, and `hytask tasks` lists their state.
 //! Roles: `script.*` are operator methods (`control::access`), like `job.run`.
 
 pub mod cnc;
-pub mod host;
 mod worker;
 
 use crate::config::MachineConfig;
 use crate::machine::api::MachineApi;
+use crate::machine::api::Mode;
 use crate::machine::devices::IoMap;
+use crate::machine::servo::ModeEvent;
 use crate::rt::prelude::*;
-use crate::script::{Bindings, Limits, ScriptControl, ScriptHosts};
+use crate::script::{Bindings, Limits, ScriptControl, ScriptErrorKind, ScriptHosts, ScriptTask};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 
@@ -68,7 +70,12 @@ pub fn add(app: &mut Deployment, config: &MachineConfig) -> Result<Added, Deploy
     let shared = cnc::Shared::new();
     let (task, rx) = cnc::CncTask::new(shared.clone());
     let cnc = app.add_periodic(CNC, task, s)?.info().clone();
-    let (task, control) = host::HostTask::new(Limits::default());
+    let (task, control) = ScriptTask::new(HOST, Limits::default());
+    let task = task.fail_all_on(
+        "machine.mode",
+        |m: &ModeEvent| m.mode == Mode::Estop,
+        ScriptErrorKind::Estop,
+    );
     let host = app.add_periodic(HOST, task, s)?;
     control.attach(host.info().clone());
     Ok(Added {
