@@ -79,12 +79,12 @@ pub enum CameraCmd {
     StartDetection,
 }
 
-const OPS: &[OperationDescriptor] = &[OperationDescriptor {
-    name: "start_detection",
-    doc: "Grab a frame and classify the object in view; done when the result event is emitted.",
-    params: &[],
-    next: NextCommand::AfterCompletion,
-}];
+const OPS: &[OperationDescriptor] = &[OperationDescriptor::new(
+    "start_detection",
+    "Grab a frame and classify the object in view; done when the result event is emitted.",
+    &[],
+    NextCommand::AfterCompletion,
+)];
 
 impl Commands for CameraCmd {
     fn operations() -> &'static [OperationDescriptor] {

@@ -27,30 +27,30 @@ pub enum HwCmd {
 pub const GLITCH_MM: f64 = 1.0e6;
 
 const OPS: &[OperationDescriptor] = &[
-    OperationDescriptor {
-        name: "press_estop",
-        doc: "Simulation: press the cell's e-stop button.",
-        params: &[],
-        next: NextCommand::AfterAcceptance,
-    },
-    OperationDescriptor {
-        name: "release_estop",
-        doc: "Simulation: release the cell's e-stop button.",
-        params: &[],
-        next: NextCommand::AfterAcceptance,
-    },
-    OperationDescriptor {
-        name: "drop_object",
-        doc: "Simulation: the gripper loses the object it holds (fails if it holds none).",
-        params: &[],
-        next: NextCommand::AfterAcceptance,
-    },
-    OperationDescriptor {
-        name: "encoder_glitch",
-        doc: "Simulation: the X encoder reads far out of range for one cycle.",
-        params: &[],
-        next: NextCommand::AfterAcceptance,
-    },
+    OperationDescriptor::new(
+        "press_estop",
+        "Simulation: press the cell's e-stop button.",
+        &[],
+        NextCommand::AfterAcceptance,
+    ),
+    OperationDescriptor::new(
+        "release_estop",
+        "Simulation: release the cell's e-stop button.",
+        &[],
+        NextCommand::AfterAcceptance,
+    ),
+    OperationDescriptor::new(
+        "drop_object",
+        "Simulation: the gripper loses the object it holds (fails if it holds none).",
+        &[],
+        NextCommand::AfterAcceptance,
+    ),
+    OperationDescriptor::new(
+        "encoder_glitch",
+        "Simulation: the X encoder reads far out of range for one cycle.",
+        &[],
+        NextCommand::AfterAcceptance,
+    ),
 ];
 
 impl Commands for HwCmd {

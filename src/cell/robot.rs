@@ -109,69 +109,59 @@ pub enum RobotCmd {
     EmergencyStop,
 }
 
-const fn op(
-    name: &'static str,
-    doc: &'static str,
-    params: &'static [ParamDescriptor],
-) -> OperationDescriptor {
-    OperationDescriptor {
-        name,
-        doc,
-        params,
-        next: NextCommand::AfterAcceptance,
-    }
-}
-
 const XYZ: &[ParamDescriptor] = &[
-    ParamDescriptor {
-        name: "x_mm",
-        ty: ArgType::Float,
-    },
-    ParamDescriptor {
-        name: "y_mm",
-        ty: ArgType::Float,
-    },
-    ParamDescriptor {
-        name: "z_mm",
-        ty: ArgType::Float,
-    },
+    ParamDescriptor::new("x_mm", ArgType::Float),
+    ParamDescriptor::new("y_mm", ArgType::Float),
+    ParamDescriptor::new("z_mm", ArgType::Float),
 ];
 
+/// Every operation (see the module's doc: `emergency_stop` is taken while a move runs).
+const NEXT: NextCommand = NextCommand::AfterAcceptance;
+
+type Op = OperationDescriptor;
+
 const OPS: &[OperationDescriptor] = &[
-    op(
+    Op::new(
         "switch_on",
         "Close the position loop and enable the amplifiers.",
         &[],
+        NEXT,
     ),
-    op(
+    Op::new(
         "switch_off",
         "Brake and disable the amplifiers; a running move fails.",
         &[],
+        NEXT,
     ),
-    op(
+    Op::new(
         "move_to",
         "Straight move to (x, y, z); done when the position is reached and settled.",
         XYZ,
+        NEXT,
     ),
-    op(
+    Op::new(
         "reset",
         "Clear a fault or an emergency stop; the robot is off afterwards.",
         &[],
+        NEXT,
     ),
-    op(
+    Op::new(
         "open_gripper",
         "Open the gripper; done on its open switch.",
         &[],
+        NEXT,
     ),
-    op(
+    Op::new(
         "close_gripper",
         "Close the gripper; done on its closed switch.",
         &[],
+        NEXT,
     ),
-    op(
+    Op::new(
         "emergency_stop",
         "Brake and disable at once; reset to recover.",
         &[],
+        NEXT,
     ),
 ];
 

@@ -148,21 +148,18 @@ pub enum SelectionCmd {
 }
 
 const OPS: &[OperationDescriptor] = &[
-    OperationDescriptor {
-        name: "run",
-        doc: "Sort n objects; done when they are sorted and the robot is home.",
-        params: &[ParamDescriptor {
-            name: "n",
-            ty: ArgType::Int,
-        }],
-        next: NextCommand::AfterAcceptance,
-    },
-    OperationDescriptor {
-        name: "stop",
-        doc: "No new object after the current one; from error_detected, recover. Done when homed.",
-        params: &[],
-        next: NextCommand::AfterAcceptance,
-    },
+    OperationDescriptor::new(
+        "run",
+        "Sort n objects; done when they are sorted and the robot is home.",
+        &[ParamDescriptor::new("n", ArgType::Int)],
+        NextCommand::AfterAcceptance,
+    ),
+    OperationDescriptor::new(
+        "stop",
+        "No new object after the current one; from error_detected, recover. Done when homed.",
+        &[],
+        NextCommand::AfterAcceptance,
+    ),
 ];
 
 impl Commands for SelectionCmd {

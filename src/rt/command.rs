@@ -61,6 +61,13 @@ pub struct ParamDescriptor {
     pub ty: ArgType,
 }
 
+impl ParamDescriptor {
+    /// A parameter, for `const` tables of operations.
+    pub const fn new(name: &'static str, ty: ArgType) -> Self {
+        ParamDescriptor { name, ty }
+    }
+}
+
 /// When the command processor may take the next command after one of this operation was
 /// accepted (the paper's Fig. 7: "the next command only when the current one allows").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -83,6 +90,23 @@ pub struct OperationDescriptor {
     pub params: &'static [ParamDescriptor],
     /// Whether later commands wait for this one to complete.
     pub next: NextCommand,
+}
+
+impl OperationDescriptor {
+    /// An operation, for `const` tables of operations.
+    pub const fn new(
+        name: &'static str,
+        doc: &'static str,
+        params: &'static [ParamDescriptor],
+        next: NextCommand,
+    ) -> Self {
+        OperationDescriptor {
+            name,
+            doc,
+            params,
+            next,
+        }
+    }
 }
 
 /// Errors turning dynamic arguments into a typed command.

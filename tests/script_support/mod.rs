@@ -31,36 +31,35 @@ pub enum ArmCmd {
 
 impl Commands for ArmCmd {
     fn operations() -> &'static [OperationDescriptor] {
-        const X: &[ParamDescriptor] = &[ParamDescriptor {
-            name: "x_mm",
-            ty: ArgType::Float,
-        }];
-        &[
-            OperationDescriptor {
-                name: "move_to",
-                doc: "Move to x (|x| <= 100); done when there.",
-                params: X,
-                next: NextCommand::AfterCompletion,
-            },
-            OperationDescriptor {
-                name: "grab",
-                doc: "Grab (event grabbed).",
-                params: &[],
-                next: NextCommand::AfterCompletion,
-            },
-            OperationDescriptor {
-                name: "drop",
-                doc: "Drop what is held.",
-                params: &[],
-                next: NextCommand::AfterCompletion,
-            },
-            OperationDescriptor {
-                name: "fail",
-                doc: "Accepted, then fails.",
-                params: &[],
-                next: NextCommand::AfterCompletion,
-            },
-        ]
+        const X: &[ParamDescriptor] = &[ParamDescriptor::new("x_mm", ArgType::Float)];
+        // A `const` item: a `const fn` call in a returned `&[..]` is not promoted to 'static.
+        const OPS: &[OperationDescriptor] = &[
+            OperationDescriptor::new(
+                "move_to",
+                "Move to x (|x| <= 100); done when there.",
+                X,
+                NextCommand::AfterCompletion,
+            ),
+            OperationDescriptor::new(
+                "grab",
+                "Grab (event grabbed).",
+                &[],
+                NextCommand::AfterCompletion,
+            ),
+            OperationDescriptor::new(
+                "drop",
+                "Drop what is held.",
+                &[],
+                NextCommand::AfterCompletion,
+            ),
+            OperationDescriptor::new(
+                "fail",
+                "Accepted, then fails.",
+                &[],
+                NextCommand::AfterCompletion,
+            ),
+        ];
+        OPS
     }
     fn operation_index(&self) -> usize {
         match self {

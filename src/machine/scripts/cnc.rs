@@ -75,42 +75,42 @@ pub enum CncCmd {
     Output(Text, bool),
 }
 
-const fn p(name: &'static str, ty: ArgType) -> ParamDescriptor {
-    ParamDescriptor { name, ty }
-}
+/// The operator's commands run one after the other: the next waits for the current one.
+const NEXT: NextCommand = NextCommand::AfterCompletion;
 
-const fn op(
-    name: &'static str,
-    doc: &'static str,
-    params: &'static [ParamDescriptor],
-) -> OperationDescriptor {
-    OperationDescriptor {
-        name,
-        doc,
-        params,
-        next: NextCommand::AfterCompletion,
-    }
-}
+type Op = OperationDescriptor;
+type Param = ParamDescriptor;
 
 static OPERATIONS: [OperationDescriptor; 7] = [
-    op("estop_reset", "release the e-stop", &[]),
-    op("on", "enable the drives", &[]),
-    op("off", "disable the drives", &[]),
-    op("home", "home every axis; done when all are homed", &[]),
-    op(
+    Op::new("estop_reset", "release the e-stop", &[], NEXT),
+    Op::new("on", "enable the drives", &[], NEXT),
+    Op::new("off", "disable the drives", &[], NEXT),
+    Op::new(
+        "home",
+        "home every axis; done when all are homed",
+        &[],
+        NEXT,
+    ),
+    Op::new(
         "mdi",
         "run one MDI line; done when it finished, failed if the job failed",
-        &[p("line", ArgType::Str)],
+        &[Param::new("line", ArgType::Str)],
+        NEXT,
     ),
-    op(
+    Op::new(
         "run",
         "load and run a G-code file (path as the daemon sees it); done when the job finished",
-        &[p("file", ArgType::Str)],
+        &[Param::new("file", ArgType::Str)],
+        NEXT,
     ),
-    op(
+    Op::new(
         "output",
         "set digital output `name` (M64/M65); done when set",
-        &[p("name", ArgType::Str), p("on", ArgType::Bool)],
+        &[
+            Param::new("name", ArgType::Str),
+            Param::new("on", ArgType::Bool),
+        ],
+        NEXT,
     ),
 ];
 
