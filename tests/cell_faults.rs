@@ -158,11 +158,8 @@ fn tracking_error_faults_the_robot_and_the_selection_detects_it() {
     // Amplifiers too weak for the programmed acceleration: the axes lag their setpoint.
     cfg.pid.max_force_n = 3.0;
     let mut rig = Rig::start(&cfg);
-    let mut tracking = rig
-        .rt
-        .event::<hytask::cell::types::TrackingError>(names::TRACKING_ERROR_EVENT)
-        .unwrap()
-        .subscribe(8);
+    let mut tracking =
+        rig.subscribe::<hytask::cell::types::TrackingError>(names::TRACKING_ERROR_EVENT);
     rig.until_homed();
     let run = rig.cell_selection.send(SelectionCmd::Run(1)).unwrap();
     rig.run_until(20 * SECOND, |_| run.status().is_final());
@@ -181,11 +178,7 @@ fn tracking_error_faults_the_robot_and_the_selection_detects_it() {
 #[test]
 fn sensor_range_error_faults_the_robot_and_the_selection_detects_it() {
     let mut rig = Rig::start(&CellConfig::with_seed(11));
-    let mut range = rig
-        .rt
-        .event::<hytask::cell::types::RangeError>(names::RANGE_ERROR_EVENT)
-        .unwrap()
-        .subscribe(8);
+    let mut range = rig.subscribe::<hytask::cell::types::RangeError>(names::RANGE_ERROR_EVENT);
     rig.until_homed();
     assert!(range.pop().is_none(), "no range error while homing");
     let run = rig.cell_selection.send(SelectionCmd::Run(3)).unwrap();

@@ -174,27 +174,26 @@ fn precondition_without_error_state_stops_the_machine_naming_the_line() {
 #[test]
 fn rejection_outside_try_is_an_error_with_file_line_col() {
     let mut c = cell();
-    let slot = c.load("PROGRAM p\n  DO arm.move_to(0.5);\n  DO arm.move_to(500.0);\nEND_PROGRAM\n");
-    c.control.control(slot, "p", Ctl::Start).unwrap();
-    c.rt.run_cycles(10);
-    let st = c.status("p");
-    assert_eq!(st.status, "error");
+    c.start(
+        "PROGRAM p\n  DO arm.move_to(0.5);\n  DO arm.move_to(500.0);\nEND_PROGRAM\n",
+        "p",
+    );
     assert_eq!(
-        st.error.as_deref(),
+        c.error_after(10, "p").as_deref(),
         Some("test.st:3:3: command rejected: bad parameters: x_mm outside -100..100")
     );
+    assert_eq!(c.status("p").status, "error");
 }
 
 #[test]
 fn failed_command_and_runtime_fault_name_their_place() {
     let mut c = cell();
-    let slot = c.load(
+    c.start(
         "PROGRAM p\nVAR d : INT; ok : BOOL; END_VAR\n  TRY DO arm.fail(); CATCH ok := TRUE; END_TRY;\n  IF ok THEN d := 10 / d; END_IF;\nEND_PROGRAM\n",
+        "p",
     );
-    c.control.control(slot, "p", Ctl::Start).unwrap();
-    c.rt.run_cycles(10);
     assert_eq!(
-        c.status("p").error.as_deref(),
+        c.error_after(10, "p").as_deref(),
         Some("test.st:4:22: division by zero")
     );
 }
@@ -383,13 +382,12 @@ END_STATE_MACHINE
 #[test]
 fn a_fault_inside_a_run_of_plain_statements_names_its_statement() {
     let mut c = cell();
-    let slot = c.load(
+    c.start(
         "VAR_GLOBAL n : INT; z : INT; END_VAR\nPROGRAM p\n  n := 1;\n  n := 10 / z;\n  n := 3;\nEND_PROGRAM\n",
+        "p",
     );
-    c.control.control(slot, "p", Ctl::Start).unwrap();
-    c.rt.run_cycles(3);
     assert_eq!(
-        c.status("p").error.as_deref(),
+        c.error_after(3, "p").as_deref(),
         Some("test.st:4:11: division by zero")
     );
 }

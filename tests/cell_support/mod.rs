@@ -75,6 +75,11 @@ impl Rig {
     }
 
     /// Waits until the selection is homed and idle.
+    /// Subscribes to the cell's event `name` (a fault the test then checks was raised).
+    pub fn subscribe<T: Clone + Send + 'static>(&self, name: &str) -> EventReceiver<T> {
+        self.rt.event::<T>(name).unwrap().subscribe(8)
+    }
+
     pub fn until_homed(&mut self) {
         let n = self.run_until(10 * SECOND, |r| {
             let s = r.state();

@@ -4,7 +4,7 @@
 #![allow(dead_code, clippy::unwrap_used)]
 
 use hytask::rt::prelude::*;
-use hytask::script::{Bindings, Limits, ScriptControl, ScriptTask};
+use hytask::script::{Bindings, Ctl, Limits, ScriptControl, ScriptTask};
 use std::sync::atomic::AtomicU64;
 use std::sync::Arc;
 
@@ -178,6 +178,17 @@ impl Cell {
         self.control
             .load("test.st", src, &self.bindings)
             .unwrap_or_else(|e| panic!("{e}"))
+    }
+    /// Loads `src` and starts its item `name`; the slot.
+    pub fn start(&self, src: &str, name: &str) -> usize {
+        let slot = self.load(src);
+        self.control.control(slot, name, Ctl::Start).unwrap();
+        slot
+    }
+    /// Runs `cycles` steps, then the error item `name` stopped in, if any.
+    pub fn error_after(&mut self, cycles: u64, name: &str) -> Option<String> {
+        self.rt.run_cycles(cycles);
+        self.status(name).error
     }
     pub fn status(&self, name: &str) -> hytask::script::ItemStatus {
         self.control
