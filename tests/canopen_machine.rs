@@ -16,7 +16,8 @@ mod support;
 use hytask::machine::api::{JobSource, MachineApi, Mode, Status};
 use hytask::machine::Machine;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use support::wait_machine as wait;
 
 const GUARD: Duration = Duration::from_secs(120);
 
@@ -66,23 +67,15 @@ fn drive_homing(method: i8) -> impl FnOnce(String) -> String {
     }
 }
 
-fn wait(m: &Machine, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
-    let t0 = Instant::now();
-    loop {
-        let s = m.status();
-        if pred(&s) {
-            return s;
-        }
-        assert!(
-            t0.elapsed() < GUARD,
-            "timed out waiting for {what}: mode {:?}, job {:?}, faults {:?}, axes {:?}",
-            s.mode,
-            s.job,
-            s.faults,
-            s.axes
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
+/// The error of loading the test configuration with the first `from` replaced by `to`.
+fn load_error(from: &str, to: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = config(dir.path());
+    let text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replacen(from, to, 1);
+    std::fs::write(&path, text).unwrap();
+    hytask::config::load(&path).unwrap_err().to_string()
 }
 
 fn ready(m: &Machine) {
@@ -325,15 +318,10 @@ fn ok_sub(c: &mut hytask::control::client::Client) {
 
 #[test]
 fn a_canopen_axis_that_homes_on_a_switch_is_refused_by_the_check() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = config(dir.path());
-    let text = std::fs::read_to_string(&path).unwrap().replacen(
+    let err = load_error(
         "home = { method = \"current_position\", position = 0.0 }",
         "home = { method = \"switch\", position = 0.0, velocity = 10.0 }",
-        1,
     );
-    std::fs::write(&path, text).unwrap();
-    let err = hytask::config::load(&path).unwrap_err().to_string();
     assert!(
         err.contains("drive[0] (x-servo).canopen: axis X homes with a switch, which the master cannot do on a CANopen drive")
             && err.contains("homing = \"drive\" and homing_method"),
@@ -413,15 +401,7 @@ fn a_drive_homing_error_is_a_fault_naming_node_and_axis() {
 
 #[test]
 fn drive_homing_without_a_method_is_refused_naming_the_key() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = config(dir.path());
-    let text = std::fs::read_to_string(&path).unwrap().replacen(
-        "node_id = 1\n",
-        "node_id = 1\nhoming = \"drive\"\n",
-        1,
-    );
-    std::fs::write(&path, text).unwrap();
-    let err = hytask::config::load(&path).unwrap_err().to_string();
+    let err = load_error("node_id = 1\n", "node_id = 1\nhoming = \"drive\"\n");
     assert!(
         err.contains("drive[0] (x-servo).canopen.homing_method: required with homing = \"drive\""),
         "{err}"

@@ -140,7 +140,7 @@ fn daemon_serves_the_cell_and_sorts_through_socket_calls() {
     // A robot operation by name: the e-stop stops the robot; the selection is idle so the
     // mode says e-stop.
     ok(&mut c, "estop", Value::Null);
-    wait_status(&mut c, "estop", Duration::from_secs(30), |s| {
+    wait_status(&mut c, "estop", Duration::from_secs(120), |s| {
         s["mode"] == json!("estop")
     });
 }

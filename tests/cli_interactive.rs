@@ -99,8 +99,9 @@ fn ctrl_c_stops_a_waiting_mdi_and_an_estop_fails_it() {
     let d = Daemon::start_sim();
     let mut c = d.client();
     ready(&mut c);
-    // 200 mm at 5 mm/s: 40 s of machine time, long enough to be interrupted.
-    let mut p = hytask(&d, &["mdi", "G1 X50 Y50 Z-5 F300"]);
+    // 354 mm at 1 mm/s: minutes of machine time, so Ctrl-C lands in the move however late
+    // this thread runs on a loaded host.
+    let mut p = hytask(&d, &["mdi", "G1 X50 Y50 Z-5 F60"]);
     p.expect("MDI line:");
     p.ctrl_c();
     let (status, out) = p.wait();
@@ -110,7 +111,11 @@ fn ctrl_c_stops_a_waiting_mdi_and_an_estop_fails_it() {
     assert_eq!(s["mode"], "idle", "{s}");
     assert!(actual(&s, "X") > 51.0, "the move was not stopped: {s}");
 
-    let mut p = hytask(&d, &["mdi", "G1 X50 F300"]);
+    // Wherever the first move stopped, the farther end of X: at least 124 mm at 1 mm/s, so
+    // the e-stop lands in the move too.
+    let target = if actual(&s, "X") > 175.0 { 50 } else { 299 };
+    let line = format!("G1 X{target} F60");
+    let mut p = hytask(&d, &["mdi", &line]);
     p.expect("MDI line:");
     ok(&mut c, "estop", serde_json::Value::Null);
     let (status, out) = p.wait();

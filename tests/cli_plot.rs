@@ -3,24 +3,17 @@
 //! `--velocity` draws the trace's path speed.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
-
 #[path = "../benches/programs/gen.rs"]
 mod gen;
+mod support;
 
-fn hytask(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_hytask"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap()
-}
+use support::{hytask, hytask_ok};
 
 #[test]
 fn plot_writes_png_from_the_home_position_and_svg_from_a_given_start() {
     let dir = tempfile::tempdir().unwrap();
     let png = dir.path().join("plate.png");
-    let out = hytask(&[
+    let out = hytask_ok(&[
         "plot",
         "examples/jobs/demo-plate.ngc",
         "--view",
@@ -29,18 +22,13 @@ fn plot_writes_png_from_the_home_position_and_svg_from_a_given_start() {
         png.to_str().unwrap(),
     ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     // The built-in sim mill homes to X300 Y300 Z0: `hytask run` starts there.
     assert!(stdout.contains("from X300 Y300 Z0"), "{stdout}");
     let img = resvg::tiny_skia::Pixmap::decode_png(&std::fs::read(&png).unwrap()).unwrap();
     assert_eq!(img.width(), 1000);
 
     let svg = dir.path().join("plate.svg");
-    let out = hytask(&[
+    hytask_ok(&[
         "plot",
         "examples/jobs/demo-plate.ngc",
         "--from",
@@ -50,11 +38,6 @@ fn plot_writes_png_from_the_home_position_and_svg_from_a_given_start() {
         "-o",
         svg.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let text = std::fs::read_to_string(&svg).unwrap();
     assert!(text.contains("front view") && text.contains("start X-10.0 Y0.0 Z50.0"));
 
@@ -79,12 +62,12 @@ fn velocity_plot_curve_is_the_trace_speed() {
     let program = dir.path().join("sine.ngc");
     std::fs::write(&program, gen::sine(600, 0.1)).unwrap();
     let csv = dir.path().join("sine.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_hytask"))
-        .args(["plan", program.to_str().unwrap(), "--trace"])
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    hytask_ok(&[
+        "plan",
+        program.to_str().unwrap(),
+        "--trace",
+        csv.to_str().unwrap(),
+    ]);
     let speed: Vec<f64> = std::fs::read_to_string(&csv)
         .unwrap()
         .lines()
@@ -96,7 +79,7 @@ fn velocity_plot_curve_is_the_trace_speed() {
         .collect();
 
     let svg_path = dir.path().join("feed.svg");
-    let out = hytask(&[
+    hytask_ok(&[
         "plot",
         program.to_str().unwrap(),
         "--velocity",
@@ -105,11 +88,6 @@ fn velocity_plot_curve_is_the_trace_speed() {
         "-o",
         svg_path.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let svg = std::fs::read_to_string(&svg_path).unwrap();
     let attr = |tag_id: &str, name: &str| -> String {
         let at = svg.find(&format!(r#"id="{tag_id}""#)).unwrap();
@@ -153,7 +131,7 @@ fn velocity_plot_curve_is_the_trace_speed() {
     assert!(svg.contains(r#"id="programmed""#) && svg.contains("axis velocity limit 50.0 mm/s"));
 
     let png = dir.path().join("feed.png");
-    let out = hytask(&[
+    hytask_ok(&[
         "plot",
         program.to_str().unwrap(),
         "--velocity",
@@ -162,7 +140,6 @@ fn velocity_plot_curve_is_the_trace_speed() {
         "-o",
         png.to_str().unwrap(),
     ]);
-    assert!(out.status.success());
     let img = resvg::tiny_skia::Pixmap::decode_png(&std::fs::read(&png).unwrap()).unwrap();
     assert_eq!(img.width(), 600);
 }

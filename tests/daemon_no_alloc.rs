@@ -19,7 +19,7 @@ use hytask::control::client::Client;
 use serde_json::{json, Value};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use support::*;
 
 /// Hang guard of every wait: a loaded host may run the machine slower than real time.
@@ -70,9 +70,24 @@ impl InProcess {
         let s = stop.clone();
         let thread = std::thread::spawn(move || {
             let mut topics = std::collections::BTreeSet::new();
-            while !s.load(Ordering::Acquire) {
-                if let Ok(Some(e)) = c.next_event(Duration::from_millis(50)) {
-                    topics.insert(e.topic);
+            // Once told to stop, it still reads what is queued (until 50 ms pass without an
+            // event, hang guard 60 s): a starved thread must not miss the backlog.
+            let mut stopped: Option<Instant> = None;
+            loop {
+                match c.next_event(Duration::from_millis(50)) {
+                    Ok(Some(e)) => {
+                        topics.insert(e.topic);
+                    }
+                    Ok(None) if stopped.is_some() => break,
+                    Ok(None) => {}
+                    // The connection is gone: nothing more to read.
+                    Err(_) => break,
+                }
+                if stopped.is_none() && s.load(Ordering::Acquire) {
+                    stopped = Some(Instant::now());
+                }
+                if stopped.is_some_and(|t| t.elapsed() > GUARD) {
+                    break;
                 }
             }
             topics

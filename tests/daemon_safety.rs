@@ -182,16 +182,16 @@ fn lost_drive_communication_stops_the_machine() {
     );
     wait_status(&mut c, "fault", GUARD, |s| s["mode"] == json!("fault"));
     // Shutdown in fault mode must not wait for a machine-off the machine does not take: it
-    // used to wait its full 30 s, past systemd's 20 s stop timeout (hang guard, not timing).
+    // used to wait its full 30 s, past systemd's 20 s stop timeout, then log that the
+    // controlled stop failed. Checked by that log line, not by the elapsed time (a loaded
+    // host may take long to stop anyway).
     drop(c);
     let mut d = d;
-    let t0 = std::time::Instant::now();
     let (status, err) = d.terminate();
     assert!(status.success(), "{status}: {err}");
     assert!(
-        t0.elapsed() < std::time::Duration::from_secs(15),
-        "shutdown after a fault took {:?}",
-        t0.elapsed()
+        !err.contains("controlled stop at shutdown"),
+        "shutdown after a fault waited for a machine-off:\n{err}"
     );
 }
 

@@ -10,7 +10,7 @@ mod modbus_support;
 use hytask::modbus::{Endpoint, UnitConfig};
 use hytask_hal::modbus::Quality;
 use modbus_support::{
-    free_port, listen_addr, modbus_sim, pty_pair, python, run_link, script, unit, wait_until, Proc,
+    listen_addr, modbus_sim, pty_pair, python, run_link, script, unit, wait_until, Proc,
 };
 use std::process::Command;
 
@@ -40,12 +40,15 @@ fn server_unit() -> UnitConfig {
     )
 }
 
-fn pymodbus_server(py: &std::path::Path, args: &[&str]) -> Proc {
+/// Starts tests/modbus/pymodbus_server.py with `args`; returns it once serving, with what
+/// its `ready` line says after the word (the TCP port it listens on; empty over RTU).
+fn pymodbus_server(py: &std::path::Path, args: &[&str]) -> (Proc, String) {
     let mut cmd = Command::new(py);
     cmd.arg(script("pymodbus_server.py")).args(args);
     let p = Proc::spawn(cmd);
-    p.expect_line("ready");
-    p
+    let ready = p.expect("ready", |l| l == "ready" || l.starts_with("ready "));
+    let rest = ready["ready".len()..].trim().to_string();
+    (p, rest)
 }
 
 /// Reads the inputs, writes the outputs, checks both ends.
@@ -90,8 +93,10 @@ fn exchange_with_pymodbus(server: &mut Proc, endpoint: Endpoint) {
 #[test]
 fn our_poller_against_a_pymodbus_tcp_server() {
     let Some(py) = python() else { return };
-    let port = free_port().to_string();
-    let mut server = pymodbus_server(&py, &["tcp", &port]);
+    // Port 0: the server reports the port it got (a port picked here and released could be
+    // taken by another test binary before the server binds it).
+    let (mut server, port) = pymodbus_server(&py, &["tcp", "0"]);
+    assert!(port.parse::<u16>().is_ok_and(|p| p > 0), "ready {port}");
     exchange_with_pymodbus(&mut server, Endpoint::Tcp(format!("127.0.0.1:{port}")));
 }
 
@@ -102,7 +107,7 @@ fn our_poller_against_a_pymodbus_rtu_server_on_a_pty_pair() {
     let Some((_socat, a, b)) = pty_pair(dir.path()) else {
         return;
     };
-    let mut server = pymodbus_server(&py, &["rtu", b.to_str().unwrap()]);
+    let (mut server, _) = pymodbus_server(&py, &["rtu", b.to_str().unwrap()]);
     exchange_with_pymodbus(
         &mut server,
         Endpoint::Rtu {

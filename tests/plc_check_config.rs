@@ -3,15 +3,10 @@
 //! compile errors name file, line and column, for every error found).
 #![allow(clippy::unwrap_used)]
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod support;
 
-fn hytask(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hytask"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use std::path::Path;
+use support::hytask;
 
 /// config/sim.toml with its PLC program replaced by `program` (written beside it as
 /// `mill.st`, named relative to the machine file), in `dir`.

@@ -3,14 +3,9 @@
 //! per scan (or JSON), runtime faults with file and line and a distinct exit status.
 #![allow(clippy::unwrap_used)]
 
-use std::process::{Command, Output};
+mod support;
 
-fn hytask(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_hytask"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+use support::hytask;
 
 fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> String {
     let p = dir.path().join(name);

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used)]
 
 use hytask::rt::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -16,13 +16,21 @@ fn one_writer_many_readers_never_torn_never_backwards() {
     let obj = DataObject::<Block>::new("block", 8);
     let mut w = obj.writer().unwrap();
     let stop = Arc::new(AtomicBool::new(false));
+    // Readers that have done enough (1000 reads, 10 new values) to make the run meaningful:
+    // the writer goes on until all have, however the loaded host schedules them.
+    let enough = Arc::new(AtomicUsize::new(0));
     let readers: Vec<_> = (0..3)
         .map(|_| {
             let mut r = obj.reader().unwrap();
-            let stop = stop.clone();
+            let (stop, enough) = (stop.clone(), enough.clone());
             std::thread::spawn(move || {
                 let (mut last, mut reads, mut new) = (0u64, 0u64, 0u64);
+                let mut counted = false;
                 while !stop.load(Ordering::Relaxed) {
+                    if !counted && reads > 1000 && new > 10 {
+                        counted = true;
+                        enough.fetch_add(1, Ordering::Relaxed);
+                    }
                     let (st, v) = r.read();
                     reads += 1;
                     let first = v.0[0];
@@ -43,7 +51,16 @@ fn one_writer_many_readers_never_torn_never_backwards() {
         .collect();
     let start = Instant::now();
     let mut i = 0u64;
-    while start.elapsed() < Duration::from_millis(400) {
+    // At least 400 ms of writing, and on until every reader did enough (hang guard 60 s).
+    while start.elapsed() < Duration::from_millis(400)
+        || i <= 10_000
+        || enough.load(Ordering::Relaxed) < 3
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "readers starved: {} of 3 did 1000 reads",
+            enough.load(Ordering::Relaxed)
+        );
         i += 1;
         w.set(Block([i; 8]));
         // A late reader registering mid-stream sees a recent, whole value.

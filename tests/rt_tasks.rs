@@ -17,6 +17,18 @@ fn log(l: &Log, s: impl Into<String>) {
 
 const MS: u64 = 1_000_000;
 
+/// Hang guard of the waits on real threads: a loaded 2-CPU host may starve them for seconds.
+const GUARD: Duration = Duration::from_secs(60);
+
+/// Polls until `done` holds: the tests act on what the threads did, never after a sleep.
+fn wait_for(what: &str, done: impl Fn() -> bool) {
+    let t0 = std::time::Instant::now();
+    while !done() {
+        assert!(t0.elapsed() < GUARD, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
 fn sched(priority: i32, period_ns: u64) -> Schedule {
     Schedule {
         priority,
@@ -505,7 +517,7 @@ fn deferred_handlers_run_in_the_owners_thread_at_its_safe_point() {
     .unwrap();
     app.configure().unwrap();
     let rt = app.start().unwrap();
-    std::thread::sleep(Duration::from_millis(60));
+    wait_for("6 events delivered", || seen.lock().unwrap().len() > 5);
     let listener_thread = rt.task("listener").unwrap().thread().to_owned();
     let _app = rt.stop();
     let seen = seen.lock().unwrap().clone();
@@ -833,9 +845,13 @@ fn periodic_thread_runs_and_reports_timing() {
     app.configure().unwrap();
     let rt = app.start().unwrap();
     let c = w.send(Op::Wait(5)).unwrap();
-    assert_eq!(c.wait(Duration::from_secs(5)), CommandStatus::Done);
-    std::thread::sleep(Duration::from_millis(20));
+    assert_eq!(c.wait(GUARD), CommandStatus::Done);
     let t = &rt.threads()[0];
+    // Ten cycles of the thread and of the task (its run and its start latency) recorded.
+    wait_for("10 cycles recorded", || {
+        let task = w.info().timing();
+        t.stats.summary().wakeup.count >= 10 && task.exec.count >= 10 && task.wakeup.count >= 10
+    });
     let s = t.stats.summary();
     assert!(s.wakeup.count >= 10, "{s:?}");
     assert!(s.exec.max_ns >= s.exec.min_ns);
@@ -860,7 +876,7 @@ fn without_fifo_the_thread_still_runs_and_reports_not_realtime() {
     app.configure().unwrap();
     let rt = app.start().unwrap();
     let c = w.send(Op::Wait(3)).unwrap();
-    assert_eq!(c.wait(Duration::from_secs(5)), CommandStatus::Done);
+    assert_eq!(c.wait(GUARD), CommandStatus::Done);
     assert!(!rt.realtime());
     assert!(!rt.status().realtime);
     assert!(!rt.threads()[0].realtime());
@@ -896,7 +912,7 @@ fn cpu_affinity_pins_the_thread() {
     .unwrap();
     app.configure().unwrap();
     let rt = app.start().unwrap();
-    std::thread::sleep(Duration::from_millis(30));
+    wait_for("6 cycles", || cpus.lock().unwrap().len() > 5);
     let _ = rt.stop();
     let cpus = cpus.lock().unwrap();
     assert!(cpus.len() > 5);

@@ -14,6 +14,7 @@
 #![allow(clippy::unwrap_used)]
 
 mod support;
+mod vcan;
 
 use serde_json::{json, Value};
 use std::process::{Child, Command, Stdio};
@@ -23,19 +24,7 @@ use support::*;
 const GUARD: Duration = Duration::from_secs(180);
 const PERIOD_US: u32 = 10_000;
 
-fn vcan() -> Option<String> {
-    match std::env::var("HYTASK_VCAN") {
-        Ok(i) if !i.is_empty() => Some(i),
-        _ => {
-            eprintln!(
-                "vcan_e2e: HYTASK_VCAN is unset, so this test does not run here: it needs a \
-                 real vcan0 and runs under tests/vcan/run (which boots a VM when the host \
-                 kernel has no CAN)"
-            );
-            None
-        }
-    }
-}
+const NAME: &str = "vcan_e2e";
 
 /// The loopback drives, stopped when dropped.
 struct Drives(Child);
@@ -107,26 +96,38 @@ fn job(c: &mut hytask::control::client::Client, dir: &std::path::Path, text: &st
 
 #[test]
 fn homes_and_runs_a_job_to_completion_on_vcan() {
-    let Some(iface) = vcan() else { return };
+    let Some(iface) = vcan::iface(NAME) else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let _drives = drives(&iface);
     let d = daemon(&iface, dir.path());
     let mut c = d.client();
     ready(&mut c);
+    square_job(&mut c, dir.path(), &[("X", 12.5), ("Y", 7.25), ("Z", -2.0)]);
+}
+
+/// Runs the two-move job to completion; checks that it ended `done` and that each of `want`'s
+/// axes is at rest where the job left it.
+fn square_job(
+    c: &mut hytask::control::client::Client,
+    dir: &std::path::Path,
+    want: &[(&str, f64)],
+) {
     job(
-        &mut c,
-        dir.path(),
+        c,
+        dir,
         // 20 mm/s: 0.2 mm per stretched 10 ms cycle, well inside the 1 mm limit with the
         // loopback drive's lag (the monitor compares each position with the setpoint it
         // answers, also when a TPDO comes a cycle or more late under emulation).
         "G21 G90\nG1 X20 Y10 Z-5 F1200\nG1 X12.5 Y7.25 Z-2\nM2\n",
     );
-    let s = wait_status(&mut c, "job done", GUARD, |s| {
+    let s = wait_status(c, "job done", GUARD, |s| {
         s["job"]["state"] == json!("done") || s["job"]["state"] == json!("failed")
     });
     assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
-    let s = wait_status(&mut c, "at rest", GUARD, |s| at_rest(s, 1e-6));
-    for (name, want) in [("X", 12.5), ("Y", 7.25), ("Z", -2.0)] {
+    let s = wait_status(c, "at rest", GUARD, |s| at_rest(s, 1e-6));
+    for &(name, want) in want {
         let x = axis(&s, name)["actual"].as_f64().unwrap();
         assert!((x - want).abs() < 1e-3, "{name} at {x}, want {want}");
     }
@@ -137,7 +138,9 @@ fn homes_and_runs_a_job_to_completion_on_vcan() {
 /// master brings it back to CSP through the PDOs; then a job runs to completion from there.
 #[test]
 fn homes_in_the_drive_then_runs_a_job_on_vcan() {
-    let Some(iface) = vcan() else { return };
+    let Some(iface) = vcan::iface(NAME) else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let _drives = drives(&iface);
     let d = daemon_with(&iface, dir.path(), |t| {
@@ -162,22 +165,13 @@ fn homes_in_the_drive_then_runs_a_job_on_vcan() {
         (x - 5.0).abs() < 1e-3,
         "X homed at {x}, want the home offset 5"
     );
-    job(
-        &mut c,
-        dir.path(),
-        "G21 G90\nG1 X20 Y10 Z-5 F1200\nG1 X12.5 Y7.25 Z-2\nM2\n",
-    );
-    let s = wait_status(&mut c, "job done", GUARD, |s| {
-        s["job"]["state"] == json!("done") || s["job"]["state"] == json!("failed")
-    });
-    assert_eq!(s["job"]["state"], json!("done"), "{}", s["job"]);
-    let s = wait_status(&mut c, "at rest", GUARD, |s| at_rest(s, 1e-6));
-    let x = axis(&s, "X")["actual"].as_f64().unwrap();
-    assert!((x - 12.5).abs() < 1e-3, "X at {x}, want 12.5");
+    square_job(&mut c, dir.path(), &[("X", 12.5)]);
 }
 
 fn fault_mid_job(drive: &str, sub: u8, value: i64, size: u8, node: u8, cause: &str) {
-    let Some(iface) = vcan() else { return };
+    let Some(iface) = vcan::iface(NAME) else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let _drives = drives(&iface);
     let d = daemon(&iface, dir.path());

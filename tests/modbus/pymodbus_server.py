@@ -3,15 +3,17 @@
 Usage: pymodbus_server.py tcp PORT | rtu DEVICE
 Serves unit 1 with known values: discrete inputs 0..3 = 1,0,1,1; input registers
 0..3 = 0x1234, 0xFFFE, then 12.5 as f32 low word first (0x0000, 0x4148); holding register 5
-= 0b1010. Prints "ready" when serving. On stdin, "get co|hr ADDR" prints the value (to check
-what the client wrote).
+= 0b1010. Prints "ready" when serving; over TCP "ready PORT" once listening, so PORT 0 (a port
+the kernel picks, which no other test binary can take in between) is the tests' choice. On
+stdin, "get co|hr ADDR" prints the value (to check what the client wrote).
 """
+import asyncio
 import sys
 import threading
 
 from pymodbus.datastore import (ModbusDeviceContext, ModbusSequentialDataBlock,
                                 ModbusServerContext)
-from pymodbus.server import StartSerialServer, StartTcpServer
+from pymodbus.server import ModbusTcpServer, StartSerialServer
 
 
 def block(values):
@@ -36,9 +38,16 @@ def commands():
             print(w[1], w[2], device.getValues(fc, int(w[2]), 1)[0], flush=True)
 
 
+async def serve_tcp(port):
+    server = ModbusTcpServer(context=context, address=("127.0.0.1", port))
+    await server.serve_forever(background=True)
+    print("ready", server.transport.sockets[0].getsockname()[1], flush=True)
+    await server.serving
+
+
 threading.Thread(target=commands, daemon=True).start()
-print("ready", flush=True)
 if sys.argv[1] == "tcp":
-    StartTcpServer(context=context, address=("127.0.0.1", int(sys.argv[2])))
+    asyncio.run(serve_tcp(int(sys.argv[2])))
 else:
+    print("ready", flush=True)
     StartSerialServer(context=context, port=sys.argv[2], baudrate=19200, timeout=0.05)

@@ -167,15 +167,6 @@ pub fn pty_pair(dir: &Path) -> Option<(Proc, PathBuf, PathBuf)> {
     Some((p, a, b))
 }
 
-/// A free TCP port on 127.0.0.1 (bound and released: good enough for one test).
-pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 /// A unit from an `[[io]]` TOML table.
 pub fn unit(io_toml: &str) -> UnitConfig {
     let io: hytask::config::IoConfig = toml::from_str(io_toml).unwrap();

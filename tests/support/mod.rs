@@ -37,11 +37,47 @@ pub fn fixture(rel: &str) -> PathBuf {
         .join(rel)
 }
 
+/// Runs the `hytask` binary with `args` in the package root to its end; returns what it did.
+pub fn hytask(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap()
+}
+
+/// [`hytask`] that must succeed (the failure shows its stdout and stderr).
+pub fn hytask_ok(args: &[&str]) -> std::process::Output {
+    let out = hytask(args);
+    assert!(
+        out.status.success(),
+        "hytask {args:?}: {}\n{}{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// A running `hytask serve`, stopped with SIGTERM when dropped.
 pub struct Daemon {
     pub child: Option<Child>,
     pub socket: PathBuf,
+    /// The daemon's stderr, read as it comes: a pipe nobody reads fills up (64 KiB) and then
+    /// blocks whichever daemon thread logs next.
+    stderr: Option<std::thread::JoinHandle<String>>,
     _dir: tempfile::TempDir,
+}
+
+/// Reads `child`'s piped stderr to its end on a thread of its own.
+fn collect_stderr(child: &mut Child) -> std::thread::JoinHandle<String> {
+    let mut pipe = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        use std::io::Read;
+        let mut all = Vec::new();
+        let _ = pipe.read_to_end(&mut all);
+        String::from_utf8_lossy(&all).into_owned()
+    })
 }
 
 /// Simulated seconds per wall-clock second of the behaviour tests' machine: fast enough to
@@ -95,7 +131,7 @@ impl Daemon {
 
     fn start_in(dir: tempfile::TempDir, config: &Path) -> Daemon {
         let socket = dir.path().join("control.sock");
-        let child = Command::new(env!("CARGO_BIN_EXE_hytask"))
+        let mut child = Command::new(env!("CARGO_BIN_EXE_hytask"))
             .args(["serve", "--config"])
             .arg(config)
             .arg("--socket")
@@ -105,24 +141,17 @@ impl Daemon {
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
+        let stderr = Some(collect_stderr(&mut child));
         let mut d = Daemon {
             child: Some(child),
             socket,
+            stderr,
             _dir: dir,
         };
         let t0 = Instant::now();
         while Client::connect(&d.socket).is_err() {
             if let Some(status) = d.child.as_mut().unwrap().try_wait().unwrap() {
-                let mut err = String::new();
-                use std::io::Read;
-                let _ = d
-                    .child
-                    .as_mut()
-                    .unwrap()
-                    .stderr
-                    .take()
-                    .unwrap()
-                    .read_to_string(&mut err);
+                let err = d.stderr.take().unwrap().join().unwrap();
                 panic!("daemon exited ({status}) before opening its socket:\n{err}");
             }
             assert!(
@@ -147,17 +176,10 @@ impl Daemon {
         let t0 = Instant::now();
         loop {
             if let Some(status) = child.try_wait().unwrap() {
-                let mut err = String::new();
-                use std::io::Read;
-                child
-                    .stderr
-                    .take()
-                    .unwrap()
-                    .read_to_string(&mut err)
-                    .unwrap();
+                let err = self.stderr.take().unwrap().join().unwrap();
                 return (status, err);
             }
-            if t0.elapsed() > Duration::from_secs(40) {
+            if t0.elapsed() > Duration::from_secs(60) {
                 let _ = child.kill();
                 panic!("daemon did not exit after SIGTERM");
             }
@@ -308,8 +330,8 @@ pub fn run_text(c: &mut Client, text: &str, name: &str) -> Value {
     info
 }
 
-/// Polls a machine deployed in this process until `pred` holds; a one-minute hang guard,
-/// never a timing.
+/// Polls a machine deployed in this process until `pred` holds; a two-minute hang guard,
+/// never a timing. A timeout shows the last status' mode, job, faults and axes.
 pub fn wait_machine(
     m: &hytask::machine::Machine,
     what: &str,
@@ -323,10 +345,12 @@ pub fn wait_machine(
             return s;
         }
         assert!(
-            t0.elapsed() < Duration::from_secs(60),
-            "timed out waiting for {what}: mode {:?}, job {:?}",
+            t0.elapsed() < Duration::from_secs(120),
+            "timed out waiting for {what}: mode {:?}, job {:?}, faults {:?}, axes {:?}",
             s.mode,
-            s.job
+            s.job,
+            s.faults,
+            s.axes
         );
         std::thread::sleep(Duration::from_millis(5));
     }

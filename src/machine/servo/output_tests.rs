@@ -4,9 +4,8 @@
 
 use super::machine_task::MachineCmd;
 use super::tests::Rig;
-use super::QueueItem;
 use crate::gcode::canon::SpindleDir;
-use crate::gcode::{Canon, CanonCmd, SourceLoc, NUM_AXES};
+use crate::gcode::{Canon, CanonCmd, SourceLoc};
 use crate::machine::api::Mode;
 use crate::motion;
 use crate::rt::prelude::*;
@@ -32,10 +31,7 @@ fn device(r: &Rig) -> ([bool; 4], f64) {
 
 /// Starts job `job`: M3 S12000 M7 M8 (or the given aux commands), then a feed to `target`.
 fn start_job(r: &mut Rig, job: u32, aux: &[CanonCmd], target: [f64; 3]) -> CommandHandle {
-    let mut start = [0.0; NUM_AXES];
-    for (i, s) in start.iter_mut().take(3).enumerate() {
-        *s = r.feedback(i).actual;
-    }
+    let start = r.position();
     let mut end = start;
     end[..3].copy_from_slice(&target);
     let loc = SourceLoc {
@@ -53,16 +49,7 @@ fn start_job(r: &mut Rig, job: u32, aux: &[CanonCmd], target: [f64; 3]) -> Comma
         })
         .collect();
     let plan = motion::plan_from(&canon, &r.motion_cfg, start).expect("plan");
-    for &item in &plan.items {
-        r.queue.try_push(QueueItem { job, item }).expect("room");
-    }
-    r.built_machine
-        .send(MachineCmd::Run {
-            job,
-            items: plan.items.len() as u64,
-            manual: false,
-        })
-        .expect("queue")
+    r.run_plan(job, &plan)
 }
 
 fn spindle_and_coolant() -> Vec<CanonCmd> {

@@ -118,12 +118,34 @@ impl Rig {
         assert_eq!(self.mode(), Mode::Idle);
     }
 
-    /// Plans a straight feed from where the machine is to `target` and starts it as `job`.
-    pub(super) fn start_move(&mut self, job: u32, target: [f64; 3], feed_mm_min: f64) {
-        let mut start = [0.0; NUM_AXES];
-        for (i, s) in start.iter_mut().take(3).enumerate() {
+    /// Where the machine is: X Y Z from the drives' feedback, the other axes at 0.
+    pub(super) fn position(&mut self) -> [f64; NUM_AXES] {
+        let mut at = [0.0; NUM_AXES];
+        for (i, s) in at.iter_mut().take(3).enumerate() {
             *s = self.feedback(i).actual;
         }
+        at
+    }
+
+    /// Queues `plan`'s items as job `job`; returns the handle of the `Run` that starts it.
+    pub(super) fn run_plan(&mut self, job: u32, plan: &motion::Plan) -> CommandHandle {
+        for &item in &plan.items {
+            self.queue
+                .try_push(QueueItem { job, item })
+                .expect("queue room");
+        }
+        self.built_machine
+            .send(MachineCmd::Run {
+                job,
+                items: plan.items.len() as u64,
+                manual: false,
+            })
+            .expect("queue")
+    }
+
+    /// Plans a straight feed from where the machine is to `target` and starts it as `job`.
+    pub(super) fn start_move(&mut self, job: u32, target: [f64; 3], feed_mm_min: f64) {
+        let start = self.position();
         let mut end = start;
         end[..3].copy_from_slice(&target);
         let loc = SourceLoc {
@@ -133,19 +155,7 @@ impl Rig {
         };
         let plan = motion::plan_straight_feed(start, end, feed_mm_min, loc, &self.motion_cfg)
             .expect("plan");
-        for &item in &plan.items {
-            self.queue
-                .try_push(QueueItem { job, item })
-                .expect("queue room");
-        }
-        let h = self
-            .built_machine
-            .send(MachineCmd::Run {
-                job,
-                items: plan.items.len() as u64,
-                manual: false,
-            })
-            .expect("queue");
+        let h = self.run_plan(job, &plan);
         self.rt.run_cycles(1);
         assert_eq!(h.status(), CommandStatus::Accepted);
     }
@@ -284,10 +294,7 @@ fn a_following_error_fault_stops_the_other_axes_under_control_and_disables_the_d
 fn single_block_holds_in_the_cycle_the_next_line_begins() {
     let mut r = Rig::new();
     r.ready();
-    let mut start = [0.0; NUM_AXES];
-    for (i, s) in start.iter_mut().take(3).enumerate() {
-        *s = r.feedback(i).actual;
-    }
+    let start = r.position();
     // Three lines of a zigzag, 10 mm along -X each, blended.
     let canon: Vec<Canon> = (0..4)
         .map(|k| {
@@ -308,17 +315,7 @@ fn single_block_holds_in_the_cycle_the_next_line_begins() {
         })
         .collect();
     let plan = motion::plan_from(&canon, &r.motion_cfg, start).expect("plan");
-    for &item in &plan.items {
-        r.queue.try_push(QueueItem { job: 1, item }).expect("room");
-    }
-    let run = r
-        .built_machine
-        .send(MachineCmd::Run {
-            job: 1,
-            items: plan.items.len() as u64,
-            manual: false,
-        })
-        .expect("queue");
+    let run = r.run_plan(1, &plan);
     r.rt.run_cycles(100);
     assert_eq!(r.sp.latest().expect("sp").line, 11);
     // Step while running line 11: it holds as line 12 begins.

@@ -52,14 +52,7 @@ pub fn render(tr: &Trace, marks: Marks<'_>, o: &Options) -> String {
         v1: top.max(1e-3),
     };
     let f = Frame::new(fit, o.width_px, false, 0.45);
-    let mut doc = Doc::new(f.width, f.height, &o.title);
-    doc.text(
-        (f.area.0 + f.area.2 / 2.0, 20.0),
-        15.0,
-        "middle",
-        "title",
-        &format!("{} — feed along the path", o.title),
-    );
+    let mut doc = f.titled_doc(&o.title, &format!("{} — feed along the path", o.title));
     grid::chart(&mut doc, &f, "time (s)", "path speed (mm/s)");
     doc.raw(&format!("<defs>{}</defs>", f.clip_path("chart-area")));
     let d = f.data;
@@ -147,16 +140,7 @@ fn column_extremes(v: &[f64], columns: usize) -> Vec<usize> {
 
 /// The key: curve, programmed feed, limit, then `summary`.
 fn legend(doc: &mut Doc, f: &Frame, limit: f64, summary: &str) {
-    let top = f.legend_top();
-    doc.open(r#"id="legend""#);
-    doc.rect(
-        6.0,
-        top + 2.0,
-        f.width - 12.0,
-        super::frame::LEGEND - 8.0,
-        r##"class="legend-box" fill="#f7f7f7" stroke="#ccc""##,
-    );
-    let y = top + 22.0;
+    let y = super::legend::open_box(doc, f);
     let items = [
         (
             format!(r#"stroke="{SPEED}" stroke-width="1.6""#),

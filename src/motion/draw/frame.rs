@@ -5,6 +5,7 @@
 //! The data-to-pixel map is nalgebra's orthographic projection of the data box to
 //! normalised device coordinates, then the viewport transform of the plot area.
 
+use super::doc::Doc;
 use nalgebra::{Orthographic3, Point3};
 
 /// Space above the plot area (title), px.
@@ -135,6 +136,20 @@ impl Frame {
     /// Pixels per data unit along u.
     pub fn scale(&self) -> f64 {
         self.area.2 / (self.data.u1 - self.data.u0)
+    }
+
+    /// A document of this frame's size titled `title`, with `heading` centred over the plot
+    /// area (every picture starts so).
+    pub fn titled_doc(&self, title: &str, heading: &str) -> Doc {
+        let mut doc = Doc::new(self.width, self.height, title);
+        doc.text(
+            (self.area.0 + self.area.2 / 2.0, 20.0),
+            15.0,
+            "middle",
+            "title",
+            heading,
+        );
+        doc
     }
 
     /// Top of the legend band, px.

@@ -62,16 +62,7 @@ pub mod marks {
 /// Draws the key of a toolpath picture: feed colours from 0 to `vmax` mm/s, then rapid,
 /// start, end, plunge and drill, then `summary` on a second line.
 pub fn toolpath(doc: &mut Doc, f: &Frame, vmax: f64, summary: &str) {
-    let top = f.legend_top();
-    doc.open(r#"id="legend""#);
-    doc.rect(
-        6.0,
-        top + 2.0,
-        f.width - 12.0,
-        frame_height() - 8.0,
-        r##"class="legend-box" fill="#f7f7f7" stroke="#ccc""##,
-    );
-    let y = top + 22.0;
+    let y = open_box(doc, f);
     let mut x = 16.0;
     for b in 0..BUCKETS {
         doc.rect(x, y - 10.0, 14.0, 12.0, &format!(r#"fill="{}""#, colour(b)));
@@ -104,6 +95,18 @@ pub fn toolpath(doc: &mut Doc, f: &Frame, vmax: f64, summary: &str) {
     doc.close();
 }
 
-fn frame_height() -> f64 {
-    super::frame::LEGEND
+/// Opens the legend group in the band under the picture framed by `f` and draws its box
+/// (the toolpath's and the feed chart's keys look alike); returns the baseline of the first
+/// line of text.
+pub fn open_box(doc: &mut Doc, f: &Frame) -> f64 {
+    let top = f.legend_top();
+    doc.open(r#"id="legend""#);
+    doc.rect(
+        6.0,
+        top + 2.0,
+        f.width - 12.0,
+        super::frame::LEGEND - 8.0,
+        r##"class="legend-box" fill="#f7f7f7" stroke="#ccc""##,
+    );
+    top + 22.0
 }

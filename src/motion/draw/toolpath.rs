@@ -16,14 +16,7 @@ pub fn render(plan: &Plan, o: &Options) -> String {
     let p = Projector::new(o.view);
     let (fit, grid_plane) = fit(&tp, &p, o.view);
     let f = Frame::new(fit, o.width_px, true, 0.0);
-    let mut doc = Doc::new(f.width, f.height, &o.title);
-    doc.text(
-        (f.area.0 + f.area.2 / 2.0, 20.0),
-        15.0,
-        "middle",
-        "title",
-        &format!("{} — {} view", o.title, o.view.name()),
-    );
+    let mut doc = f.titled_doc(&o.title, &format!("{} — {} view", o.title, o.view.name()));
     match o.view.plane_axes() {
         Some((a, b)) => {
             let names = ["X", "Y", "Z"];
