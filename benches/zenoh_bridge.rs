@@ -15,7 +15,8 @@
 //! figure is the median of the per-round ratios. The machine is the built-in simulated mill,
 //! in process. Run: `cargo bench --bench zenoh_bridge` (`ZENOH_BENCH_ROUNDS`, default 9;
 //! `ZENOH_BENCH_SAMPLES`, default 200 per window; `ZENOH_BENCH_RATE_HZ`, the publication
-//! rate of both sides, default 2000).
+//! rate of both sides, default 2000). Under `cargo test --all-targets` (no `--bench`) it
+//! runs one round of 5 samples as a smoke test.
 #![allow(clippy::unwrap_used)]
 
 use hytask::bridge::Bridge;
@@ -142,19 +143,27 @@ fn port_delays(
         .collect()
 }
 
+/// `name` from the environment, or `default`.
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
 fn main() {
-    let rounds: usize = std::env::var("ZENOH_BENCH_ROUNDS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(9);
-    let samples: usize = std::env::var("ZENOH_BENCH_SAMPLES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(200);
-    let rate_hz: f64 = std::env::var("ZENOH_BENCH_RATE_HZ")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(2000.0);
+    // `cargo test --all-targets` runs this main without `--bench`: a short smoke run then
+    // (every path once, a few samples), the full run only under `cargo bench`.
+    let bench = std::env::args().any(|a| a == "--bench");
+    let (rounds, samples) = if bench {
+        (
+            env_or("ZENOH_BENCH_ROUNDS", 9),
+            env_or("ZENOH_BENCH_SAMPLES", 200),
+        )
+    } else {
+        (1, 5)
+    };
+    let rate_hz: f64 = env_or("ZENOH_BENCH_RATE_HZ", 2000.0);
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -248,10 +257,13 @@ fn main() {
     // Warm up: routes learnt, threads running.
     let op_key = "hytask/bench/machine/op/set_optional_stop";
     let args = r#"{"on": true}"#;
-    query_rtts(&client, op_key, args, 20);
-    query_rtts(&client, "bare/op", "", 20);
-    port_delays(&sub_bridge, 20, |b| serde_json::from_slice(b).unwrap());
-    port_delays(&sub_bare, 20, |b| u64::from_le_bytes(b.try_into().unwrap()));
+    let warm = if bench { 20 } else { 2 };
+    query_rtts(&client, op_key, args, warm);
+    query_rtts(&client, "bare/op", "", warm);
+    port_delays(&sub_bridge, warm, |b| serde_json::from_slice(b).unwrap());
+    port_delays(&sub_bare, warm, |b| {
+        u64::from_le_bytes(b.try_into().unwrap())
+    });
 
     let mut op_ratio = (Vec::new(), Vec::new(), Vec::new()); // p50 ours/bare, p99, A/A p50
     let mut port_ratio = (Vec::new(), Vec::new(), Vec::new());
@@ -291,6 +303,15 @@ fn main() {
         port_ratio.2.push(pa2 / pa);
         port_abs.0.push(pa);
         port_abs.1.push(pb);
+    }
+    // The smoke run asserts only that every path worked (a number for every window).
+    for r in [&op_ratio, &port_ratio] {
+        assert!(
+            [&r.0, &r.1, &r.2]
+                .iter()
+                .all(|v| v.len() == rounds && v.iter().all(|x| x.is_finite() && *x > 0.0)),
+            "a window measured nothing"
+        );
     }
     println!("zenoh bridge vs bare zenoh, loopback, {rounds} rounds x {samples} samples (median of per-round ratios)");
     println!(

@@ -1,19 +1,21 @@
 //! The exporter: a machine's task interfaces on Zenoh (keys in [`super::keys`]).
 //!
-//! Two ordinary threads, never a realtime one:
+//! Ordinary threads, never a realtime one (plus the call workers of [`super::calls`]):
 //! - `zenoh-pub` publishes, every `1 / port_rate_hz`: each exported data-object port whose
 //!   value changed (through a lock-free [`crate::rt::json::JsonPortReader`]), every realtime
 //!   event queued since (a deferred subscription: the emitter never waits), the control
 //!   socket's event stream, and the status every `1 / status_rate_hz`;
 //! - `zenoh-query` answers queries under `hytask/<machine>/`: the task list, the status and
 //!   port values (from the publisher's cache), and control methods and task operations. A
-//!   call runs on a thread of its own, so a slow operation delays only its own reply; it is
+//!   call runs on a worker of a pool ([`super::calls`]: a worker per running call, threads
+//!   kept, none started per call), so a slow operation delays only its own reply; it is
 //!   answered with a timeout after `call_timeout_s`.
 //!
 //! Remote callers have the role of `[zenoh] role` and are checked like control-socket
 //! clients (`control::access`). Over a network (not local-only) a job cannot be loaded from
 //! a path on this host, only as text.
 
+use super::calls::{Calls, Reply};
 use super::{codec, keys, BridgeError};
 use crate::config::{ZenohConfig, ZenohRole};
 use crate::control::access::{self, Role};
@@ -23,8 +25,8 @@ use crate::machine::api::MachineApi;
 use crate::rt::json::{JsonEventReceiver, JsonPortReader};
 use serde_json::Value;
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use zenoh::bytes::Encoding;
@@ -92,7 +94,8 @@ impl Bridge {
             period: Duration::from_secs_f64(1.0 / cfg.port_rate_hz),
             status_period: Duration::from_secs_f64(1.0 / cfg.status_rate_hz),
         };
-        let server = Server {
+        let runner = machine.clone();
+        let mut server = Server {
             machine,
             prefix: prefix.clone(),
             cache,
@@ -101,8 +104,15 @@ impl Bridge {
                 ZenohRole::Operator => Role::Operator,
             },
             local: cfg.local_only(),
-            timeout: Duration::from_secs_f64(cfg.call_timeout_s),
-            calls: Arc::new(AtomicUsize::new(0)),
+            calls: Calls::start(
+                Arc::new(move |method: &str, params: Value| {
+                    methods::dispatch(&*runner, method, params)
+                        .map(codec::done)
+                        .map_err(|e| codec::control_failure(&e))
+                }),
+                MAX_CALLS,
+                Duration::from_secs_f64(cfg.call_timeout_s),
+            )?,
         };
         let spawn = |name: &str, f: Box<dyn FnOnce() + Send>| {
             std::thread::Builder::new()
@@ -315,12 +325,11 @@ struct Server {
     cache: Cache,
     role: Role,
     local: bool,
-    timeout: Duration,
-    calls: Arc<AtomicUsize>,
+    calls: Calls<Query>,
 }
 
 impl Server {
-    fn answer(&self, q: Query) {
+    fn answer(&mut self, q: Query) {
         let key = q.key_expr().as_str().to_owned();
         let Some(target) = keys::parse(&self.prefix, &key) else {
             return reply(
@@ -365,45 +374,20 @@ impl Server {
         }
     }
 
-    /// Runs `method` on a thread of its own and replies with its result or a timeout.
-    fn call(&self, q: Query, method: String, params: Value) {
+    /// Runs `method` on a call worker ([`super::calls`]), which replies with its result;
+    /// the deadline watcher replies "timeout" if it has none within `call_timeout_s`.
+    fn call(&mut self, q: Query, method: String, params: Value) {
         if let Err(e) = self.permitted(&method, &params) {
             return reply(&q, Err(codec::control_failure(&e)));
         }
-        if self.calls.fetch_add(1, Ordering::AcqRel) >= MAX_CALLS {
-            self.calls.fetch_sub(1, Ordering::AcqRel);
-            return reply(
-                &q,
+        if let Err(refused) = self.calls.submit(q, method, params) {
+            reply(
+                &refused.reply,
                 Err(codec::failure(
                     "rejected",
-                    format!("busy: {MAX_CALLS} calls running"),
+                    format!("busy: {} calls running", refused.running),
                 )),
             );
-        }
-        let (machine, calls, timeout) = (self.machine.clone(), self.calls.clone(), self.timeout);
-        let spawned = std::thread::Builder::new()
-            .name("zenoh-call".into())
-            .spawn(move || {
-                let (tx, rx) = mpsc::channel();
-                let worker = std::thread::Builder::new()
-                    .name("zenoh-call-run".into())
-                    .spawn(move || {
-                        let _ = tx.send(methods::dispatch(&*machine, &method, params));
-                    });
-                let r = match (worker, rx.recv_timeout(timeout)) {
-                    (Ok(_), Ok(r)) => r.map(codec::done).map_err(|e| codec::control_failure(&e)),
-                    (Ok(_), Err(_)) => Err(codec::failure(
-                        "timeout",
-                        format!("no final status within {:.1} s", timeout.as_secs_f64()),
-                    )),
-                    (Err(e), _) => Err(codec::failure("failed", e)),
-                };
-                reply(&q, r);
-                calls.fetch_sub(1, Ordering::AcqRel);
-            });
-        if let Err(e) = spawned {
-            self.calls.fetch_sub(1, Ordering::AcqRel);
-            tracing::error!("zenoh: cannot start a call thread: {e}");
         }
     }
 
@@ -426,6 +410,12 @@ impl Server {
             ));
         }
         Ok(())
+    }
+}
+
+impl Reply for Query {
+    fn send(self, r: Result<Value, Value>) {
+        reply(&self, r);
     }
 }
 

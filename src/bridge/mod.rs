@@ -5,8 +5,8 @@
 //! Time-critical loops stay local: the bridge runs on ordinary threads and meets the
 //! realtime tasks only through the lock-free primitives (data-object readers, deferred event
 //! subscriptions, the command queues behind the control methods). Keys are in [`keys`],
-//! payloads (JSON) in [`codec`], the session settings in [`session`] and the exporter in
-//! [`export`].
+//! payloads (JSON) in [`codec`], the session settings in [`session`], the exporter in
+//! [`export`] and its pool of call workers in [`calls`].
 //!
 //! Enabled by a `[zenoh]` table in the machine file (`config::zenoh`), local-only by default.
 //!
@@ -19,6 +19,7 @@
 //! plugins) next to the ROS graph, since `rmw_zenoh`'s router is an ordinary Zenoh router
 //! the bridge can connect to (`[zenoh] connect = ["tcp/127.0.0.1:7447"]`).
 
+pub mod calls;
 pub mod codec;
 pub mod export;
 pub mod keys;

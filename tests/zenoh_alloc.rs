@@ -1,0 +1,163 @@
+//! Proves that the servo thread allocates nothing while the Zenoh bridge exports the machine
+//! (issue 15: "the realtime side never touches the network"): the fast simulated mill
+//! deployed on its real periodic thread, the bridge subscribed to every realtime event of
+//! its tasks (deferred subscriptions: the emitter only queues) and publishing every output
+//! port at 1 kHz, a remote Zenoh peer subscribed to all of it and operating the machine
+//! through the bridge's calls (reset, on, home, a job, a task operation). A counting global
+//! allocator counts every allocation made inside a servo cycle on any thread.
+//!
+//! One test function on purpose: the count is process-wide, so nothing else may run beside it.
+//! Every wait is a hang guard, never a timing.
+#![allow(clippy::unwrap_used)]
+
+mod counting_alloc;
+mod support;
+
+use hytask::bridge::Bridge;
+use hytask::config::ZenohConfig;
+use serde_json::{json, Value};
+use std::collections::BTreeSet;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// Hang guard of every wait: a loaded host may run the machine slower than real time.
+const GUARD: Duration = Duration::from_secs(120);
+
+/// A query through the bridge; panics on an error reply.
+fn call(s: &zenoh::Session, key: &str, payload: Value) -> Value {
+    let replies = s
+        .get(key)
+        .payload(payload.to_string())
+        .timeout(GUARD)
+        .wait()
+        .unwrap();
+    let reply = replies.recv().unwrap();
+    match reply.result() {
+        Ok(sample) => serde_json::from_slice(&sample.payload().to_bytes()).unwrap(),
+        Err(e) => panic!("{key}: {:?}", e.payload().try_to_string()),
+    }
+}
+
+fn wait_until(
+    what: &str,
+    machine: &dyn hytask::machine::api::MachineApi,
+    f: impl Fn(&Value) -> bool,
+) {
+    let t0 = Instant::now();
+    loop {
+        let s = serde_json::to_value(machine.status()).unwrap();
+        if f(&s) {
+            return;
+        }
+        assert!(t0.elapsed() < GUARD, "waited too long for {what}: {s}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn the_servo_thread_allocates_nothing_while_the_bridge_exports_the_machine() {
+    assert_eq!(counting_alloc::in_rt_steps(), 0);
+    let machine = hytask::machine::deploy_from(Some(&support::fast_sim())).unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let cfg: ZenohConfig = toml::from_str(&format!(
+        "key = \"mill\"\nlisten = [\"{endpoint}\"]\nport_rate_hz = 1000.0\nstatus_rate_hz = 50.0"
+    ))
+    .unwrap();
+    let bridge = Bridge::start(machine.clone(), "mill", &cfg).unwrap();
+    assert!(!bridge.port_keys().is_empty(), "no port exported");
+
+    let mut c = zenoh::Config::default();
+    c.insert_json5("mode", "\"client\"").unwrap();
+    c.insert_json5("connect/endpoints", &json!([endpoint]).to_string())
+        .unwrap();
+    c.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    let s = zenoh::open(c).wait().unwrap();
+    // Kinds of key seen (`port`, `event`, `status`, `events`), counted on Zenoh's thread.
+    let seen = Arc::new(Mutex::new(BTreeSet::new()));
+    let seen2 = seen.clone();
+    let sub = s
+        .declare_subscriber("hytask/mill/**")
+        .callback(move |sample| {
+            let key = sample.key_expr().as_str();
+            let kind = match key.rsplit('/').collect::<Vec<_>>().as_slice() {
+                ["status", ..] => "status".to_owned(),
+                [_, kind, ..] => (*kind).to_owned(),
+                _ => key.to_owned(),
+            };
+            seen2.lock().unwrap().insert(kind);
+        })
+        .wait()
+        .unwrap();
+
+    // Operated from the remote peer: every call runs on the bridge's call workers and its
+    // command through the machine task's queue into servo cycles.
+    let t0 = Instant::now();
+    while s
+        .get("hytask/mill/control/estop.reset")
+        .timeout(GUARD)
+        .wait()
+        .unwrap()
+        .recv()
+        .is_err()
+    {
+        // The route to the queryable is still being learnt.
+        assert!(t0.elapsed() < GUARD, "the bridge never answered");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    call(&s, "hytask/mill/control/machine.on", Value::Null);
+    call(&s, "hytask/mill/control/home", Value::Null);
+    wait_until("homed and idle", &*machine, |s| {
+        s["mode"] == json!("idle")
+            && s["axes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|a| a["homed"] == json!(true))
+    });
+    let job = "G21 G90\nG0 X50 Y60 Z-5\nG1 X80 Y70 F3000\nG0 Z-2\nM2\n";
+    call(
+        &s,
+        "hytask/mill/control/job.load",
+        json!({"text": job, "name": "z.ngc"}),
+    );
+    call(&s, "hytask/mill/control/job.run", Value::Null);
+    wait_until("the job done", &*machine, |s| {
+        s["job"]["state"] == json!("done") && s["mode"] == json!("idle")
+    });
+    let r = call(
+        &s,
+        "hytask/mill/machine/op/set_optional_stop",
+        json!({"on": true}),
+    );
+    assert_eq!(r["status"], "done", "{r}");
+    wait_until("port, event and status publications", &*machine, |_| {
+        let seen = seen.lock().unwrap();
+        ["port", "event", "status"]
+            .iter()
+            .all(|k| seen.contains(*k))
+    });
+    assert!(
+        machine.servo_cycles() > 1000,
+        "the servo thread ran ({} cycles)",
+        machine.servo_cycles()
+    );
+
+    drop(sub);
+    let _ = s.close().wait();
+    bridge.stop();
+    machine.shutdown().unwrap();
+    let n = counting_alloc::in_rt_steps();
+    assert_eq!(
+        n,
+        0,
+        "allocations inside servo cycles with the bridge running; first one at:\n{}",
+        counting_alloc::first_rt_backtrace().unwrap_or_default()
+    );
+}
