@@ -23,6 +23,8 @@ pub mod calls;
 pub mod codec;
 pub mod export;
 pub mod keys;
+pub mod remote;
+pub mod remote_host;
 pub mod session;
 
 pub use export::Bridge;

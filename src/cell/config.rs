@@ -197,6 +197,31 @@ pub struct CellFile {
     /// `[control]`: the control socket, as for a machine.
     #[serde(default)]
     pub control: ControlConfig,
+    /// `[peers]`: cell tasks run by remote peers, `camera = "<remote>/<task>"`
+    /// (`cell::remote`).
+    #[serde(default, skip_serializing_if = "Peers::is_empty")]
+    pub peers: Peers,
+    /// `[[remote]]`: the remote peers `[peers]` names.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub remote: Vec<crate::config::remote::RemoteConfig>,
+    /// `[zenoh]`: the session remote peers are reached on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zenoh: Option<crate::config::ZenohConfig>,
+}
+
+/// `[peers]`.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Peers {
+    /// The camera task in another process: `"<remote>/<task>"`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<String>,
+}
+
+impl Peers {
+    fn is_empty(&self) -> bool {
+        self.camera.is_none()
+    }
 }
 
 /// Errors loading a cell file.

@@ -13,8 +13,9 @@
 //! and `selection.error_detected` also on topic `fault`.
 
 use super::config::CellFile;
-use super::deploy::deploy;
+use super::deploy::deploy_with;
 use super::names;
+use super::remote::RemoteCamera;
 use super::robot::RobotCmd;
 use super::selection::SelectionStatus;
 use super::types::{Container, RobotState, RobotStatus, RunDone, Setpoint, WorldTally};
@@ -51,6 +52,8 @@ pub struct CellDaemon {
     scripts: crate::script::ScriptHosts,
     /// Threads on simulated time (never realtime).
     simulated: bool,
+    /// The camera's peer process, if remote: kept open while the cell runs.
+    _remote: Option<RemoteCamera>,
 }
 
 /// How long [`CellDaemon`]'s `realtime` waits for every thread's first cycle (a hang
@@ -152,7 +155,17 @@ impl CellDaemon {
                 "mlockall failed (no CAP_IPC_LOCK or RLIMIT_MEMLOCK too low)",
             );
         }
-        let cell = deploy(cfg)?;
+        // A camera in another process (`[peers] camera`): reached before anything starts.
+        let remote = match &file.peers.camera {
+            Some(r) => Some(RemoteCamera::connect(
+                r,
+                &file.remote,
+                file.zenoh.as_ref(),
+                &cfg.name,
+            )?),
+            None => None,
+        };
+        let cell = deploy_with(cfg, remote.as_ref().map(RemoteCamera::proxy).transpose()?)?;
         let app = cell.deployment;
         let mut bridge = Bridge::subscribe(&app)?;
         let runtime = match cfg.sim_speed {
@@ -166,6 +179,9 @@ impl CellDaemon {
             setpoint: runtime.reader(names::SETPOINT)?,
         };
         let (events, _) = broadcast::channel(1024);
+        if let Some(r) = &remote {
+            r.watch(events.clone(), cell.robot.sender().clone());
+        }
         let stop_bridge = Arc::new(AtomicBool::new(false));
         let mut selection_status = runtime.reader::<SelectionStatus>(names::SELECTION_STATUS)?;
         let (tx, stop) = (events.clone(), stop_bridge.clone());
@@ -188,6 +204,7 @@ impl CellDaemon {
             bridge: Mutex::new(Some(thread)),
             scripts: cell.scripts,
             simulated: cfg.sim_speed.is_some(),
+            _remote: remote,
         }))
     }
 

@@ -11,6 +11,7 @@ use super::scripted::{self, ScriptLoadError, ScriptedSelection};
 use super::selection::{Selection, SelectionCmd, SelectionKind};
 use super::sensor::Sensor;
 use super::world::World;
+use crate::bridge::remote::RemoteProxy;
 use crate::rt::prelude::*;
 use crate::script::ScriptHosts;
 use std::sync::Arc;
@@ -48,6 +49,15 @@ pub const RANGE_MARGIN_MM: f64 = 5.0;
 
 /// Adds the cell's tasks to a new deployment and configures it.
 pub fn deploy(cfg: &CellConfig) -> Result<Cell, CellDeployError> {
+    deploy_with(cfg, None)
+}
+
+/// As [`deploy`], with the camera task replaced by `remote_camera` (a proxy of a camera in
+/// another process, [`super::remote`]) when given.
+pub fn deploy_with(
+    cfg: &CellConfig,
+    remote_camera: Option<RemoteProxy<CameraCmd>>,
+) -> Result<Cell, CellDeployError> {
     let mut app = Deployment::new();
     let servo = cfg.threads.servo.schedule();
     let (lo, hi) = (cfg.robot.min_mm, cfg.robot.max_mm);
@@ -74,11 +84,11 @@ pub fn deploy(cfg: &CellConfig) -> Result<Cell, CellDeployError> {
             (handle, Some((source, control)))
         }
     };
-    let camera = app.add_non_periodic(
-        names::CAMERA,
-        Camera::new(cfg.camera),
-        cfg.threads.selection.priority,
-    )?;
+    let prio = cfg.threads.selection.priority;
+    let camera = match remote_camera {
+        Some(proxy) => app.add_non_periodic(names::CAMERA, proxy, prio)?,
+        None => app.add_non_periodic(names::CAMERA, Camera::new(cfg.camera), prio)?,
+    };
     app.configure()?;
     let mut scripts = ScriptHosts::default();
     if let Some((source, control)) = script {

@@ -31,6 +31,7 @@ pub mod deploy;
 pub mod hw;
 pub mod pid;
 pub mod profile;
+pub mod remote;
 pub mod rng;
 pub mod robot;
 pub mod scripted;

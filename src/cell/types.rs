@@ -97,7 +97,9 @@ pub struct RobotStatus {
 }
 
 /// Kind of an object arriving at the pick position.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum ObjectKind {
     /// Belongs in container A.
@@ -174,7 +176,8 @@ pub struct WorldTally {
 
 /// What the camera sees at the camera position: the kind of the object held there, if any.
 /// Written by the `hw` task (the scene), read by the camera task when it grabs a frame.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+/// Serde: a remote camera receives it over Zenoh (`cell::remote`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct CameraScene {
     /// The object in view, if one is held within the camera's field.
     pub object: Option<ObjectKind>,

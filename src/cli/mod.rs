@@ -11,6 +11,7 @@ mod gcode;
 mod interrupt;
 mod latency;
 mod modbus_sim;
+mod peer;
 mod plan;
 mod plc;
 mod plot;
@@ -39,6 +40,9 @@ pub enum Command {
     Run(run::RunArgs),
     /// Run the pick-and-place cell (on an embedded daemon, or `--socket`) and report.
     RunCell(run_cell::RunCellArgs),
+    /// Host tasks without a machine, exported over Zenoh for remote peers (e.g. the cell's
+    /// camera: config/vision-peer.toml).
+    Peer(peer::PeerArgs),
     /// Talk to a running daemon: status, estop, home, jog, mdi, ...
     #[command(flatten)]
     Client(client::ClientCommand),
@@ -72,6 +76,7 @@ pub fn main() -> ExitCode {
         Command::Serve(a) => serve::run(a),
         Command::Run(a) => run::run(a),
         Command::RunCell(a) => run_cell::run(a),
+        Command::Peer(a) => peer::run(a),
         Command::Client(a) => client::run(a),
         Command::Check(a) => check::run(a),
         Command::Latency(a) => latency::run(a),

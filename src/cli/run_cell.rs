@@ -174,6 +174,13 @@ fn follow(mut c: Client, runs: u32) -> anyhow::Result<ExitCode> {
                 }
                 _ => {}
             },
+            // A remote peer lost (`cell::remote`), or the selection's own faults.
+            Some(ev) if ev.topic == "fault" => {
+                eprintln!(
+                    "hytask: fault: {}",
+                    ev.data["message"].as_str().unwrap_or("?")
+                );
+            }
             Some(_) => {}
             None => {
                 let s = c.call("status", Value::Null)?;

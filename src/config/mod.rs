@@ -44,6 +44,7 @@ mod io;
 mod machine;
 pub mod modbus;
 mod plc;
+pub mod remote;
 mod root;
 mod settings;
 mod spindle;

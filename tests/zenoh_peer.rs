@@ -1,0 +1,338 @@
+//! Remote peers (`hytask::bridge::remote`) in one process: a "remote" deployment served by
+//! `PeerHost` on one Zenoh session, a local deployment reaching its task through a
+//! `RemoteProxy` on another, linked over loopback TCP.
+//!
+//! Every wait is a hang guard (60 s), never a timing: the tests hold for any interleaving of
+//! the two sessions' threads.
+#![allow(clippy::unwrap_used)]
+
+use hytask::bridge::remote::{RemoteCommand, RemoteLink, RemoteProxy};
+use hytask::bridge::remote_host::{PeerHost, RunningPeer};
+use hytask::config::remote::RemoteConfig;
+use hytask::config::ZenohConfig;
+use hytask::rt::deploy::Runtime;
+use hytask::rt::prelude::*;
+use serde_json::{json, Value};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+const GUARD: Duration = Duration::from_secs(60);
+
+/// `work(ms)`: done `ms` after it was accepted, then emits `worked` (a count) and writes
+/// the count to `<task>.count`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum WorkCmd {
+    Work(i64),
+}
+
+const OPS: &[OperationDescriptor] = &[OperationDescriptor {
+    name: "work",
+    doc: "Work for ms milliseconds.",
+    params: &[ParamDescriptor {
+        name: "ms",
+        ty: ArgType::Int,
+    }],
+    next: NextCommand::AfterCompletion,
+}];
+
+impl Commands for WorkCmd {
+    fn operations() -> &'static [OperationDescriptor] {
+        OPS
+    }
+    fn operation_index(&self) -> usize {
+        0
+    }
+    fn from_args(op: &str, args: &[ArgValue]) -> Result<Self, ArgError> {
+        let a = Args::new(OPS, op, args)?;
+        Ok(WorkCmd::Work(a.int(0)?))
+    }
+}
+
+impl RemoteCommand for WorkCmd {
+    fn remote_args(&self) -> Value {
+        let WorkCmd::Work(ms) = self;
+        json!({ "ms": ms })
+    }
+}
+
+#[derive(Default)]
+struct Worker {
+    due_ns: u64,
+    count: u32,
+    worked: Option<EventSource<u32>>,
+    out: Option<DataWriter<u32>>,
+}
+
+impl Task for Worker {
+    type Command = WorkCmd;
+    fn configure(&mut self, ctx: &mut Configure<'_>) -> Result<(), TaskError> {
+        self.worked = Some(ctx.event("worked"));
+        self.out = Some(ctx.output(&format!("{}.count", ctx.task_name())));
+        Ok(())
+    }
+    fn update(&mut self, _: &StepContext) -> Result<(), TaskError> {
+        Ok(())
+    }
+    fn accept(&mut self, c: &WorkCmd, ctx: &StepContext) -> Result<(), RejectReason> {
+        let WorkCmd::Work(ms) = *c;
+        if ms < 0 {
+            return Err(RejectReason::BadParameters("ms must not be negative"));
+        }
+        self.due_ns = ctx.now_ns + ms as u64 * 1_000_000;
+        Ok(())
+    }
+    fn progress(&mut self, _: &WorkCmd, ctx: &StepContext) -> Progress {
+        if ctx.now_ns < self.due_ns {
+            return Progress::Running;
+        }
+        self.count += 1;
+        if let Some(e) = &mut self.worked {
+            e.emit(self.count);
+        }
+        if let Some(o) = &mut self.out {
+            o.set(self.count);
+        }
+        Progress::Done
+    }
+}
+
+const SCHED: Schedule = Schedule {
+    priority: 10,
+    period_ns: 2_000_000,
+    cpu: None,
+};
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn zenoh_cfg(listen: u16, connect: Option<u16>) -> ZenohConfig {
+    let connect = connect
+        .map(|p| format!("connect = [\"tcp/127.0.0.1:{p}\"]"))
+        .unwrap_or_default();
+    toml::from_str(&format!(
+        "listen = [\"tcp/127.0.0.1:{listen}\"]\n{connect}\nport_rate_hz = 200.0\ncall_timeout_s = 120.0\n"
+    ))
+    .unwrap()
+}
+
+fn remote_cfg(machine: &str, timeout_s: f64, critical: bool) -> RemoteConfig {
+    RemoteConfig {
+        name: "far".into(),
+        machine: Some(machine.into()),
+        timeout_s,
+        critical,
+        check: true,
+    }
+}
+
+/// A remote process stand-in: tasks `worker` and `other` served as `machine`.
+fn remote(machine: &str, port: u16) -> RunningPeer {
+    let cfg = zenoh_cfg(port, None);
+    let session = hytask::bridge::session::open(&cfg).unwrap();
+    let mut app = Deployment::new();
+    app.add_periodic("worker", Worker::default(), SCHED)
+        .unwrap();
+    app.add_periodic("other", Worker::default(), SCHED).unwrap();
+    app.configure().unwrap();
+    PeerHost::serve(session, app.start().unwrap(), machine, &cfg).unwrap()
+}
+
+struct Local {
+    rt: Runtime,
+    worker: TaskHandle<WorkCmd>,
+    other: TaskHandle<WorkCmd>,
+    worked: EventReceiver<u32>,
+    link: RemoteLink,
+    _session: zenoh::Session,
+}
+
+/// The local side: proxies `worker` and `other` of the remote, importing `worker`'s event
+/// and port.
+fn local(machine: &str, remote_port: u16, timeout_s: f64, critical: bool) -> Local {
+    let session =
+        hytask::bridge::session::open(&zenoh_cfg(free_port(), Some(remote_port))).unwrap();
+    let link = RemoteLink::connect(&session, &remote_cfg(machine, timeout_s, critical)).unwrap();
+    let proxy = RemoteProxy::<WorkCmd>::new(&link, "worker", "local")
+        .unwrap()
+        .event::<u32>("worked")
+        .unwrap()
+        .port::<u32>("worker.count")
+        .unwrap();
+    let mut app = Deployment::new();
+    let worker = app.add_periodic("worker", proxy, SCHED).unwrap();
+    let other = RemoteProxy::<WorkCmd>::new(&link, "other", "local").unwrap();
+    let other = app.add_periodic("other", other, SCHED).unwrap();
+    app.configure().unwrap();
+    let worked = app.event::<u32>("worker.worked").unwrap().subscribe(16);
+    Local {
+        rt: app.start().unwrap(),
+        worker,
+        other,
+        worked,
+        link,
+        _session: session,
+    }
+}
+
+fn wait_final(h: &CommandHandle) -> CommandStatus {
+    let s = h.wait(GUARD);
+    assert!(s.is_final(), "no final status within {GUARD:?}: {s:?}");
+    s
+}
+
+#[test]
+fn a_remote_operation_completes_and_its_event_and_port_arrive() {
+    let port = free_port();
+    let peer = remote("rt-far", port);
+    let mut l = local("rt-far", port, 30.0, false);
+    let h = l.worker.send(WorkCmd::Work(5)).unwrap();
+    assert_eq!(wait_final(&h), CommandStatus::Done);
+    let t0 = Instant::now();
+    let got = loop {
+        if let Some(n) = l.worked.pop() {
+            break n;
+        }
+        assert!(t0.elapsed() < GUARD, "the remote event never arrived");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert_eq!(got, 1);
+    let mut count = l.rt.reader::<u32>("worker.count").unwrap();
+    let t0 = Instant::now();
+    while count.latest() != Some(1) {
+        assert!(t0.elapsed() < GUARD, "the remote port never arrived");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // A remote rejection fails the command (accepted locally = forwarded).
+    let h = l.worker.send(WorkCmd::Work(-1)).unwrap();
+    assert_eq!(
+        wait_final(&h),
+        CommandStatus::Failed("remote peer rejected the operation")
+    );
+    assert!(
+        l.link.last_error().contains("ms must not be negative"),
+        "{}",
+        l.link.last_error()
+    );
+    l.rt.stop();
+    peer.stop();
+}
+
+#[test]
+fn missing_remote_names_are_refused_by_name() {
+    // Nobody serves this machine: refused after the configured timeout, naming the remote.
+    let session = hytask::bridge::session::open(&zenoh_cfg(free_port(), None)).unwrap();
+    let e = RemoteLink::connect(&session, &remote_cfg("nobody-here", 1.0, false))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("'far'") && e.contains("hytask/nobody-here/tasks"),
+        "{e}"
+    );
+    assert!(e.contains("within 1 s"), "{e}");
+
+    let port = free_port();
+    let peer = remote("names-far", port);
+    let s2 = hytask::bridge::session::open(&zenoh_cfg(free_port(), Some(port))).unwrap();
+    let link = RemoteLink::connect(&s2, &remote_cfg("names-far", 30.0, false)).unwrap();
+    let e = link
+        .require("ghost", &[], &[], &[])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no task 'ghost'") && e.contains("worker"), "{e}");
+    let e = link
+        .require("worker", &["nope"], &["nada"], &["zilch"])
+        .unwrap_err()
+        .to_string();
+    for name in [
+        "operation 'worker.nope'",
+        "event 'worker.nada'",
+        "port 'zilch'",
+    ] {
+        assert!(e.contains(name), "{name} not in: {e}");
+    }
+    let e = RemoteProxy::<WorkCmd>::new(&link, "worker", "l")
+        .unwrap()
+        .event::<u32>("missing")
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("event 'worker.missing'"), "{e}");
+    peer.stop();
+}
+
+#[test]
+fn a_slow_remote_delays_only_its_own_commands() {
+    let port = free_port();
+    let peer = remote("slow-far", port);
+    let l = local("slow-far", port, 3.0, false);
+    // `worker` is busy far longer than timeout_s: its command fails with the timeout...
+    let slow = l.worker.send(WorkCmd::Work(600_000)).unwrap();
+    // ... while `other`, another remote task behind another proxy, answers meanwhile.
+    let quick = l.other.send(WorkCmd::Work(1)).unwrap();
+    assert_eq!(wait_final(&quick), CommandStatus::Done);
+    assert_eq!(
+        wait_final(&slow),
+        CommandStatus::Failed("remote peer: no final status within timeout_s")
+    );
+    assert!(
+        l.link.last_error().contains("worker.work"),
+        "{}",
+        l.link.last_error()
+    );
+    l.rt.stop();
+    peer.stop();
+}
+
+#[test]
+fn a_lost_critical_remote_fails_pending_commands_and_calls_the_stop_hook() {
+    let port = free_port();
+    let peer = remote("lost-far", port);
+    let l = local("lost-far", port, 600.0, true);
+    let stops = Arc::new(AtomicU32::new(0));
+    let message = Arc::new(Mutex::new(String::new()));
+    let (s, m) = (stops.clone(), message.clone());
+    l.link.on_lost(move |msg, critical| {
+        assert!(critical);
+        *m.lock().unwrap() = msg.to_owned();
+        s.fetch_add(1, Ordering::AcqRel);
+    });
+    let mut lost = l.rt.event::<u32>("worker.peer_lost").unwrap().subscribe(4);
+    let pending = l.worker.send(WorkCmd::Work(600_000)).unwrap();
+    let t0 = Instant::now();
+    while pending.status() != CommandStatus::Accepted {
+        assert!(t0.elapsed() < GUARD, "not accepted: {:?}", pending.status());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // The remote goes away: its liveliness token is withdrawn.
+    peer.stop();
+    // Long before the 600 s timeout, the pending command fails as lost.
+    assert_eq!(
+        wait_final(&pending),
+        CommandStatus::Failed("remote peer lost")
+    );
+    let t0 = Instant::now();
+    while stops.load(Ordering::Acquire) == 0 || lost.pop().is_none() {
+        assert!(t0.elapsed() < GUARD, "no stop hook or peer_lost event");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(
+        message.lock().unwrap().contains("'far'"),
+        "{}",
+        message.lock().unwrap()
+    );
+    assert!(!l.link.alive());
+    // New commands are refused while it is lost.
+    let h = l.worker.send(WorkCmd::Work(1)).unwrap();
+    assert_eq!(
+        wait_final(&h),
+        CommandStatus::Rejected(RejectReason::Other("remote peer lost"))
+    );
+    l.rt.stop();
+}
