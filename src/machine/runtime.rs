@@ -86,8 +86,11 @@ struct ActiveJob {
     /// or plan); the machine task only sees the abort this causes.
     error: Option<String>,
     /// A probing job's persistent parameters from its live run (see `probing`).
-    measured: Arc<Mutex<Option<crate::gcode::VarFile>>>,
+    measured: Measured,
 }
+
+/// A probing job's persistent parameters from its live run, once its last piece is read.
+type Measured = Arc<Mutex<Option<crate::gcode::VarFile>>>;
 
 #[derive(Default)]
 struct JobBook {
@@ -743,10 +746,7 @@ impl Machine {
         job: &PreparedJob,
         id: u32,
         cancel: &Arc<AtomicBool>,
-        (messages, measured): (
-            &Arc<Mutex<Vec<String>>>,
-            &Arc<Mutex<Option<crate::gcode::VarFile>>>,
-        ),
+        (messages, measured): (&Arc<Mutex<Vec<String>>>, &Measured),
     ) -> Result<(std::thread::JoinHandle<()>, u64), ApiError> {
         if self.config.motion.probe_input.is_none() {
             let line = job::first_probe_line_of(job).unwrap_or(0);
