@@ -3,7 +3,8 @@
 # program (generated here into target/gcode-bench/, never committed), both writing to
 # /dev/null, measured side by side with hyperfine (apt install hyperfine). Release build.
 #
-#   benches/gcode_vs_rs274.sh [lines]      (default 150000 lines; RUNS=n to change runs)
+#   benches/gcode_vs_rs274.sh [lines]      (default 150000 lines; RUNS=n to change runs;
+#                                           HYTASK_BIN=path to time a given build)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 lines="${1:-150000}"
@@ -14,8 +15,11 @@ prog="$out/large.ngc"
 command -v rs274 >/dev/null || { echo "rs274 not found (apt install linuxcnc-uspace)"; exit 1; }
 command -v hyperfine >/dev/null || { echo "hyperfine not found (apt install hyperfine)"; exit 1; }
 
-cargo build --release --quiet
-hy=target/release/hytask
+# HYTASK_BIN=path times an already built binary instead (e.g. two builds side by side).
+if [ -z "${HYTASK_BIN:-}" ]; then
+  cargo build --release --quiet
+fi
+hy="${HYTASK_BIN:-target/release/hytask}"
 tbl=tests/gcode/corpus/tool.tbl
 
 # CAM-style program: raster of short G1 moves, arcs, and a drilling block with a tool
@@ -45,8 +49,14 @@ else
   echo "WARNING: traces differ on the benchmark program"
 fi
 
+# HYTASK_BASE=path adds an earlier build to the same run (before/after an optimisation).
+base=()
+if [ -n "${HYTASK_BASE:-}" ]; then
+  base=(-n hytask-base "$HYTASK_BASE gcode canon --tool-table $tbl $prog > /dev/null")
+fi
 hyperfine --warmup 2 --runs "${RUNS:-10}" --export-json "$out/result.json" \
   -n hytask "$hy gcode canon --tool-table $tbl $prog > /dev/null" \
+  "${base[@]}" \
   -n rs274 "rs274 -t $tbl -g $prog > /dev/null 2>&1"
 
 python3 - "$out/result.json" "$total" <<'PY'
@@ -55,4 +65,8 @@ r = {x["command"]: x for x in json.load(open(sys.argv[1]))["results"]}
 n = int(sys.argv[2])
 h, s = r["hytask"]["mean"], r["rs274"]["mean"]
 print(f"hytask: {n / h / 1e6:.2f} M lines/s   rs274: {n / s / 1e6:.3f} M lines/s   ratio: {s / h:.1f}x")
+for name, x in r.items():
+    u = x["user"] + x["system"]
+    print(f"  {name}: mean {x['mean'] * 1e3:.1f} ms, user+sys {u * 1e3:.1f} ms, wall ratio {s / x['mean']:.1f}x, "
+          f"CPU ratio {(r['rs274']['user'] + r['rs274']['system']) / u:.1f}x")
 PY

@@ -74,3 +74,35 @@ fn a_finished_job_saves_its_offsets_and_the_next_daemon_starts_from_them() {
     hytask::daemon::Deployed::shutdown(&*m).unwrap();
     assert_eq!(value(&var, 5241).as_deref(), Some("12.500000"));
 }
+
+/// A probing job runs piece by piece with the measured probe results; its dry run (before
+/// motion) used rs274's simulated probe, which trips at the end of the move. The var file
+/// must hold what the program computed from the measurement, not from the dry run.
+#[test]
+fn a_probing_job_saves_the_offsets_it_measured_not_those_of_its_dry_run() {
+    let dir = tempfile::tempdir().unwrap();
+    // The touch plate's top is at Z-10; the probe move goes to Z-20.
+    let config = support::sim_clock_config(dir.path(), 0, Some(-10.0));
+    let mut text = std::fs::read_to_string(&config).unwrap();
+    text.push_str("\n[gcode]\nvar_file = \"m.var\"\n");
+    std::fs::write(&config, text).unwrap();
+    let var = dir.path().join("m.var");
+    std::fs::write(&var, "5220\t1\n").unwrap();
+
+    let m = deploy(&config);
+    // Touch off: G54's Z zero becomes the plate's top (G10 L20 sets the offset so that the
+    // current position is Z0), then move clear above it.
+    run(
+        &m,
+        "G21 G90\nG0 X20 Y20 Z-2\nG38.2 Z-20 F300\nG10 L20 P1 Z0\nG0 Z5\nM2\n",
+    );
+    let z: f64 = value(&var, 5223).unwrap().parse().unwrap();
+    assert!(
+        (-11.0..=-10.0).contains(&z),
+        "G54 Z offset {z}: the plate is at -10, the probe stops a little past it (the dry \
+         run's probe ends near -20)"
+    );
+    hytask::daemon::Deployed::shutdown(&*m).unwrap();
+    let z: f64 = value(&var, 5223).unwrap().parse().unwrap();
+    assert!((-11.0..=-10.0).contains(&z), "after shutdown: {z}");
+}

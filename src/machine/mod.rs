@@ -13,6 +13,7 @@ pub mod runtime;
 pub mod safety;
 pub mod scripts;
 pub mod servo;
+pub mod sim_spindle;
 pub mod task_api;
 
 pub use runtime::{DeployError, Machine};

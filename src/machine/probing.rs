@@ -93,6 +93,10 @@ pub struct PieceRunner {
     /// The job's `(MSG, …)` texts: each piece's are appended, and the message ids of its
     /// queue items shifted to match (each piece's plan numbers its own from 0).
     pub messages: Arc<Mutex<Vec<String>>>,
+    /// The persistent parameters as the live run leaves them, set once the last piece is
+    /// interpreted (before it is queued, so before the job can end "done"): the var file is
+    /// saved from these, not from the dry run's simulated probes (issue 13).
+    pub parameters: Arc<Mutex<Option<crate::gcode::VarFile>>>,
 }
 
 /// Appends a piece's message texts to the job's and renumbers the piece's message items.
@@ -127,6 +131,9 @@ impl PieceRunner {
             plan,
             more,
         } = first;
+        if !more {
+            self.keep_parameters(&session);
+        }
         if !self.feed(&plan.items) || !more {
             return RunnerEnd::Done;
         }
@@ -151,6 +158,9 @@ impl PieceRunner {
                 Err(e) => return RunnerEnd::Failed(format!("{}: {e}", self.name)),
             };
             append_messages(&mut plan, &self.messages);
+            if !matches!(end, PieceEnd::Probe { .. }) {
+                self.keep_parameters(&session);
+            }
             // Queue what fits, release the machine, then queue the rest as it drains: the
             // interpolator consumes nothing until `continue`, so a piece longer than the
             // queue would otherwise never fit.
@@ -172,6 +182,11 @@ impl PieceRunner {
                 return RunnerEnd::Done;
             }
         }
+    }
+
+    /// Records the parameters of a session that has interpreted its last piece.
+    fn keep_parameters(&self, session: &Session) {
+        *self.parameters.lock().unwrap_or_else(|p| p.into_inner()) = Some(session.parameters());
     }
 
     /// Waits until the machine publishes the result of this job's next probe; `None` when

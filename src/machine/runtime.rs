@@ -85,7 +85,12 @@ struct ActiveJob {
     /// Why the job failed off the realtime path (a piece after a probe did not interpret
     /// or plan); the machine task only sees the abort this causes.
     error: Option<String>,
+    /// A probing job's persistent parameters from its live run (see `probing`).
+    measured: Measured,
 }
+
+/// A probing job's persistent parameters from its live run, once its last piece is read.
+type Measured = Arc<Mutex<Option<crate::gcode::VarFile>>>;
 
 #[derive(Default)]
 struct JobBook {
@@ -643,6 +648,7 @@ impl Machine {
         let id = self.next_job.fetch_add(1, Ordering::Relaxed);
         let cancel = Arc::new(AtomicBool::new(false));
         let messages = Arc::new(Mutex::new(Vec::new()));
+        let measured = Arc::new(Mutex::new(None));
         let (feeder, items) = match &job.probing {
             None => {
                 lock(&messages).clone_from(&job.plan.messages);
@@ -676,7 +682,7 @@ impl Machine {
                     .map_err(|e| ApiError::Failed(format!("cannot start the feeder: {e}")))?;
                 (feeder, job.item_count())
             }
-            Some(src) => self.start_piece_runner(src, &job, id, &cancel, &messages)?,
+            Some(src) => self.start_piece_runner(src, &job, id, &cancel, (&messages, &measured))?,
         };
         let mut book = lock(&self.book);
         book.status = JobStatus {
@@ -700,6 +706,7 @@ impl Machine {
             manual,
             messages,
             error: None,
+            measured,
         });
         drop(book);
         if let Some(mut p) = previous {
@@ -739,7 +746,7 @@ impl Machine {
         job: &PreparedJob,
         id: u32,
         cancel: &Arc<AtomicBool>,
-        messages: &Arc<Mutex<Vec<String>>>,
+        (messages, measured): (&Arc<Mutex<Vec<String>>>, &Measured),
     ) -> Result<(std::thread::JoinHandle<()>, u64), ApiError> {
         if self.config.motion.probe_input.is_none() {
             let line = job::first_probe_line_of(job).unwrap_or(0);
@@ -768,6 +775,7 @@ impl Machine {
             seen_probe_seq: self.snapshot().machine.probe.seq,
             servo: self.servo.clone(),
             messages: messages.clone(),
+            parameters: measured.clone(),
         };
         let book = self.book.clone();
         let machine = self.machine.clone();

@@ -78,6 +78,7 @@ pub mod moves;
 pub mod nurbs;
 pub mod profile;
 pub mod segment;
+pub mod spindle_lock;
 pub mod spindle_sync;
 pub mod stream;
 pub mod svg;

@@ -386,7 +386,8 @@ impl<'a> Interp<'a> {
         let expect = (src.lines.len() + 32).min(self.opts.limits.max_canon);
         match &mut self.out {
             Sink::Canon(v) => v.reserve(expect.min(self.yield_after)),
-            Sink::Trace { buf, .. } => buf.reserve(expect * 64),
+            // About 75 bytes per call of a CAM program's trace: no regrowth on the way.
+            Sink::Trace { buf, .. } => buf.reserve(expect * 80),
         }
         self.files.push(src);
         self.loc = SourceLoc {
@@ -510,12 +511,19 @@ impl<'a> Interp<'a> {
     /// line after the `M98` go through this too).
     pub(super) fn block_of(&mut self, words: &[parser::Word]) -> Result<Block, GcodeError> {
         let mut b = Block::default();
+        self.block_into(words, &mut b)?;
+        Ok(b)
+    }
+
+    /// [`block_of`](Self::block_of) into a block the caller holds: the hot path of every
+    /// line, where returning the block (some 700 bytes) by value cost a memcpy per line.
+    fn block_into(&mut self, words: &[parser::Word], b: &mut Block) -> Result<(), GcodeError> {
         for w in words {
             self.loc.col = w.col;
             let v = expr::eval(&w.value, &*self).map_err(|m| self.err(w.col, m))?;
             b.add(w.letter, v, w.col).map_err(|(c, m)| self.err(c, m))?;
         }
-        Ok(b)
+        Ok(())
     }
 
     fn exec_line(&mut self, line: &Line) -> Result<(), GcodeError> {
@@ -525,7 +533,8 @@ impl<'a> Interp<'a> {
         if self.fanuc_line(line)? {
             return Ok(());
         }
-        let mut b = self.block_of(&line.words)?;
+        let mut b = Block::default();
+        self.block_into(&line.words, &mut b)?;
         self.diameter_words(&mut b);
         let mut sets: Vec<(Result<usize, Box<str>>, f64)> = Vec::with_capacity(line.assigns.len());
         for a in &line.assigns {

@@ -226,8 +226,14 @@ fn handle_job_event(m: &Machine, news: JobNews) {
                 book.status.distance_to_go_mm = 0.0;
                 // The job ran to its end: its persistent parameters become the machine's
                 // (issue 13; a small file, written on this non-realtime thread).
-                if let (Some(p), Some(v)) = (&m.params, &a.job.parameters) {
-                    if let Err(e) = p.commit(v.clone()) {
+                // A probing job's are those of its live run, not of its dry run.
+                let measured = lock(&a.measured).take();
+                let v = match a.job.probing {
+                    Some(_) => measured,
+                    None => a.job.parameters.clone(),
+                };
+                if let (Some(p), Some(v)) = (&m.params, v) {
+                    if let Err(e) = p.commit(v) {
                         tracing::warn!("saving {}: {e}", p.path().display());
                     }
                 }

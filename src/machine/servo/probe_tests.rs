@@ -56,6 +56,7 @@ fn run_probing(r: &mut Rig, text: &str, surface_z: Option<f64>) -> Outcome {
         seen_probe_seq: 0,
         servo: r.rt.threads()[0].clone(),
         messages: Arc::default(),
+        parameters: Arc::default(),
     };
     let thread = std::thread::spawn(move || runner.run(first));
     let h = r
