@@ -72,7 +72,7 @@ fn same_behaviour(name: &str, fused: &mut Program, plain: &mut Program, scans: i
 
 fn both(name: &str, src: &str) -> Option<(Program, Program)> {
     let opts = Options { budget: 20_000 };
-    let fused = compile(name, src, opts.clone()).ok()?;
+    let fused = compile(name, src, opts).ok()?;
     let plain = compile_unfused(name, src, opts).unwrap();
     Some((fused, plain))
 }

@@ -180,9 +180,8 @@ fn pass(
             .unwrap_or(n.min(i + 3));
         match rule(&ops[i..end], i) {
             Some((op, used)) => {
-                for j in i + 1..i + used {
-                    map[j] = map[i];
-                }
+                let to = map[i];
+                map[i + 1..i + used].fill(to);
                 if let Some(op) = op {
                     new_ops.push(op);
                     // The last instruction is the one that can fault or be reported.
