@@ -31,6 +31,12 @@ pub enum PieceEnd {
         /// Where the G38 block is.
         loc: SourceLoc,
     },
+    /// The last line of the piece waits for an input (M66): call [`Session::wait_result`]
+    /// with what the machine read before the next piece.
+    Wait {
+        /// Where the M66 block is.
+        loc: SourceLoc,
+    },
     /// The program ended (M2/M30, closing `%`, end of MDI text).
     End,
 }
@@ -84,6 +90,14 @@ impl Session {
                 message: "internal: the probe result of this line was not given".into(),
             });
         }
+        if let Some(loc) = &self.it.pending_wait {
+            return Err(GcodeError {
+                file: loc.file.to_string(),
+                line: loc.line,
+                col: loc.col,
+                message: "internal: the M66 result of this line was not given".into(),
+            });
+        }
         if !self.it.ended() {
             self.it.resume()?;
         }
@@ -96,7 +110,10 @@ impl Session {
                 kind: p.kind,
                 loc: p.loc.clone(),
             },
-            None => PieceEnd::End,
+            None => match &self.it.pending_wait {
+                Some(loc) => PieceEnd::Wait { loc: loc.clone() },
+                None => PieceEnd::End,
+            },
         };
         Ok((canon, end))
     }
@@ -104,6 +121,19 @@ impl Session {
     /// Hands the result of the probe that ended the last piece to the interpreter.
     pub fn probe_result(&mut self, r: &ProbeResult) {
         self.it.probe_result(r.tripped, &r.probed, &r.stopped);
+    }
+
+    /// Makes every M66 end a piece ([`PieceEnd::Wait`]), so that the lines after it see
+    /// the machine's answer in #5399 (off by default: the M66 is then passed on and #5399
+    /// keeps its value, as in the whole-program dry run).
+    pub fn live_waits(&mut self, on: bool) {
+        self.it.live_wait = on;
+    }
+
+    /// Hands the machine's answer to the M66 that ended the last piece to the interpreter:
+    /// #5399 becomes `value` (the input, or -1 when the wait timed out).
+    pub fn wait_result(&mut self, value: f64) {
+        self.it.wait_result(value);
     }
 
     /// The result `rs274` reports without a machine for the pending probe (not tripped;
@@ -125,7 +155,7 @@ impl Session {
 
     /// True once the program has ended.
     pub fn finished(&self) -> bool {
-        self.it.ended() && self.it.pending_probe.is_none()
+        self.it.ended() && self.it.pending_probe.is_none() && self.it.pending_wait.is_none()
     }
 }
 
@@ -280,6 +310,7 @@ mod tests {
                     assert_eq!(&m[0][..2], &[12.0, 1.0], "incremental move from the stop");
                     break;
                 }
+                PieceEnd::Wait { loc } => panic!("no M66 in this program, yet one at {loc:?}"),
             }
         }
         assert_eq!(pieces, 4);

@@ -40,8 +40,20 @@ impl Default for Options {
 
 /// Compiles `src` (the contents of `file`). Returns every error found.
 pub fn compile(file: &str, src: &str, opts: Options) -> Result<Program, Diags> {
+    compile_with(file, src, opts, true)
+}
+
+/// [`compile`] without the peephole pass: the plain code generator's output, the reference
+/// the fused code is tested against (`tests/plc_fusion.rs`).
+#[doc(hidden)]
+pub fn compile_unfused(file: &str, src: &str, opts: Options) -> Result<Program, Diags> {
+    compile_with(file, src, opts, false)
+}
+
+fn compile_with(file: &str, src: &str, opts: Options, fuse: bool) -> Result<Program, Diags> {
     let (unit, mut diags) = super::parser::parse(src);
     let mut c = Compiler::new(&unit);
+    c.fuse = fuse;
     c.diags.append(&mut diags);
     let prog = c.run(file, opts);
     if c.diags.is_empty() {
@@ -193,6 +205,8 @@ pub(crate) struct Compiler<'u> {
     spans: Vec<Span>,
     /// Calls to patch with their callee's entry: (op index, POU index).
     patches: Vec<(usize, usize)>,
+    /// Run the peephole pass (off only for the fusion tests' reference).
+    fuse: bool,
     entries: HashMap<usize, u32>,
     calls: HashSet<(usize, usize)>,
     // Current body.
@@ -228,6 +242,7 @@ impl<'u> Compiler<'u> {
             ops: Vec::new(),
             spans: Vec::new(),
             patches: Vec::new(),
+            fuse: true,
             entries: HashMap::new(),
             calls: HashSet::new(),
             locals: HashMap::new(),
@@ -405,7 +420,9 @@ impl<'u> Compiler<'u> {
             let mut entries: Vec<&mut u32> = programs.iter_mut().map(|(e, _)| e).collect();
             entries.extend(self.entries.values_mut());
             entries.extend(extra.iter_mut());
-            super::peephole::optimize(&mut self.ops, &mut self.spans, &mut entries);
+            if self.fuse {
+                super::peephole::optimize(&mut self.ops, &mut self.spans, &mut entries);
+            }
         }
         let stack = super::stack::max_depth(
             &self.ops,

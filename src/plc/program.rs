@@ -175,6 +175,10 @@ impl Program {
     pub fn code_len(&self) -> usize {
         self.ops.len()
     }
+    /// The compiled code, for inspection (what the peephole pass made of a program).
+    pub fn code(&self) -> &[Op] {
+        &self.ops
+    }
     /// Memory cells (8 bytes each) laid out for variables.
     pub fn memory_cells(&self) -> usize {
         self.mem.len()

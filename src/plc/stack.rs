@@ -22,6 +22,11 @@ fn effect(op: Op) -> (usize, usize) {
         Mux(n) => (n as usize + 1, 1),
         Call { .. } | Std { .. } | Jmp(_) | Ret | MovL(..) | SetL(..) => (0, 0),
         BinL(..) | BinC(..) => (1, 1),
+        BinLL(..) | BinLI(..) | BinLF(..) | JzL(..) | JfLL(..) | JfLI(..) | JfLF(..) => (0, 0),
+        BinLS(..) | BinCSI(..) | BinCSF(..) => (1, 0),
+        PushLL(..) | PushLI(..) | PushLF(..) => (0, 1),
+        BinS(..) => (2, 0),
+        LoadLL(..) => (0, 2),
     }
 }
 
@@ -41,7 +46,12 @@ pub fn max_depth(ops: &[Op], entries: impl Iterator<Item = u32>) -> usize {
         match ops[pc] {
             Op::Ret => {}
             Op::Jmp(t) => work.push((t as usize, after)),
-            Op::Jz(t) | Op::Jnz(t) => {
+            Op::Jz(t)
+            | Op::Jnz(t)
+            | Op::JzL(_, t)
+            | Op::JfLL(_, _, _, t)
+            | Op::JfLI(_, _, _, t)
+            | Op::JfLF(_, _, _, t) => {
                 work.push((t as usize, after));
                 work.push((pc + 1, after));
             }

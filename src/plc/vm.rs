@@ -109,9 +109,39 @@ pub enum Bin {
     MinMaxI(bool),
     /// Float min/max.
     MinMaxF(bool),
+    /// Integer divide by a constant that is not zero (fused only then: it cannot fault).
+    Div(IntKind),
+    /// Integer remainder by a constant that is not zero.
+    Mod(IntKind),
+}
+
+/// Integer `a / b` (`div`) or `a MOD b` of kind `k`, `b` not zero: truncating, the
+/// remainder with the sign of the dividend, 64-bit unsigned kinds unsigned, wrapped.
+#[inline(always)]
+fn div_rem(k: IntKind, a: u64, b: u64, div: bool) -> u64 {
+    let r = if k.bits() == 64 && !k.signed() {
+        if div {
+            a / b
+        } else {
+            a % b
+        }
+    } else if div {
+        (a as i64).wrapping_div(b as i64) as u64
+    } else {
+        (a as i64).wrapping_rem(b as i64) as u64
+    };
+    k.wrap(r as i64) as u64
 }
 
 impl Bin {
+    /// Whether its operands are floats (REAL/LREAL cells).
+    pub fn float(self) -> bool {
+        matches!(
+            self,
+            Bin::CmpF(_) | Bin::FAdd(_) | Bin::FSub(_) | Bin::FMul(_) | Bin::MinMaxF(_)
+        )
+    }
+
     /// `a op b`, exactly as the unfused instruction computes it.
     #[inline(always)]
     pub fn apply(self, a: u64, b: u64) -> u64 {
@@ -142,6 +172,8 @@ impl Bin {
                     b
                 }
             }
+            Bin::Div(k) => div_rem(k, a, b, true),
+            Bin::Mod(k) => div_rem(k, a, b, false),
         }
     }
 }
@@ -326,6 +358,40 @@ pub enum Op {
     MovL(u32, u32),
     /// Fused `Push(c)` + `StoreL(dst)`.
     SetL(u32, u64),
+    /// Fused `LoadL(x)` + `BinL(b, y)` + `StoreL(d)`: `mem[d] = mem[x] b mem[y]`, all
+    /// relative to the base.
+    BinLL(Bin, u32, u32, u32),
+    /// Fused `LoadL(x)` + `BinC(b, k)` + `StoreL(d)` with an integer constant that fits 32
+    /// bits (sign-extended to the cell).
+    BinLI(Bin, u32, i32, u32),
+    /// The same with a float constant that is exact in single precision.
+    BinLF(Bin, u32, f32, u32),
+    /// Fused `BinL(b, y)` + `StoreL(d)`: pop `a`, `mem[d] = a b mem[y]`.
+    BinLS(Bin, u32, u32),
+    /// A binary operation whose result is stored: pop `b`, `a`, `mem[base + d] = a op b`.
+    BinS(Bin, u32),
+    /// Fused `LoadL(x)` + `BinL(b, y)`: push `mem[x] b mem[y]`.
+    PushLL(Bin, u32, u32),
+    /// Fused `LoadL(x)` + `BinC(b, k)` with a 32-bit integer constant: push `mem[x] b k`.
+    PushLI(Bin, u32, i32),
+    /// The same with a single-precision float constant.
+    PushLF(Bin, u32, f32),
+    /// Fused `BinC(b, k)` + `StoreL(d)` with a 32-bit integer constant: pop `a`,
+    /// `mem[d] = a b k`.
+    BinCSI(Bin, i32, u32),
+    /// The same with a single-precision float constant.
+    BinCSF(Bin, f32, u32),
+    /// Fused `LoadL(x)` + `LoadL(y)`.
+    LoadLL(u32, u32),
+    /// Fused `LoadL(x)` + `Jz(t)`: jump if `mem[x]` is zero.
+    JzL(u32, u32),
+    /// Fused `LoadL(x)` + `BinL(b, y)` + `Jz(t)`: jump if `mem[x] b mem[y]` is zero
+    /// (false).
+    JfLL(Bin, u32, u32, u32),
+    /// Fused `LoadL(x)` + `BinC(b, k)` + `Jz(t)` with a 32-bit integer constant.
+    JfLI(Bin, u32, i32, u32),
+    /// The same with a single-precision float constant.
+    JfLF(Bin, u32, f32, u32),
 }
 
 /// The machine state of one scan, borrowed from the program's preallocated storage.
@@ -433,6 +499,67 @@ impl Vm<'_> {
                 Op::BinC(b, c) => st[sp - 1] = b.apply(st[sp - 1], c),
                 Op::MovL(s, d) => mem[base + d as usize] = mem[base + s as usize],
                 Op::SetL(d, c) => mem[base + d as usize] = c,
+                Op::BinLL(b, x, y, d) => {
+                    mem[base + d as usize] = b.apply(mem[base + x as usize], mem[base + y as usize])
+                }
+                Op::BinLI(b, x, k, d) => {
+                    mem[base + d as usize] = b.apply(mem[base + x as usize], k as i64 as u64)
+                }
+                Op::BinLF(b, x, k, d) => {
+                    mem[base + d as usize] = b.apply(mem[base + x as usize], (k as f64).to_bits())
+                }
+                Op::BinLS(b, y, d) => {
+                    let a = pop!();
+                    mem[base + d as usize] = b.apply(a, mem[base + y as usize]);
+                }
+                Op::BinS(b, d) => {
+                    let v = b.apply(st[sp - 2], st[sp - 1]);
+                    sp -= 2;
+                    mem[base + d as usize] = v;
+                }
+                Op::PushLL(b, x, y) => {
+                    push!(b.apply(mem[base + x as usize], mem[base + y as usize]))
+                }
+                Op::PushLI(b, x, k) => push!(b.apply(mem[base + x as usize], k as i64 as u64)),
+                Op::PushLF(b, x, k) => {
+                    push!(b.apply(mem[base + x as usize], (k as f64).to_bits()))
+                }
+                Op::BinCSI(b, k, d) => {
+                    let a = pop!();
+                    mem[base + d as usize] = b.apply(a, k as i64 as u64);
+                }
+                Op::BinCSF(b, k, d) => {
+                    let a = pop!();
+                    mem[base + d as usize] = b.apply(a, (k as f64).to_bits());
+                }
+                Op::LoadLL(x, y) => {
+                    push!(mem[base + x as usize]);
+                    push!(mem[base + y as usize]);
+                }
+                Op::JzL(x, t) => {
+                    if mem[base + x as usize] == 0 {
+                        charge!(t);
+                        pc = t as usize;
+                    }
+                }
+                Op::JfLL(b, x, y, t) => {
+                    if b.apply(mem[base + x as usize], mem[base + y as usize]) == 0 {
+                        charge!(t);
+                        pc = t as usize;
+                    }
+                }
+                Op::JfLI(b, x, k, t) => {
+                    if b.apply(mem[base + x as usize], k as i64 as u64) == 0 {
+                        charge!(t);
+                        pc = t as usize;
+                    }
+                }
+                Op::JfLF(b, x, k, t) => {
+                    if b.apply(mem[base + x as usize], (k as f64).to_bits()) == 0 {
+                        charge!(t);
+                        pc = t as usize;
+                    }
+                }
                 Op::LoadL(o) => push!(mem[base + o as usize]),
                 Op::LoadG(a) => push!(mem[a as usize]),
                 Op::StoreL(o) => mem[base + o as usize] = pop!(),
@@ -489,20 +616,8 @@ impl Vm<'_> {
                         pc -= 1;
                         fault!(FaultKind::DivisionByZero);
                     }
-                    let div = matches!(op, Op::Div(_));
-                    let r = if k.bits() == 64 && !k.signed() {
-                        if div {
-                            a / b
-                        } else {
-                            a % b
-                        }
-                    } else if div {
-                        (a as i64).wrapping_div(b as i64) as u64
-                    } else {
-                        (a as i64).wrapping_rem(b as i64) as u64
-                    };
                     sp -= 1;
-                    st[sp - 1] = k.wrap(r as i64) as u64;
+                    st[sp - 1] = div_rem(k, a, b, matches!(op, Op::Div(_)));
                 }
                 Op::Neg(k) => st[sp - 1] = k.wrap((st[sp - 1] as i64).wrapping_neg()) as u64,
                 Op::CmpI(c) => bin!(|a, b| c.test(a as i64, b as i64) as u64),

@@ -187,6 +187,13 @@ impl Interp<'_> {
         Ok(())
     }
 
+    /// Takes the machine's answer to the pending M66: the input's value (0/1 for a digital
+    /// input, the reading for an analog one) or -1 after a timeout, into #5399.
+    pub(crate) fn wait_result(&mut self, value: f64) {
+        self.pending_wait = None;
+        self.p.numbered[params::M66_RESULT] = value;
+    }
+
     fn io(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
         let col = self.loc.col;
         self.refuse_with_comp(col, "Cannot set outputs or wait for inputs (M62-M68)")?;
@@ -242,7 +249,15 @@ impl Interp<'_> {
                     input,
                     kind,
                     timeout_s: q,
-                })
+                })?;
+                // LinuxCNC's M66 is a queue buster: the interpreter stops after the line and
+                // reads the input (or -1 after a timeout) into #5399 before the next one. In
+                // a live session the machine answers (`Session::wait_result`); without one
+                // #5399 keeps its value, as rs274's GET_EXTERNAL_*_INPUT returns the default.
+                if self.live_wait {
+                    self.pending_wait = Some(self.loc.clone());
+                }
+                Ok(())
             }
             _ => {
                 let e = b

@@ -257,6 +257,11 @@ pub(crate) struct Interp<'a> {
     pub(crate) live_probe: bool,
     /// The probe of the line just executed, waiting for its result (live probing only).
     pub(crate) pending_probe: Option<PendingProbe>,
+    /// The M66 of the line just executed, waiting for the input's value or the timeout
+    /// (live sessions only): #5399 is set from the machine's answer.
+    pub(crate) pending_wait: Option<SourceLoc>,
+    /// M66 ends a piece (a live session whose machine answers with the input's value).
+    pub(crate) live_wait: bool,
     /// Streaming hook ([`crate::gcode::session::Chunked`]): `resume` returns once this many
     /// commands are collected, so a long program never holds all its commands at once.
     pub(crate) yield_after: usize,
@@ -319,6 +324,8 @@ impl<'a> Interp<'a> {
             steps: 0,
             live_probe: false,
             pending_probe: None,
+            pending_wait: None,
+            live_wait: false,
             yield_after: usize::MAX,
         };
         it.restore_persistent()?;
@@ -440,7 +447,7 @@ impl<'a> Interp<'a> {
                 ));
             }
             self.step(f, l)?;
-            if self.pending_probe.is_some() {
+            if self.pending_probe.is_some() || self.pending_wait.is_some() {
                 return Ok(());
             }
             if matches!(&self.out, Sink::Canon(v) if v.len() >= self.yield_after) {

@@ -1,0 +1,197 @@
+//! The peephole pass (superinstructions: three-address operations, compare-and-branch,
+//! fused loads and stores, dropped jumps to the next instruction) changes how many
+//! instructions a scan dispatches, never what it computes: every program of the corpus, the
+//! shipped programs and targeted cases run scan by scan both as compiled and as the plain
+//! code generator's output, with the same pseudo-random inputs, and every variable, every
+//! fault (kind, line) and every output must agree.
+#![allow(clippy::unwrap_used)]
+
+use hytask::plc::compile::compile_unfused;
+use hytask::plc::{compile, Options, Program, Ty, Value, VarKind};
+use std::path::Path;
+
+/// A small deterministic generator (xorshift), so failures reproduce.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+}
+
+fn random_value(ty: Ty, rng: &mut Rng) -> Option<Value> {
+    let r = rng.next();
+    Some(match ty {
+        Ty::Bool => Value::Bool(r & 1 == 1),
+        Ty::Int(_) => Value::Int((r % 41) as i64 - 20),
+        Ty::Real | Ty::LReal => Value::Real(((r % 4001) as f64 - 2000.0) / 7.0),
+        Ty::Time => Value::Time((r % 200) as i64 * 1_000_000),
+        _ => return None,
+    })
+}
+
+/// Runs `scans` scans of both versions with the same inputs (every input, and every local
+/// on a few scans, set at random) and compares all cells after each.
+fn same_behaviour(name: &str, fused: &mut Program, plain: &mut Program, scans: i64) {
+    assert_eq!(fused.vars(), plain.vars(), "{name}: same layout");
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    for n in 0..scans {
+        for (i, v) in plain.vars().to_vec().iter().enumerate() {
+            let poke = v.kind == VarKind::Input || (n % 7 == 3 && !v.constant);
+            if !poke || rng.next() % 3 == 0 {
+                continue;
+            }
+            let Some(val) = random_value(v.ty, &mut rng) else {
+                continue;
+            };
+            let id = hytask::plc::VarId(i as u32);
+            if plain.set(id, val).is_ok() {
+                fused.set(id, val).unwrap();
+            }
+        }
+        let now = n * 10_000_000;
+        let (a, b) = (fused.scan(&[], &mut [], now), plain.scan(&[], &mut [], now));
+        assert_eq!(a, b, "{name}: scan {n} result");
+        if a.is_err() {
+            fused.reset_fault();
+            plain.reset_fault();
+        }
+        for (i, v) in plain.vars().iter().enumerate() {
+            let id = hytask::plc::VarId(i as u32);
+            assert_eq!(
+                fused.cell(id),
+                plain.cell(id),
+                "{name}: scan {n}: {} differs",
+                v.name
+            );
+        }
+    }
+}
+
+fn both(name: &str, src: &str) -> Option<(Program, Program)> {
+    let opts = Options { budget: 20_000 };
+    let fused = compile(name, src, opts).ok()?;
+    let plain = compile_unfused(name, src, opts).unwrap();
+    Some((fused, plain))
+}
+
+#[test]
+fn corpus_and_shipped_programs_behave_the_same_fused() {
+    let mut files = Vec::new();
+    for dir in ["tests/plc/corpus", "config/plc"] {
+        for e in std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(dir)).unwrap() {
+            files.push(e.unwrap().path());
+        }
+    }
+    files.sort();
+    let mut ran = 0;
+    for f in files
+        .iter()
+        .filter(|f| f.extension().is_some_and(|e| e == "st"))
+    {
+        let src = std::fs::read_to_string(f).unwrap();
+        let name = f.display().to_string();
+        if let Some((mut fused, mut plain)) = both(&name, &src) {
+            same_behaviour(&name, &mut fused, &mut plain, 300);
+            ran += 1;
+        }
+    }
+    assert!(ran >= 10, "only {ran} programs compiled");
+}
+
+/// Each fused form, including the ones that must not fuse (constants that do not fit 32
+/// bits or single precision) and loops whose budget runs out at a fused backward branch.
+const CASES: &[(&str, &str)] = &[
+    (
+        "three-address and compare-and-branch, INT",
+        "PROGRAM T\nVAR_INPUT a, b : INT; END_VAR\nVAR c, d : INT; e : DINT; f : BOOL; END_VAR\n\
+         c := a + b; d := a * 3; e := INT_TO_DINT(a) * 100000;\n\
+         IF a > 5 THEN c := c - 1; END_IF;\n\
+         IF a <= b THEN d := d + 2; ELSIF a = -3 THEN d := 7; ELSE d := 0; END_IF;\n\
+         IF f THEN c := 0; END_IF; f := c > d;\n\
+         IF e > 2000000000 THEN e := 1; END_IF;\n\
+         IF e > 2000000000 THEN e := 1; END_IF;\nEND_PROGRAM\n",
+    ),
+    (
+        "REAL and LREAL constants",
+        "PROGRAM T\nVAR_INPUT x : REAL; y : LREAL; END_VAR\nVAR r : REAL; l : LREAL; b : BOOL; END_VAR\n\
+         r := x * 0.99; r := r + 0.5; l := y * 0.1; l := l - 1.0E300;\n\
+         IF x > 300.0 THEN r := 0.0; END_IF;\n\
+         IF y < 0.1 THEN l := y; END_IF;\n\
+         b := x >= 12.25; b := b AND (y <> 0.3);\n\
+         r := MAX(r, 10.0); l := MIN(l, y);\nEND_PROGRAM\n",
+    ),
+    (
+        "loops with fused backward branches",
+        "PROGRAM T\nVAR_INPUT n : INT; END_VAR\nVAR i, s : INT; k : DINT; END_VAR\n\
+         s := 0; i := 0;\n\
+         WHILE i < n DO s := s + i; i := i + 1; END_WHILE;\n\
+         REPEAT k := k + 1; UNTIL k > 3 END_REPEAT;\n\
+         FOR i := 1 TO n BY 2 DO IF i = 9 THEN EXIT; END_IF; s := s - 1; END_FOR;\nEND_PROGRAM\n",
+    ),
+    (
+        "a block's locals (base-relative) and globals",
+        "VAR_GLOBAL g : INT; gb : BOOL; END_VAR\n\
+         FUNCTION_BLOCK Acc\nVAR_INPUT in : INT; END_VAR\nVAR_OUTPUT sum : INT; END_VAR\n\
+         VAR last : INT; END_VAR\n\
+         IF in <> last THEN sum := sum + in; END_IF; last := in;\n\
+         IF sum > 100 THEN sum := sum - 100; END_IF;\nEND_FUNCTION_BLOCK\n\
+         PROGRAM T\nVAR_INPUT a : INT; END_VAR\nVAR acc : Acc; t : TON; q : BOOL; END_VAR\n\
+         acc(in := a); g := acc.sum + g; IF g > 1000 THEN g := 0; END_IF;\n\
+         t(IN := a > 0, PT := T#30ms); q := t.Q XOR gb; gb := NOT q;\nEND_PROGRAM\n",
+    ),
+];
+
+#[test]
+fn targeted_cases_behave_the_same_fused() {
+    for (name, src) in CASES {
+        let (mut fused, mut plain) = both(name, src).unwrap_or_else(|| panic!("{name}"));
+        assert!(
+            fused.code().len() < plain.code().len(),
+            "{name}: nothing fused"
+        );
+        same_behaviour(name, &mut fused, &mut plain, 400);
+    }
+}
+
+/// A loop that never ends faults at the same line fused and plain: the budget is charged at
+/// the backward branch, in the instructions the loop body dispatches (fewer when fused, so
+/// the fault comes after more iterations, but at the same place).
+#[test]
+fn an_endless_loop_faults_at_its_line_fused() {
+    let src = "PROGRAM T\nVAR i : INT; END_VAR\n\
+               WHILE i >= 0 DO\n  i := i + 1;\n  IF i > 100 THEN i := 0; END_IF;\nEND_WHILE;\nEND_PROGRAM\n";
+    let (mut fused, mut plain) = both("loop.st", src).unwrap();
+    let a = fused.scan(&[], &mut [], 0).unwrap_err();
+    let b = plain.scan(&[], &mut [], 0).unwrap_err();
+    assert_eq!((a.kind, a.line), (b.kind, b.line));
+    assert_eq!(a.line, 3, "the WHILE's line");
+}
+
+/// The benchmark's 10-statement pattern: what the superinstructions buy, as a bound that
+/// fails if the peephole pass stops firing.
+#[test]
+fn the_bench_pattern_shrinks() {
+    let src = "PROGRAM B\nVAR a, b, cnt, y : INT; x, q, flag : BOOL; r : REAL; t : TON; END_VAR\n\
+               a := a + b * 3;\nIF a > 1000 THEN\n  a := a - 1000;\nEND_IF;\n\
+               x := (a MOD 7 = 0) OR (flag AND NOT x);\nt(IN := x, PT := T#50ms);\n\
+               q := t.Q XOR flag;\nr := r * 0.99 + INT_TO_REAL(a) * 0.01;\n\
+               cnt := cnt + BOOL_TO_INT(q);\ny := LIMIT(0, cnt, 500);\nflag := r > 300.0;\nEND_PROGRAM\n";
+    let (mut fused, mut plain) = both("bench.st", src).unwrap();
+    let (f, p) = (fused.code().len(), plain.code().len());
+    assert!(
+        f * 2 <= p,
+        "fused {f} instructions, plain {p}: {:?}",
+        fused.code()
+    );
+    same_behaviour("bench", &mut fused, &mut plain, 300);
+}
+
+/// Superinstructions carry their constants in 32 bits so that an instruction stays 16 bytes:
+/// the code of a 2,000-statement program stays in cache.
+#[test]
+fn an_instruction_is_16_bytes() {
+    assert_eq!(std::mem::size_of::<hytask::plc::vm::Op>(), 16);
+}
