@@ -209,13 +209,6 @@ pub fn time_optimal_s(plan: &Plan, canon: &[Canon], cfg: &MotionConfig) -> Resul
 /// blend between two moves may run at either feed).
 fn path_nodes(tr: &trace::Trace, feed: &HashMap<u32, f64>) -> Vec<topp::Node> {
     let f_of = |line: u32| feed.get(&line).copied().unwrap_or(f64::INFINITY);
-    let dist = |a: &[f64; NUM_AXES], b: &[f64; NUM_AXES]| {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y) * (x - y))
-            .sum::<f64>()
-            .sqrt()
-    };
     let mut nodes = Vec::new();
     let Some(first) = tr.poses_mm.first() else {
         return nodes;
@@ -239,7 +232,7 @@ fn path_nodes(tr: &trace::Trace, feed: &HashMap<u32, f64>) -> Vec<topp::Node> {
             continue;
         }
         still = 0;
-        if dist(&p, &nodes[last].p) >= NODE_SPACING_MM {
+        if topp::distance_mm(&p, &nodes[last].p) >= NODE_SPACING_MM {
             nodes.push(topp::Node {
                 p,
                 feed_mm_s: f,

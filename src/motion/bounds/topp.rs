@@ -35,17 +35,23 @@ pub struct AxisLimits {
     pub acc: [f64; NUM_AXES],
 }
 
+/// Euclidean distance over all axes between two poses (the arc-length measure of the path
+/// nodes, shared with the node builder in `bounds`).
+pub(crate) fn distance_mm(a: &[f64; NUM_AXES], b: &[f64; NUM_AXES]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f64>()
+        .sqrt()
+}
+
 /// Tangent and curvature vectors at the nodes by finite differences over arc length.
 fn geometry(nodes: &[Node]) -> (Vec<f64>, Vec<[f64; NUM_AXES]>, Vec<[f64; NUM_AXES]>) {
     let n = nodes.len();
-    let dist = |a: &[f64; NUM_AXES], b: &[f64; NUM_AXES]| {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y) * (x - y))
-            .sum::<f64>()
-            .sqrt()
-    };
-    let h: Vec<f64> = nodes.windows(2).map(|w| dist(&w[0].p, &w[1].p)).collect();
+    let h: Vec<f64> = nodes
+        .windows(2)
+        .map(|w| distance_mm(&w[0].p, &w[1].p))
+        .collect();
     let chord = |k: usize| {
         let mut d = [0.0; NUM_AXES];
         for (i, d) in d.iter_mut().enumerate() {
