@@ -40,7 +40,7 @@ fn same_behaviour(name: &str, fused: &mut Program, plain: &mut Program, scans: i
     for n in 0..scans {
         for (i, v) in plain.vars().to_vec().iter().enumerate() {
             let poke = v.kind == VarKind::Input || (n % 7 == 3 && !v.constant);
-            if !poke || rng.next() % 3 == 0 {
+            if !poke || rng.next().is_multiple_of(3) {
                 continue;
             }
             let Some(val) = random_value(v.ty, &mut rng) else {
