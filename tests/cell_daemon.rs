@@ -12,7 +12,7 @@ use cell_support::expected_counts;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-use support::{ok, wait_event, wait_status, Daemon};
+use support::{err, ok, wait_event, wait_status, Daemon};
 
 const SEED: u64 = 42;
 
@@ -60,6 +60,12 @@ fn daemon_serves_the_cell_and_sorts_through_socket_calls() {
     wait_status(&mut c, "homed", Duration::from_secs(60), |s| {
         s["job"]["state"] == json!("homed")
     });
+    // The machine's motion methods are refused with what to use instead.
+    let (_, why) = err(&mut c, "mdi", json!({"line": "G0 X1"}));
+    assert!(
+        why.contains("mdi: this is a pick-and-place cell; use `call`"),
+        "{why}"
+    );
     let tasks = ok(&mut c, "tasks", Value::Null);
     let names: Vec<&str> = tasks
         .as_array()

@@ -63,12 +63,6 @@ impl PeerHost {
         })
     }
 
-    fn unsupported<T>(what: &str) -> Result<T, ApiError> {
-        Err(ApiError::NotSupported(format!(
-            "{what}: this is a peer process hosting tasks; use `call` on its tasks"
-        )))
-    }
-
     fn with_rt<T>(&self, f: impl FnOnce(&Runtime) -> Result<T, ApiError>) -> Result<T, ApiError> {
         match lock(&self.runtime).as_ref() {
             Some(rt) => f(rt),
@@ -91,6 +85,9 @@ impl RunningPeer {
 }
 
 impl MachineApi for PeerHost {
+    fn not_a_machine(&self) -> &'static str {
+        "this is a peer process hosting tasks; use `call` on its tasks"
+    }
     fn status(&self) -> Status {
         let threads = lock(&self.runtime)
             .as_ref()
@@ -115,49 +112,16 @@ impl MachineApi for PeerHost {
         }
     }
     fn estop(&self) -> Result<(), ApiError> {
-        Self::unsupported("estop")
+        Err(self.not_a_machine_error("estop"))
     }
     fn estop_reset(&self) -> Result<(), ApiError> {
-        Self::unsupported("estop.reset")
+        Err(self.not_a_machine_error("estop.reset"))
     }
     fn machine_on(&self) -> Result<(), ApiError> {
-        Self::unsupported("machine.on")
+        Err(self.not_a_machine_error("machine.on"))
     }
     fn machine_off(&self) -> Result<(), ApiError> {
-        Self::unsupported("machine.off")
-    }
-    fn home(&self, _: Option<&str>) -> Result<(), ApiError> {
-        Self::unsupported("home")
-    }
-    fn jog(&self, _: &JogRequest) -> Result<(), ApiError> {
-        Self::unsupported("jog")
-    }
-    fn jog_stop(&self) -> Result<(), ApiError> {
-        Self::unsupported("jog")
-    }
-    fn mdi(&self, _: &str) -> Result<(), ApiError> {
-        Self::unsupported("mdi")
-    }
-    fn job_load(&self, _: &JobSource) -> Result<JobInfo, ApiError> {
-        Self::unsupported("job.load")
-    }
-    fn job_run(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.run")
-    }
-    fn job_pause(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.pause")
-    }
-    fn job_resume(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.resume")
-    }
-    fn job_abort(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.abort")
-    }
-    fn job_step(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.step")
-    }
-    fn set_overrides(&self, _: &OverrideRequest) -> Result<Overrides, ApiError> {
-        Self::unsupported("override")
+        Err(self.not_a_machine_error("machine.off"))
     }
     fn tasks(&self) -> Vec<TaskInfo> {
         lock(&self.runtime)
@@ -188,12 +152,6 @@ impl MachineApi for PeerHost {
                 self.call_timeout.as_secs_f64()
             ))),
         }
-    }
-    fn set_sim_input(&self, _: &str, _: f64) -> Result<(), ApiError> {
-        Self::unsupported("sim.input")
-    }
-    fn sim_fault(&self, _: &SimFault) -> Result<(), ApiError> {
-        Self::unsupported("sim.fault")
     }
     fn subscribe(&self) -> broadcast::Receiver<MachineEvent> {
         self.events.subscribe()

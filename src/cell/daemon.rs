@@ -215,12 +215,6 @@ impl CellDaemon {
             .map_err(|e| ApiError::Failed(e.to_string()))?;
         task_api::call_reply(&h, names::ROBOT).map(|_| ())
     }
-
-    fn unsupported<T>(what: &str) -> Result<T, ApiError> {
-        Err(ApiError::NotSupported(format!(
-            "{what}: this is a pick-and-place cell; use `call` on its tasks"
-        )))
-    }
 }
 
 fn mode_of(robot: RobotState, selection: &SelectionStatus) -> Mode {
@@ -235,6 +229,9 @@ fn mode_of(robot: RobotState, selection: &SelectionStatus) -> Mode {
 }
 
 impl MachineApi for CellDaemon {
+    fn not_a_machine(&self) -> &'static str {
+        "this is a pick-and-place cell; use `call` on its tasks"
+    }
     fn status(&self) -> Status {
         let (robot, sel, tally, sp) = {
             let mut r = lock(&self.readers);
@@ -343,37 +340,7 @@ impl MachineApi for CellDaemon {
         self.robot_call(RobotCmd::SwitchOff)
     }
     fn home(&self, _: Option<&str>) -> Result<(), ApiError> {
-        Self::unsupported("home (the selection homes the robot: call selection stop)")
-    }
-    fn jog(&self, _: &JogRequest) -> Result<(), ApiError> {
-        Self::unsupported("jog")
-    }
-    fn jog_stop(&self) -> Result<(), ApiError> {
-        Self::unsupported("jog")
-    }
-    fn mdi(&self, _: &str) -> Result<(), ApiError> {
-        Self::unsupported("mdi")
-    }
-    fn job_load(&self, _: &JobSource) -> Result<JobInfo, ApiError> {
-        Self::unsupported("job.load")
-    }
-    fn job_run(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.run")
-    }
-    fn job_pause(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.pause")
-    }
-    fn job_resume(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.resume")
-    }
-    fn job_abort(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.abort")
-    }
-    fn job_step(&self) -> Result<(), ApiError> {
-        Self::unsupported("job.step")
-    }
-    fn set_overrides(&self, _: &OverrideRequest) -> Result<Overrides, ApiError> {
-        Self::unsupported("override")
+        Err(self.not_a_machine_error("home (the selection homes the robot: call selection stop)"))
     }
     fn tasks(&self) -> Vec<TaskInfo> {
         lock(&self.runtime)
@@ -399,10 +366,11 @@ impl MachineApi for CellDaemon {
         task_api::call_reply(&handle, task)
     }
     fn set_sim_input(&self, _: &str, _: f64) -> Result<(), ApiError> {
-        Self::unsupported("sim.input (call hw press_estop / release_estop / drop_object)")
+        Err(self
+            .not_a_machine_error("sim.input (call hw press_estop / release_estop / drop_object)"))
     }
     fn sim_fault(&self, _: &SimFault) -> Result<(), ApiError> {
-        Self::unsupported("sim.fault (call hw drop_object)")
+        Err(self.not_a_machine_error("sim.fault (call hw drop_object)"))
     }
     fn subscribe(&self) -> broadcast::Receiver<MachineEvent> {
         self.events.subscribe()

@@ -352,6 +352,16 @@ pub struct MachineEvent {
 pub trait MachineApi: Send + Sync + 'static {
     /// A snapshot of the whole machine.
     fn status(&self) -> Status;
+    /// Why this host refuses the motion, job and simulation methods when it is not a machine
+    /// (the pick-and-place cell, a peer process): their default implementations answer
+    /// "`<method>`: `<this>`", so such hosts implement only what they really offer.
+    fn not_a_machine(&self) -> &'static str {
+        "not supported by this host"
+    }
+    /// The error of a method this host does not offer (see [`MachineApi::not_a_machine`]).
+    fn not_a_machine_error(&self, what: &str) -> ApiError {
+        ApiError::NotSupported(format!("{what}: {}", self.not_a_machine()))
+    }
     /// Trip the e-stop: all axes quick-stop within one servo cycle.
     fn estop(&self) -> Result<(), ApiError>;
     /// Release the e-stop (the machine goes to `Off`).
@@ -361,25 +371,49 @@ pub trait MachineApi: Send + Sync + 'static {
     /// Disable drives after a controlled stop.
     fn machine_off(&self) -> Result<(), ApiError>;
     /// Home one axis (`Some("X")`) or all axes in order.
-    fn home(&self, axis: Option<&str>) -> Result<(), ApiError>;
+    fn home(&self, axis: Option<&str>) -> Result<(), ApiError> {
+        let _ = axis;
+        Err(self.not_a_machine_error("home"))
+    }
     /// Jog an axis.
-    fn jog(&self, req: &JogRequest) -> Result<(), ApiError>;
+    fn jog(&self, req: &JogRequest) -> Result<(), ApiError> {
+        let _ = req;
+        Err(self.not_a_machine_error("jog"))
+    }
     /// Stop a continuous jog with a controlled deceleration.
-    fn jog_stop(&self) -> Result<(), ApiError>;
+    fn jog_stop(&self) -> Result<(), ApiError> {
+        Err(self.not_a_machine_error("jog"))
+    }
     /// Execute one line of G-code.
-    fn mdi(&self, line: &str) -> Result<(), ApiError>;
+    fn mdi(&self, line: &str) -> Result<(), ApiError> {
+        let _ = line;
+        Err(self.not_a_machine_error("mdi"))
+    }
     /// Interpret and plan a job in full; refused as a whole on any error.
-    fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError>;
+    fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError> {
+        let _ = src;
+        Err(self.not_a_machine_error("job.load"))
+    }
     /// Start the loaded job.
-    fn job_run(&self) -> Result<(), ApiError>;
+    fn job_run(&self) -> Result<(), ApiError> {
+        Err(self.not_a_machine_error("job.run"))
+    }
     /// Feed hold.
-    fn job_pause(&self) -> Result<(), ApiError>;
+    fn job_pause(&self) -> Result<(), ApiError> {
+        Err(self.not_a_machine_error("job.pause"))
+    }
     /// Resume after a feed hold.
-    fn job_resume(&self) -> Result<(), ApiError>;
+    fn job_resume(&self) -> Result<(), ApiError> {
+        Err(self.not_a_machine_error("job.resume"))
+    }
     /// Abort with a controlled stop.
-    fn job_abort(&self) -> Result<(), ApiError>;
+    fn job_abort(&self) -> Result<(), ApiError> {
+        Err(self.not_a_machine_error("job.abort"))
+    }
     /// Run until the next source line, then hold.
-    fn job_step(&self) -> Result<(), ApiError>;
+    fn job_step(&self) -> Result<(), ApiError> {
+        Err(self.not_a_machine_error("job.step"))
+    }
     /// Optional stop on or off (whether M1 holds the job as M0 does); returns the new state.
     /// A machine without program stops does not support it.
     fn set_optional_stop(&self, on: bool) -> Result<bool, ApiError> {
@@ -387,7 +421,10 @@ pub trait MachineApi: Send + Sync + 'static {
         Err(ApiError::NotSupported("optional stop".into()))
     }
     /// Change overrides.
-    fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError>;
+    fn set_overrides(&self, req: &OverrideRequest) -> Result<Overrides, ApiError> {
+        let _ = req;
+        Err(self.not_a_machine_error("override"))
+    }
     /// The tasks with their interfaces.
     fn tasks(&self) -> Vec<TaskInfo>;
     /// Call a task operation by name with JSON arguments; returns its final status.
@@ -398,9 +435,15 @@ pub trait MachineApi: Send + Sync + 'static {
         args: &serde_json::Value,
     ) -> Result<serde_json::Value, ApiError>;
     /// Set a simulated input (sim backends only).
-    fn set_sim_input(&self, name: &str, value: f64) -> Result<(), ApiError>;
+    fn set_sim_input(&self, name: &str, value: f64) -> Result<(), ApiError> {
+        let _ = (name, value);
+        Err(self.not_a_machine_error("sim.input"))
+    }
     /// Inject a fault into a simulated drive or the servo thread (sim backends only).
-    fn sim_fault(&self, fault: &SimFault) -> Result<(), ApiError>;
+    fn sim_fault(&self, fault: &SimFault) -> Result<(), ApiError> {
+        let _ = fault;
+        Err(self.not_a_machine_error("sim.fault"))
+    }
     /// A receiver of machine events (for `subscribe`).
     fn subscribe(&self) -> tokio::sync::broadcast::Receiver<MachineEvent>;
     /// A JSON reader of data object `name` (exporters such as the Zenoh bridge; the reader
