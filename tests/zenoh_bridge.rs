@@ -7,6 +7,7 @@
 #![allow(clippy::unwrap_used)]
 
 mod support;
+mod zenoh_support;
 
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -14,16 +15,9 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 use support::Daemon;
 use zenoh::Wait;
+use zenoh_support::free_port;
 
 const GUARD: Duration = Duration::from_secs(60);
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// The simulated mill on a simulated clock with `[zenoh]` on `tcp/127.0.0.1:<port>`.
 fn daemon_with_zenoh(extra: &str) -> (Daemon, String, tempfile::TempDir) {

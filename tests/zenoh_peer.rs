@@ -6,6 +6,8 @@
 //! the two sessions' threads.
 #![allow(clippy::unwrap_used)]
 
+mod zenoh_support;
+
 use hytask::bridge::remote::{RemoteCommand, RemoteLink, RemoteProxy};
 use hytask::bridge::remote_host::{PeerHost, RunningPeer};
 use hytask::config::remote::RemoteConfig;
@@ -16,6 +18,7 @@ use serde_json::{json, Value};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+use zenoh_support::free_port;
 
 const GUARD: Duration = Duration::from_secs(60);
 
@@ -102,14 +105,6 @@ const SCHED: Schedule = Schedule {
     period_ns: 2_000_000,
     cpu: None,
 };
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 fn zenoh_cfg(listen: u16, connect: Option<u16>) -> ZenohConfig {
     let connect = connect

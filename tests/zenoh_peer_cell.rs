@@ -9,23 +9,17 @@
 #![allow(clippy::unwrap_used)]
 
 mod cell_support;
+mod zenoh_support;
 
 use hytask::control::client::Client;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+use zenoh_support::free_port;
 
 const SEED: u64 = 42;
 const GUARD: Duration = Duration::from_secs(120);
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 fn replace_once(text: &str, from: &str, to: &str) -> String {
     assert!(text.contains(from), "shipped config changed: no {from:?}");
