@@ -22,10 +22,7 @@ mod support;
 use hytask::control::client::Client;
 use hytask::modbus::sim::Sim;
 use serde_json::{json, Value};
-use std::collections::VecDeque;
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use support::{ok, ready, wait_status, Daemon};
 
@@ -43,35 +40,14 @@ fn desync(k: usize) {
     std::thread::sleep(Duration::from_micros(1000 + (k as u64 * 3779) % 10_000));
 }
 
-/// Reads the daemon's log (a full pipe would block it) and keeps the last lines.
-fn drain_log(daemon: &mut Daemon) -> Arc<Mutex<VecDeque<String>>> {
-    let tail = Arc::new(Mutex::new(VecDeque::new()));
-    let err = daemon.child.as_mut().unwrap().stderr.take().unwrap();
-    let keep = tail.clone();
-    std::thread::spawn(move || {
-        for line in BufReader::new(err).lines().map_while(Result::ok) {
-            let mut t = keep.lock().unwrap();
-            if t.len() == 40 {
-                t.pop_front();
-            }
-            t.push_back(line);
-        }
-    });
-    tail
-}
-
-fn wait_until(
-    what: &str,
-    log: &Mutex<VecDeque<String>>,
-    c: &mut Client,
-    sim: &Sim,
-    pred: impl Fn() -> bool,
-) {
+fn wait_until(what: &str, daemon: &Daemon, c: &mut Client, sim: &Sim, pred: impl Fn() -> bool) {
     let t0 = Instant::now();
     while !pred() {
         if t0.elapsed() > GUARD {
             let status = c.call("status", Value::Null);
-            let tail = Vec::from(log.lock().unwrap().clone()).join("\n");
+            let log = daemon.log();
+            let lines: Vec<&str> = log.lines().collect();
+            let tail = lines[lines.len().saturating_sub(40)..].join("\n");
             // Is the poller still polling?
             let r0 = sim.lock().requests;
             std::thread::sleep(Duration::from_millis(200));
@@ -112,8 +88,7 @@ fn main() {
     let (addr, _) = modbus_support::serve_sim(&sim);
     let dir = tempfile::tempdir().unwrap();
     let config = modbus_support::machine_config(dir.path(), &addr);
-    let mut daemon = Daemon::start(&config);
-    let log = drain_log(&mut daemon);
+    let daemon = Daemon::start(&config);
     let mut c = daemon.client();
     ready(&mut c);
 
@@ -130,7 +105,7 @@ fn main() {
             json!({ "line": if on { "M8" } else { "M9" } }),
         );
         let level = f64::from(u8::from(on));
-        wait_until("the coolant coil", &log, &mut c, &sim, || {
+        wait_until("the coolant coil", &daemon, &mut c, &sim, || {
             let s = sim.lock();
             s.get("coolant_flood").unwrap() == level
                 && s.changed_at("coolant_flood").unwrap() != before

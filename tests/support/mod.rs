@@ -64,19 +64,26 @@ pub struct Daemon {
     pub child: Option<Child>,
     pub socket: PathBuf,
     /// The daemon's stderr, read as it comes: a pipe nobody reads fills up (64 KiB) and then
-    /// blocks whichever daemon thread logs next.
-    stderr: Option<std::thread::JoinHandle<String>>,
+    /// blocks whichever daemon thread logs next. `log` holds what was read so far.
+    stderr: Option<std::thread::JoinHandle<()>>,
+    log: std::sync::Arc<std::sync::Mutex<String>>,
     _dir: tempfile::TempDir,
 }
 
-/// Reads `child`'s piped stderr to its end on a thread of its own.
-fn collect_stderr(child: &mut Child) -> std::thread::JoinHandle<String> {
-    let mut pipe = child.stderr.take().unwrap();
+/// Reads `child`'s piped stderr to its end on a thread of its own, line by line into `log`
+/// (so a bench or a hang guard can show the log while the daemon still runs).
+fn collect_stderr(
+    child: &mut Child,
+    log: std::sync::Arc<std::sync::Mutex<String>>,
+) -> std::thread::JoinHandle<()> {
+    let pipe = child.stderr.take().unwrap();
     std::thread::spawn(move || {
-        use std::io::Read;
-        let mut all = Vec::new();
-        let _ = pipe.read_to_end(&mut all);
-        String::from_utf8_lossy(&all).into_owned()
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(pipe).lines().map_while(Result::ok) {
+            let mut l = log.lock().unwrap();
+            l.push_str(&line);
+            l.push('\n');
+        }
     })
 }
 
@@ -141,17 +148,20 @@ impl Daemon {
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        let stderr = Some(collect_stderr(&mut child));
+        let log = std::sync::Arc::default();
+        let stderr = Some(collect_stderr(&mut child, std::sync::Arc::clone(&log)));
         let mut d = Daemon {
             child: Some(child),
             socket,
             stderr,
+            log,
             _dir: dir,
         };
         let t0 = Instant::now();
         while Client::connect(&d.socket).is_err() {
             if let Some(status) = d.child.as_mut().unwrap().try_wait().unwrap() {
-                let err = d.stderr.take().unwrap().join().unwrap();
+                d.stderr.take().unwrap().join().unwrap();
+                let err = d.log();
                 panic!("daemon exited ({status}) before opening its socket:\n{err}");
             }
             assert!(
@@ -161,6 +171,11 @@ impl Daemon {
             std::thread::sleep(Duration::from_millis(20));
         }
         d
+    }
+
+    /// The daemon's stderr so far.
+    pub fn log(&self) -> String {
+        self.log.lock().unwrap().clone()
     }
 
     /// A new client.
@@ -176,8 +191,8 @@ impl Daemon {
         let t0 = Instant::now();
         loop {
             if let Some(status) = child.try_wait().unwrap() {
-                let err = self.stderr.take().unwrap().join().unwrap();
-                return (status, err);
+                self.stderr.take().unwrap().join().unwrap();
+                return (status, self.log());
             }
             if t0.elapsed() > Duration::from_secs(60) {
                 let _ = child.kill();
