@@ -192,11 +192,24 @@ fn the_remote_camera_sorts_like_the_local_one_and_survives_a_peer_restart() {
     assert!(cell.child.try_wait().unwrap().is_none(), "{}", cell.log());
 
     // Restart the peer: the cell recovers (run-cell calls selection.stop) and sorts again.
+    // The run starts once the cell has seen the new peer's liveliness token (declared after
+    // its exporter is up); a run started before that fails with "no detection result".
+    let backs = cell.log().matches("is back").count();
     let peer2 = Proc::spawn(
         &["peer", "--config"],
         &peer_cfg,
         dir.path().join("peer2.log"),
     );
+    let t0 = Instant::now();
+    while cell.log().matches("is back").count() == backs {
+        assert!(
+            t0.elapsed() < GUARD,
+            "the cell never saw the restarted peer:\n{}\npeer:\n{}",
+            cell.log(),
+            peer2.log()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
     let (ok, out, err) = run_cell(&cell_cfg, &socket, 3);
     assert!(
         ok,
