@@ -117,6 +117,8 @@ pub enum Expr {
     Atan(Box<Expr>, Box<Expr>),
     /// `EXISTS[#<name>]`.
     Exists(Box<str>),
+    /// `EXISTS[#index]`: 1 when the (integer) index is a parameter number, as in rs274.
+    ExistsNumbered(Box<Expr>),
     /// `a op b`.
     Bin(BinOp, Box<Expr>, Box<Expr>),
 }
@@ -133,6 +135,13 @@ pub trait ParamSource {
 /// LinuxCNC's tolerance for `EQ`/`NE`.
 const TOLERANCE_EQUAL: f64 = 0.0001;
 
+/// How far from an integer a value read as an integer may be (rs274's `TOLERANCE_INCH`-like
+/// test in its integer reader: `#1.00001` is 1, `#1.001` an error).
+const TOLERANCE_INTEGER: f64 = 0.0001;
+
+/// rs274's parameter table size: numbered parameters are 1 to 5601.
+const MAX_PARAMETERS: f64 = crate::gcode::params::NUM_PARAMS as f64;
+
 /// Evaluates `e` against `src`. Errors carry LinuxCNC's wording.
 pub fn eval(e: &Expr, src: &dyn ParamSource) -> Result<f64, String> {
     match e {
@@ -146,6 +155,18 @@ pub fn eval(e: &Expr, src: &dyn ParamSource) -> Result<f64, String> {
             .ok_or_else(|| format!("Named parameter #<{n}> not defined")),
         Expr::Neg(v) => Ok(-eval(v, src)?),
         Expr::Exists(n) => Ok(if src.named(n).is_some() { 1.0 } else { 0.0 }),
+        Expr::ExistsNumbered(i) => {
+            let idx = eval(i, src)?;
+            let n = idx.round();
+            if (idx - n).abs() > TOLERANCE_INTEGER {
+                return Err("Non integer value for integer".into());
+            }
+            Ok(if (1.0..MAX_PARAMETERS).contains(&n) {
+                1.0
+            } else {
+                0.0
+            })
+        }
         Expr::Atan(y, x) => {
             let y = eval(y, src)?;
             let x = eval(x, src)?;

@@ -382,17 +382,23 @@ impl Parser<'_> {
             Some(c) if c.is_ascii_alphabetic() => {
                 let name = self.c.word();
                 if name == "exists" {
-                    if !(self.c.eat(b'[') && self.c.eat(b'#') && self.c.eat(b'<')) {
+                    if !(self.c.eat(b'[') && self.c.eat(b'#')) {
                         return err(
                             col,
-                            "EXISTS argument must be a named parameter: exists[#<name>]",
+                            "EXISTS argument must be a parameter: exists[#<name>] or exists[#n]",
                         );
                     }
-                    let n = self.name(col)?;
+                    // rs274 also takes a numbered parameter (`EXISTS[#1]`, `EXISTS[##2]`):
+                    // it exists when its index is in the parameter table's range.
+                    let e = if self.c.eat(b'<') {
+                        Expr::Exists(self.name(col)?)
+                    } else {
+                        Expr::ExistsNumbered(Box::new(self.value(depth + 1)?))
+                    };
                     if !self.c.eat(b']') {
                         return err(self.c.col(), "Missing closing bracket");
                     }
-                    return Ok(Expr::Exists(n));
+                    return Ok(e);
                 }
                 let is_atan = name == "atan";
                 let f = Func::from_name(&name);

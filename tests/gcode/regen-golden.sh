@@ -5,15 +5,24 @@
 # `o<name> call` finds name.ngc there, as it does for hytask). A program with a var file
 # beside it (NAME.var) runs with `-v` on a copy of it; the copy rs274 writes back at exit is
 # kept as golden/NAME.var.
+#
+#   regen-golden.sh              regenerates every golden
+#   regen-golden.sh NAME.ngc...  (re)generates only these programs' goldens (new corpus
+#                                files), leaving every other golden untouched
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 cd "$here/corpus"
 mkdir -p "$here/golden"
-rm -f "$here"/golden/*.canon "$here"/golden/*.err "$here"/golden/*.var
+if [ "$#" -eq 0 ]; then
+    rm -f "$here"/golden/*.canon "$here"/golden/*.err "$here"/golden/*.var
+    set -- *.ngc
+fi
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
-for f in *.ngc; do
+for f in "$@"; do
+    f="$(basename "$f")"
     name="${f%.ngc}"
+    rm -f "$here/golden/$name.canon" "$here/golden/$name.err" "$here/golden/$name.var"
     vars=()
     if [ -f "$name.var" ]; then
         cp "$name.var" "$tmp/$name.var"

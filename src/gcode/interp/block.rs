@@ -33,7 +33,12 @@ impl Interp<'_> {
             self.loc.col = c.col;
             self.comment(&c.text)?;
         }
-        // 2. feed mode
+        // 2. spindle mode (G96/G97): rs274 sets it before the feed mode
+        if let Some((g, col)) = b.g[14] {
+            self.loc.col = col;
+            self.spindle_mode(g, b)?;
+        }
+        // 2a. feed mode
         if let Some((g, col)) = b.g[5] {
             self.loc.col = col;
             self.set_feed_mode(g)?;
@@ -49,11 +54,7 @@ impl Interp<'_> {
                 self.emit(CanonCmd::SetFeedRate(f))?;
             }
         }
-        // 4. spindle mode and speed
-        if let Some((g, col)) = b.g[14] {
-            self.loc.col = col;
-            self.spindle_mode(g, b)?;
-        }
+        // 4. spindle speed
         if let Some(sv) = b.get(b's') {
             self.loc.col = b.col_of(b's');
             if sv < 0.0 {
@@ -165,15 +166,7 @@ impl Interp<'_> {
         }
         // 21. retract mode
         if let Some((g, _)) = b.g[10] {
-            self.s.retract_old_z = g == 980;
-            self.emit(CanonCmd::Comment(
-                if g == 980 {
-                    "interpreter: retract mode set to old_z"
-                } else {
-                    "interpreter: retract mode set to r_plane"
-                }
-                .into(),
-            ))?;
+            self.set_retract_mode(g == 980)?;
         }
         // 22. G10 / G28 / G30 / G92
         if let Some((g, col)) = b.g[0] {
@@ -450,7 +443,20 @@ impl Interp<'_> {
         out
     }
 
-    fn set_feed_mode(&mut self, g: u16) -> Result<(), GcodeError> {
+    /// G98 (`old_z`) or G99.
+    pub(super) fn set_retract_mode(&mut self, old_z: bool) -> Result<(), GcodeError> {
+        self.s.retract_old_z = old_z;
+        self.emit(CanonCmd::Comment(
+            if old_z {
+                "interpreter: retract mode set to old_z"
+            } else {
+                "interpreter: retract mode set to r_plane"
+            }
+            .into(),
+        ))
+    }
+
+    pub(super) fn set_feed_mode(&mut self, g: u16) -> Result<(), GcodeError> {
         let (mode, text) = match g {
             930 => (
                 FeedMode::InverseTime,

@@ -280,6 +280,7 @@ impl Interp<'_> {
         match m {
             70 | 73 => {
                 let mut snap = self.s.clone();
+                snap.g92_enabled = self.p.numbered[params::G92_ENABLED] != 0.0;
                 snap.saved = Vec::new();
                 snap.auto_restore = Vec::new();
                 if let Some(slot) = self.s.saved.get_mut(level) {
@@ -299,7 +300,7 @@ impl Interp<'_> {
             _ => {
                 let snap = self.s.saved.get(level).cloned().flatten();
                 match snap {
-                    Some(s) => self.restore_modal(&s, false),
+                    Some(s) => self.restore_modal(&s),
                     None => Err(self.err(
                         self.loc.col,
                         "Cannot restore context from invalid stack frame - missing M70/M73?",
@@ -309,15 +310,14 @@ impl Interp<'_> {
         }
     }
 
-    /// Restores the modal state saved by M70/M73, reporting each change to canon. rs274
-    /// reports coolant before the distance mode when M73 restores on return, after it for
-    /// M72 (`coolant_first`).
-    pub(super) fn restore_modal(
-        &mut self,
-        s: &super::Settings,
-        coolant_first: bool,
-    ) -> Result<(), GcodeError> {
-        use crate::gcode::canon::{LengthUnits, MotionControl};
+    /// Restores the modal state saved by M70/M73, reporting each change to canon in rs274's
+    /// observed order: units, feed mode, feed, spindle speed and direction, (coolant), plane,
+    /// tool length offset mode, coordinate system, path control, distance mode, retract
+    /// mode, the G92 offsets' on/off state, (coolant). The coolant comes before the plane
+    /// unless the spindle's state changes too; then it comes last (M72 and M73 alike).
+    pub(super) fn restore_modal(&mut self, s: &super::Settings) -> Result<(), GcodeError> {
+        use crate::gcode::canon::{FeedMode, LengthUnits, MotionControl};
+        let coolant_first = s.spindle == self.s.spindle;
         if s.units != self.s.units {
             self.set_units(if s.units == LengthUnits::Inches {
                 200
@@ -325,13 +325,12 @@ impl Interp<'_> {
                 210
             })?;
         }
-        if s.plane != self.s.plane {
-            self.s.plane = s.plane;
-            self.emit(CanonCmd::SelectPlane(s.plane))?;
-        }
         if s.feed_mode != self.s.feed_mode {
-            self.s.feed_mode = s.feed_mode;
-            self.emit(CanonCmd::SetFeedMode(s.feed_mode))?;
+            self.set_feed_mode(match s.feed_mode {
+                FeedMode::InverseTime => 930,
+                FeedMode::UnitsPerRevolution => 950,
+                FeedMode::UnitsPerMinute => 940,
+            })?;
         }
         if s.feed_rate != self.s.feed_rate {
             self.s.feed_rate = s.feed_rate;
@@ -352,6 +351,24 @@ impl Interp<'_> {
         if coolant_first {
             self.restore_coolant(s)?;
         }
+        if s.plane != self.s.plane {
+            self.s.plane = s.plane;
+            self.emit(CanonCmd::SelectPlane(s.plane))?;
+        }
+        if s.tlo_active != self.s.tlo_active {
+            self.restore_tool_offset_mode(s.tlo_active)?;
+        }
+        if s.origin_index != self.s.origin_index {
+            self.select_coord_system(s.origin_index)?;
+        }
+        if s.control != self.s.control || s.naive_tol != self.s.naive_tol {
+            self.s.control = s.control;
+            self.s.naive_tol = s.naive_tol;
+            self.emit(CanonCmd::SetMotionControl(s.control))?;
+            if matches!(s.control, MotionControl::Continuous { .. }) {
+                self.emit(CanonCmd::SetNaivecamTolerance(s.naive_tol))?;
+            }
+        }
         if s.absolute != self.s.absolute {
             self.s.absolute = s.absolute;
             self.emit(CanonCmd::Comment(
@@ -364,20 +381,21 @@ impl Interp<'_> {
             ))?;
         }
         self.s.ijk_absolute = s.ijk_absolute;
-        self.s.retract_old_z = s.retract_old_z;
-        if !coolant_first {
-            self.restore_coolant(s)?;
+        if s.retract_old_z != self.s.retract_old_z {
+            self.set_retract_mode(s.retract_old_z)?;
         }
-        if s.control != self.s.control || s.naive_tol != self.s.naive_tol {
-            self.s.control = s.control;
-            self.s.naive_tol = s.naive_tol;
-            self.emit(CanonCmd::SetMotionControl(s.control))?;
-            if matches!(s.control, MotionControl::Continuous { .. }) {
-                self.emit(CanonCmd::SetNaivecamTolerance(s.naive_tol))?;
+        // The G92 offsets come back on (G92.3, from #5211…) or go off (G92.2) as they were;
+        // their values are not part of the saved state.
+        let g92_on = self.p.numbered[params::G92_ENABLED] != 0.0;
+        if s.g92_enabled != g92_on {
+            if s.g92_enabled {
+                self.g92_apply_stored()?;
+            } else {
+                self.g92_off(false)?;
             }
         }
-        if s.origin_index != self.s.origin_index {
-            self.select_coord_system(s.origin_index)?;
+        if !coolant_first {
+            self.restore_coolant(s)?;
         }
         Ok(())
     }
@@ -540,6 +558,8 @@ impl Interp<'_> {
             // after this uses the new offsets.
             self.s.spindle_tool = Some(t.clone());
             self.emit(entry(0))?;
+            // #5401-#5410 mirror the spindle's entry, so they show the edit at once.
+            self.load_tool_params(false);
         }
         Ok(())
     }

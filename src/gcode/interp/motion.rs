@@ -283,7 +283,9 @@ impl Interp<'_> {
                         }
                         let tool = h as u32;
                         if tool == 0 {
-                            None
+                            // H0 is rs274's pocket 0: the spindle's copy of the tool loaded
+                            // by the last M6 (none: no offset).
+                            self.s.spindle_tool.clone()
                         } else {
                             let slot = self.tools.slot_of(tool).ok_or_else(|| {
                                 self.err(
@@ -341,15 +343,21 @@ impl Interp<'_> {
                     ));
                 }
                 let tool = h as u32;
-                let slot = self.tools.slot_of(tool).ok_or_else(|| {
-                    self.err(
-                        self.loc.col,
-                        format!("Requested tool {tool} not found in the tool table"),
-                    )
-                })?;
+                // H0: the spindle's copy of the tool, as for G43 H0.
+                let entry = if tool == 0 {
+                    self.s.spindle_tool.clone()
+                } else {
+                    let slot = self.tools.slot_of(tool).ok_or_else(|| {
+                        self.err(
+                            self.loc.col,
+                            format!("Requested tool {tool} not found in the tool table"),
+                        )
+                    })?;
+                    self.tools.at_slot(slot).cloned()
+                };
                 let k = self.s.k_mp();
                 off = self.s.tool_offset;
-                if let Some(t) = self.tools.at_slot(slot) {
+                if let Some(t) = entry {
                     for (i, (o, v)) in off.iter_mut().zip(t.offset.iter()).enumerate() {
                         *o += v * lin9(i, k);
                     }
@@ -357,11 +365,33 @@ impl Interp<'_> {
             }
             _ => {}
         }
+        self.s.tlo_active = g != 490;
+        self.use_tool_offset(off)
+    }
+
+    /// Makes `off` the active tool length offset (the program position moves with it).
+    fn use_tool_offset(&mut self, off: Pose) -> Result<(), GcodeError> {
         for (i, p) in self.s.pos.iter_mut().enumerate() {
             *p += self.s.tool_offset[i] - off[i];
         }
         self.s.tool_offset = off;
         self.emit(CanonCmd::UseToolLengthOffset(off))
+    }
+
+    /// M72's tool length offset: rs274 restores the mode only, as a plain `G43` (the
+    /// spindle's tool) or `G49`, and only when one of the two is off.
+    pub(super) fn restore_tool_offset_mode(&mut self, active: bool) -> Result<(), GcodeError> {
+        let mut off: Pose = [0.0; 9];
+        if active {
+            let k = self.s.k_mp();
+            if let Some(t) = &self.s.spindle_tool {
+                for (i, (o, v)) in off.iter_mut().zip(t.offset.iter()).enumerate() {
+                    *o = v * lin9(i, k);
+                }
+            }
+        }
+        self.s.tlo_active = active;
+        self.use_tool_offset(off)
     }
 
     pub(super) fn load_g5x(&self, index: u8) -> ([f64; 6], f64) {
@@ -477,28 +507,34 @@ impl Interp<'_> {
                 self.p.numbered[params::G92_ENABLED] = 1.0;
                 self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
             }
-            921 | 922 => {
-                for i in 0..6 {
-                    self.s.pos[i] += self.s.g92[i];
-                    self.s.g92[i] = 0.0;
-                    if g == 921 {
-                        self.p.numbered[params::G92_BASE + i] = 0.0;
-                    }
-                }
-                self.p.numbered[params::G92_ENABLED] = 0.0;
-                self.emit(CanonCmd::SetG92Offset([0.0; 9]))
-            }
-            923 => {
-                for i in 0..6 {
-                    let v = self.p.numbered[params::G92_BASE + i] * lin(i, self.s.k_mp());
-                    self.s.pos[i] += self.s.g92[i] - v;
-                    self.s.g92[i] = v;
-                }
-                self.p.numbered[params::G92_ENABLED] = 1.0;
-                self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
-            }
+            921 | 922 => self.g92_off(g == 921),
+            923 => self.g92_apply_stored(),
             _ => Ok(()),
         }
+    }
+
+    /// G92.1 (`clear`: the stored offsets too) and G92.2: the G92 offsets off.
+    pub(super) fn g92_off(&mut self, clear: bool) -> Result<(), GcodeError> {
+        for i in 0..6 {
+            self.s.pos[i] += self.s.g92[i];
+            self.s.g92[i] = 0.0;
+            if clear {
+                self.p.numbered[params::G92_BASE + i] = 0.0;
+            }
+        }
+        self.p.numbered[params::G92_ENABLED] = 0.0;
+        self.emit(CanonCmd::SetG92Offset([0.0; 9]))
+    }
+
+    /// G92.3: the offsets stored in #5211… applied again.
+    pub(super) fn g92_apply_stored(&mut self) -> Result<(), GcodeError> {
+        for i in 0..6 {
+            let v = self.p.numbered[params::G92_BASE + i] * lin(i, self.s.k_mp());
+            self.s.pos[i] += self.s.g92[i] - v;
+            self.s.g92[i] = v;
+        }
+        self.p.numbered[params::G92_ENABLED] = 1.0;
+        self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
     }
 
     fn go_home(&mut self, g: u16, b: &Block) -> Result<(), GcodeError> {

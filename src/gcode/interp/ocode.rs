@@ -70,6 +70,24 @@ impl Interp<'_> {
             .find(|&x| x < l && self.kind_at(f, x).is_some_and(|k| kinds.contains(&k)))
     }
 
+    /// An `else`, `elseif` or `endif` needs an `if` with its label before it: rs274 refuses
+    /// one whose label it has not seen ("undefined O-word label") or has seen on a loop.
+    fn check_opened(&self, f: usize, l: usize, label: &str, o: &OStmt) -> Result<(), GcodeError> {
+        if self.find_prev(f, l, label, &[OKind::If]).is_some() {
+            return Ok(());
+        }
+        let looped = [OKind::While, OKind::Do, OKind::Repeat];
+        let why = if self.find_prev(f, l, label, &looped).is_some() {
+            "no matching label: the label opens a loop, not an if"
+        } else {
+            "undefined O-word label: no if with this label before it"
+        };
+        Err(self.err(
+            o.col,
+            format!("o<{label}> {:?}: {why}", o.kind).to_lowercase(),
+        ))
+    }
+
     /// A `while` is the tail of a `do` loop when the nearest earlier loop statement with its
     /// label is a `do`.
     fn is_do_tail(&self, f: usize, l: usize, label: &str) -> bool {
@@ -181,7 +199,11 @@ impl Interp<'_> {
                         self.s.value = v;
                         self.s.value_returned = 1.0;
                     }
-                    None => self.s.value_returned = 0.0,
+                    // rs274 clears #<_value> too when a subroutine returns nothing.
+                    None => {
+                        self.s.value = 0.0;
+                        self.s.value_returned = 0.0;
+                    }
                 }
                 self.leave_frame()
             }
@@ -286,6 +308,7 @@ impl Interp<'_> {
                 }
             }
             OKind::ElseIf | OKind::Else => {
+                self.check_opened(f, l, &label, o)?;
                 // Reached by falling out of a taken branch: skip to endif. rs274 still
                 // evaluates an elseif condition here (its errors count).
                 if o.kind == OKind::ElseIf {
@@ -297,7 +320,8 @@ impl Interp<'_> {
                 self.pc = (f, end + 1);
                 Ok(())
             }
-            OKind::EndIf | OKind::Do => Ok(()),
+            OKind::EndIf => self.check_opened(f, l, &label, o),
+            OKind::Do => Ok(()),
             OKind::While => {
                 let c = self.cond(o)?;
                 if self.is_do_tail(f, l, &label) {
@@ -404,7 +428,7 @@ impl Interp<'_> {
         let level = self.frames.len();
         if self.s.auto_restore.get(level).copied().unwrap_or(false) {
             if let Some(Some(saved)) = self.s.saved.get(level).cloned() {
-                self.restore_modal(&saved, true)?;
+                self.restore_modal(&saved)?;
             }
         }
         let Some(frame) = self.frames.pop() else {

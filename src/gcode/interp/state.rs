@@ -50,6 +50,11 @@ pub(crate) struct Settings {
     /// G98 (true, back to the old Z) / G99 (R plane). Starts in G99, as LinuxCNC's
     /// interpreter does (`#<_retract_r_plane>` is 1 in rs274 before any G98/G99).
     pub retract_old_z: bool,
+    /// In a state saved by M70/M73: whether the G92 offsets were applied (#5210), which M72
+    /// restores. Not kept up to date in the live state (#5210 is the live flag).
+    pub g92_enabled: bool,
+    /// G43/G43.1/G43.2 in effect (not G49), whatever the offset's value.
+    pub tlo_active: bool,
     /// G61/G61.1/G64.
     pub control: MotionControl,
     /// G64 Q.
@@ -128,6 +133,8 @@ impl Settings {
             last_g5_pq: [0.0; 2],
             nurbs: None,
             retract_old_z: false,
+            g92_enabled: false,
+            tlo_active: false,
             control: MotionControl::Continuous { tolerance: 0.0 },
             naive_tol: 0.0,
             spindle: 0,
@@ -206,7 +213,7 @@ pub(crate) fn predefined(it: &Interp<'_>, name: &str) -> Option<f64> {
         "_lathe_diameter_mode" => b(s.diameter_mode),
         "_lathe_radius_mode" => b(!s.diameter_mode),
         "_spindle_on" => b(s.spindle != 0),
-        "_spindle_cw" => b(s.spindle >= 0),
+        "_spindle_cw" => b(s.spindle > 0),
         "_mist" => b(s.mist),
         "_flood" => b(s.flood),
         "_speed_override" => b(s.speed_override),
@@ -230,7 +237,8 @@ pub(crate) fn predefined(it: &Interp<'_>, name: &str) -> Option<f64> {
         "_abs_c" => abs(5),
         "_current_tool" => f64::from(s.tool),
         "_current_pocket" => s.tool_slot as f64,
-        "_selected_tool" => s.selected.map(|t| f64::from(t.0)).unwrap_or(-1.0),
+        // rs274 reports tool 0 (and pocket -1) before any T word.
+        "_selected_tool" => s.selected.map(|t| f64::from(t.0)).unwrap_or(0.0),
         "_selected_pocket" => s.selected.map(|t| t.1 as f64).unwrap_or(-1.0),
         "_value" => s.value,
         "_value_returned" => s.value_returned,
