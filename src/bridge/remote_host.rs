@@ -124,10 +124,7 @@ impl MachineApi for PeerHost {
         Err(self.not_a_machine_error("machine.off"))
     }
     fn tasks(&self) -> Vec<TaskInfo> {
-        lock(&self.runtime)
-            .as_ref()
-            .map(|rt| task_api::task_infos(rt.tasks()))
-            .unwrap_or_default()
+        task_api::runtime_task_infos(&self.runtime)
     }
     /// Waits two cycles of every thread first: values a caller published just before its
     /// call (a proxy's forwarded ports) have then been written to the data objects by the

@@ -343,10 +343,7 @@ impl MachineApi for CellDaemon {
         Err(self.not_a_machine_error("home (the selection homes the robot: call selection stop)"))
     }
     fn tasks(&self) -> Vec<TaskInfo> {
-        lock(&self.runtime)
-            .as_ref()
-            .map(|rt| task_api::task_infos(rt.tasks()))
-            .unwrap_or_default()
+        task_api::runtime_task_infos(&self.runtime)
     }
     /// As the machine's `call`, except that `selection.run` answers once accepted (it runs
     /// for minutes; follow it through the `task` events and `status`).

@@ -40,6 +40,20 @@ pub fn thread_timings(threads: &[Arc<ThreadInfo>]) -> Vec<ThreadTiming> {
         .collect()
 }
 
+/// The tasks of a runtime kept as `Mutex<Option<Runtime>>` (`None` once stopped: no tasks), as
+/// the cell daemon and the peer host keep theirs. Why here: both answer `tasks` this way; a
+/// poisoned lock still answers (a panicked holder must not hide the tasks).
+pub fn runtime_task_infos(
+    runtime: &std::sync::Mutex<Option<crate::rt::deploy::Runtime>>,
+) -> Vec<TaskInfo> {
+    runtime
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .as_ref()
+        .map(|rt| task_infos(rt.tasks()))
+        .unwrap_or_default()
+}
+
 /// Every task with its interface, for `tasks`.
 pub fn task_infos(tasks: &[crate::rt::runner::TaskInfo]) -> Vec<TaskInfo> {
     tasks
