@@ -147,13 +147,17 @@ fn short_lookahead_window_is_slower_but_within_limits() {
         g.g1(i as f64 * 0.5, (i as f64 * 0.02).sin(), 0.0);
     }
     let long = MotionConfig::default();
+    // Chord by chord (no arc fitting, no merging): a window of 4 chords of 0.5 mm is shorter
+    // than a stop from full feed.
     let short = MotionConfig {
         lookahead_moves: 4,
         merge_fraction: 0.0,
+        fit_arcs: false,
         ..Default::default()
     };
     let long_nomerge = MotionConfig {
         merge_fraction: 0.0,
+        fit_arcs: false,
         ..Default::default()
     };
     let pl = plan(&g.canon, &long_nomerge).unwrap();

@@ -268,6 +268,9 @@ fn digest(items: &[Item]) -> u64 {
                     s.scale_jerk_max,
                     s.brake_scale_jerk_max,
                     s.next_scale_jerk_max,
+                    s.curvature_per_mm,
+                    s.heading_rad,
+                    s.step_jerk_mm_s3,
                 ] {
                     h.write_u64(v.to_bits());
                 }

@@ -148,6 +148,9 @@ mod tests {
                 scale_jerk_max: 1.0,
                 brake_scale_jerk_max: 1.0,
                 next_scale_jerk_max: 1.0,
+                curvature_per_mm: 0.0,
+                heading_rad: 0.0,
+                step_jerk_mm_s3: 0.0,
             };
             let end = seg.integrated_end_mm();
             assert!(

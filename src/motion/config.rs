@@ -100,6 +100,10 @@ pub struct MotionConfig {
     pub nominal_spindle_rpm: f64,
     /// Kinematics of the machine.
     pub kinematics: KinematicsConfig,
+    /// Fit runs of short, gently turning XY feed chords into tangent-continuous arcs within
+    /// the G64 tolerance (issue 14, `motion::arcfit`; Cartesian kinematics only). False plans
+    /// every chord with its own corner blend, as before.
+    pub fit_arcs: bool,
 }
 
 impl Default for MotionConfig {
@@ -118,6 +122,7 @@ impl Default for MotionConfig {
             max_feed_override: 2.0,
             nominal_spindle_rpm: 0.0,
             kinematics: KinematicsConfig::Identity,
+            fit_arcs: true,
         }
     }
 }

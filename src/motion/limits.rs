@@ -2,7 +2,7 @@
 //! acceleration/jerk along a move, the S-curve shape of any velocity change, the override
 //! headroom of a segment, and soft limits.
 
-use super::config::MotionConfig;
+use super::config::{KinematicsConfig, MotionConfig};
 use super::profile::{Shape, Tangential};
 use super::segment::{Item, Segment, SegmentKind};
 use super::{PlanError, AXIS_NAMES};
@@ -19,7 +19,20 @@ pub struct Limits {
     pub jerk: [f64; NUM_AXES],
     /// Largest feed override.
     pub max_override: f64,
+    /// Servo period, s: an acceleration step shows on the trace as jerk over one period.
+    pub servo_period_s: f64,
+    /// Whether dense gently turning chords are fitted into arcs ([`super::arcfit`]): on
+    /// Cartesian machines (the arcs are planned against the axis limits of X and Y).
+    pub fit_arcs: bool,
+    /// Tolerances at or below this (G61/G61.1's exact-path tolerance) keep their chords.
+    pub exact_tolerance_mm: f64,
 }
+
+/// Share of the planning jerk an acceleration step at a curvature step may use (the arcs
+/// and lines next to it keep the rest for their own jerk).
+pub const STEP_SHARE: f64 = 0.5;
+/// Largest share of the planning acceleration held as normal acceleration on an arc.
+pub const NORMAL_SHARE: f64 = 0.9;
 
 impl Limits {
     /// From the configuration.
@@ -30,7 +43,46 @@ impl Limits {
             acc: cfg.axes.map(|a| a.max_acc_mm_s2 * keep),
             jerk: cfg.axes.map(|a| a.max_jerk_mm_s3 * keep),
             max_override: cfg.max_feed_override,
+            servo_period_s: cfg.servo_period_s,
+            fit_arcs: cfg.fit_arcs && matches!(cfg.kinematics, KinematicsConfig::Identity),
+            exact_tolerance_mm: cfg.exact_path_tolerance_mm,
         }
+    }
+
+    /// Largest acceleration step at a curvature step, mm/s² (`v²·|Δκ|` at a junction).
+    pub fn step_budget_mm_s2(&self) -> f64 {
+        STEP_SHARE * self.jerk[0].min(self.jerk[1]) * self.servo_period_s
+    }
+
+    /// Speed cap and tangential limits on an XY arc of curvature `kappa` at feed `feed`:
+    /// the normal acceleration `v²·κ` and the jerk terms of the curvature (`κ²·v³` and
+    /// `3κ·v·s''`) are taken out of the X/Y limits first, and the share of the jerk kept for
+    /// curvature steps ([`STEP_SHARE`]) too.
+    pub fn arc(&self, kappa: f64, feed_mm_s: f64) -> (f64, Tangential) {
+        let (a, j) = (self.acc[0].min(self.acc[1]), self.jerk[0].min(self.jerk[1]));
+        let k = kappa.abs();
+        let mut v = feed_mm_s
+            .min(self.vel[0].min(self.vel[1]))
+            .min((NORMAL_SHARE * a / k).sqrt());
+        let jt_free = (1.0 - STEP_SHARE) * j;
+        let mut t = Tangential {
+            acc_mm_s2: a,
+            jerk_mm_s3: jt_free,
+        };
+        for _ in 0..60 {
+            let an = k * v * v;
+            let at = (a * a - an * an).max(0.0).sqrt();
+            let jt = jt_free - k * k * v * v * v - 3.0 * k * v * at;
+            t = Tangential {
+                acc_mm_s2: at,
+                jerk_mm_s3: jt,
+            };
+            if jt >= 0.2 * jt_free {
+                break;
+            }
+            v *= 0.9;
+        }
+        (v, t)
     }
 
     /// Highest path speed along direction `u` (per unit feed length) within axis velocities.

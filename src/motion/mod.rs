@@ -15,6 +15,10 @@
 //! closed form and planned within the limits, velocity is continuous and acceleration is zero
 //! at every segment boundary, so the trace is C² with bounded jerk everywhere.
 //!
+//! Runs of short, gently turning XY chords are fitted into tangent arcs first ([`arcfit`]):
+//! an arc segment runs the same S-curve speed law along a circle, and two tangent arcs meet
+//! with a bounded curvature step instead of a blend (see [`lookahead`]).
+//!
 //! Overrides, feed hold and abort are time scaling in the interpolator (`dσ/dt = k`). The
 //! planner plans with `(1 - override_reserve)` of each axis' acceleration and jerk and
 //! records per segment how far `k` may go ([`Segment::override_cap`]) and how fast it may
@@ -61,6 +65,7 @@
 // Index loops over several parallel per-axis arrays read better than zipped iterators.
 #![allow(clippy::needless_range_loop)]
 
+pub mod arcfit;
 pub mod arcs;
 pub mod blend;
 pub mod bounds;

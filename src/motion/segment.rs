@@ -65,6 +65,16 @@ pub struct Segment {
     /// Smallest `scale_jerk_max` of the segments a servo period starting near the end of
     /// this one can reach: used on the last stretch of the segment.
     pub next_scale_jerk_max: f64,
+    /// Signed curvature of the path in the XY plane, 1/mm (> 0 turns left): 0 for a straight
+    /// segment or a corner blend, else the segment runs along a circular arc (fitted over
+    /// dense chords, see [`super::arcfit`]) starting with heading `heading_rad`.
+    pub curvature_per_mm: f64,
+    /// Heading of the path tangent at the start of an arc segment (XY plane), rad.
+    pub heading_rad: f64,
+    /// Jerk that the acceleration step at this segment's ends (a curvature step where two
+    /// tangent arcs, or an arc and a line, meet) shows on the servo-period trace, mm/s³:
+    /// counted in [`Segment::peaks`] so override and hold headroom allow for it.
+    pub step_jerk_mm_s3: f64,
 }
 
 impl Segment {
@@ -83,6 +93,10 @@ impl Segment {
         }
         let t = t_s.max(0.0);
         let (_, cap_f) = self.shape().eval(t);
+        if self.curvature_per_mm != 0.0 {
+            let (s0, s1) = (norm(&self.v0_mm_s), norm(&self.v1_mm_s));
+            return self.arc_pose(s0 * t + (s1 - s0) * cap_f);
+        }
         let mut p = self.start_mm;
         for (i, p) in p.iter_mut().enumerate() {
             *p += self.v0_mm_s[i] * t + (self.v1_mm_s[i] - self.v0_mm_s[i]) * cap_f;
@@ -90,10 +104,22 @@ impl Segment {
         p
     }
 
+    /// Pose after arc length `s_mm` along an arc segment.
+    fn arc_pose(&self, s_mm: f64) -> [f64; NUM_AXES] {
+        let d = super::arcfit::offset(self.heading_rad, self.curvature_per_mm, s_mm);
+        let mut p = self.start_mm;
+        p[0] += d[0];
+        p[1] += d[1];
+        p
+    }
+
     /// End pose computed from the motion (equal to `end_mm` up to rounding).
     pub fn integrated_end_mm(&self) -> [f64; NUM_AXES] {
-        let mut p = self.start_mm;
         let h = 0.5 * self.duration_s;
+        if self.curvature_per_mm != 0.0 {
+            return self.arc_pose((norm(&self.v0_mm_s) + norm(&self.v1_mm_s)) * h);
+        }
+        let mut p = self.start_mm;
         for (i, p) in p.iter_mut().enumerate() {
             *p += (self.v0_mm_s[i] + self.v1_mm_s[i]) * h;
         }
@@ -119,11 +145,23 @@ impl Segment {
         }
     }
 
-    /// Per-axis peaks of velocity, acceleration and jerk at 100% override.
+    /// Per-axis peaks of velocity, acceleration and jerk at 100% override. On an arc the
+    /// acceleration is `s''·T + κ·s'²·N` and the jerk `(s''' − κ²·s'³)·T + 3κ·s'·s''·N`; each
+    /// X/Y component is bounded by the norm of these vectors.
     pub fn peaks(&self) -> [[f64; 3]; NUM_AXES] {
         let s = self.shape();
         let (r, j) = (s.peak_rate(), s.peak_jerk());
         let mut out = [[0.0; 3]; NUM_AXES];
+        if self.curvature_per_mm != 0.0 {
+            let (s0, s1) = (norm(&self.v0_mm_s), norm(&self.v1_mm_s));
+            let (vm, dv, k) = (s0.max(s1), (s1 - s0).abs(), self.curvature_per_mm.abs());
+            let at = dv * r;
+            let acc = at.hypot(k * vm * vm);
+            let jerk = dv * j + k * k * vm * vm * vm + 3.0 * k * vm * at + self.step_jerk_mm_s3;
+            out[0] = [vm, acc, jerk];
+            out[1] = [vm, acc, jerk];
+            return out;
+        }
         for (i, o) in out.iter_mut().enumerate() {
             let dv = (self.v1_mm_s[i] - self.v0_mm_s[i]).abs();
             *o = [
@@ -131,6 +169,9 @@ impl Segment {
                 dv * r,
                 dv * j,
             ];
+        }
+        for o in &mut out[..2] {
+            o[2] += self.step_jerk_mm_s3;
         }
         out
     }
@@ -284,9 +325,10 @@ mod tests {
     fn queue_items_are_copy_send_and_small() {
         realtime_safe::<Item>();
         realtime_safe::<AuxItem>();
-        // Fixed size, no heap: a ring of 4096 items is about 1.5 MiB.
+        // Fixed size, no heap: a ring of 4096 items is about 1.6 MiB (the arc fields of
+        // issue 14 added 24 bytes).
         assert!(
-            std::mem::size_of::<Item>() <= 400,
+            std::mem::size_of::<Item>() <= 416,
             "{}",
             std::mem::size_of::<Item>()
         );
