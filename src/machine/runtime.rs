@@ -695,7 +695,7 @@ impl Machine {
             elapsed_s: 0.0,
             distance_mm: job.plan.distance_mm,
             distance_to_go_mm: job.plan.distance_mm,
-            reason: None,
+            ..JobStatus::default()
         };
         let previous = book.active.replace(ActiveJob {
             id,
@@ -748,8 +748,11 @@ impl Machine {
         cancel: &Arc<AtomicBool>,
         (messages, measured): (&Arc<Mutex<Vec<String>>>, &Measured),
     ) -> Result<(std::thread::JoinHandle<()>, u64), ApiError> {
-        if self.config.motion.probe_input.is_none() {
-            let line = job::first_probe_line_of(job).unwrap_or(0);
+        // A job that only waits for inputs (M66) runs piece by piece without a probe.
+        if let (None, Some(line)) = (
+            &self.config.motion.probe_input,
+            job::first_probe_line_of(job),
+        ) {
             return Err(ApiError::Rejected(format!(
                 "{}: line {line} probes (G38.x) but the machine has no probe input \
                  (set motion.probe_input)",
@@ -869,6 +872,7 @@ impl MachineApi for Machine {
         let mut job = book.status.clone();
         if let Some(a) = &book.active {
             apply_progress(&mut job, a, sp);
+            job.input_wait = super::servo::input_wait::status(&snap.wait, a.id);
         }
         let mut faults: Vec<String> = book.faults.iter().cloned().collect();
         if matches!(snap.mode, Mode::Fault | Mode::Estop) {

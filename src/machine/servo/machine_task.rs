@@ -14,12 +14,13 @@
 //! thread's overrun event; both are handled at this task's safe point (deferred handlers,
 //! step 6), so a fault found in cycle n starts the controlled stop in cycle n + 1.
 
+use super::input_wait::{self, InputWait};
 use super::plc_link::{PlcLink, PlcLinkSetup};
 use super::{
     ports, AxisFeedback, DriveControl, FaultEvent, Inputs, JobError, JobEvent, JobNews,
     MachineSnapshot, ModeEvent, MonitorSnapshot, MotionControl, Outputs, Setpoints,
 };
-use crate::gcode::canon::{InputKind, SpindleDir, WaitKind};
+use crate::gcode::canon::{InputKind, SpindleDir};
 use crate::gcode::NUM_AXES;
 use crate::machine::api::Mode;
 use crate::machine::mode::{Fact, ModeMachine, Request};
@@ -330,16 +331,11 @@ enum Barrier {
         since: u64,
     },
     /// M66 waits for an input.
-    Wait {
-        index: u32,
-        input: InputKind,
-        kind: WaitKind,
-        deadline: u64,
-        last: bool,
-    },
+    Wait(InputWait),
     /// M0 (or M1 with optional stop on): held until `resume`.
     ProgramStop,
-    /// The end of a probe move: held until the next piece of the program is queued.
+    /// The end of a probe move, or an M66 that answered a live job: held until the next
+    /// piece of the program is queued.
     Probe,
     /// M6 or M100–M199 handled by the PLC: held until it answers request `seq`.
     Plc {
@@ -684,15 +680,14 @@ impl MachineTask {
                 input,
                 kind,
                 timeout_s,
+                answer,
             } => {
-                let cycles = (timeout_s / self.setup.period_s).max(0.0) as u64;
-                self.barrier = Barrier::Wait {
-                    index,
-                    input,
-                    kind,
-                    deadline: self.cycle + cycles,
-                    last: self.input_level(index, input),
-                };
+                let (period, now) = (self.setup.period_s, self.input_value(index, input));
+                let w = InputWait::start(
+                    index, input, kind, timeout_s, period, self.cycle, now, answer, line,
+                );
+                self.barrier = Barrier::Wait(w);
+                input_wait::publish_start(&mut self.snap.wait, &w, self.job_id);
                 done = false;
             }
             AuxKind::Message { id } => self.emit_job(JobEvent::Message { id, line }),
@@ -761,18 +756,20 @@ impl MachineTask {
         }
     }
 
-    fn input_level(&self, index: u32, input: InputKind) -> bool {
+    /// What M66 reads on an input: 0/1 for a digital one, the reading of an analog one.
+    fn input_value(&self, index: u32, input: InputKind) -> f64 {
         // `[plc] m66_digital` / `m66_analog`: the PLC's variables.
-        if let Some(v) = self.plc.as_ref().and_then(|p| p.m66_level(index, input)) {
+        if let Some(v) = self.plc.as_ref().and_then(|p| p.m66_value(index, input)) {
             return v;
         }
         match input {
-            InputKind::Digital => self.inputs.di(index as usize),
+            InputKind::Digital => f64::from(u8::from(self.inputs.di(index as usize))),
             InputKind::Analog => self
                 .inputs
                 .analog
                 .get(index as usize)
-                .is_some_and(|v| *v > 0.5),
+                .copied()
+                .unwrap_or(0.0),
         }
     }
 
@@ -797,26 +794,19 @@ impl MachineTask {
                 }
                 at
             }
-            Barrier::Wait {
-                index,
-                input,
-                kind,
-                deadline,
-                last,
-            } => {
-                let now = self.input_level(index, input);
-                let ok = match kind {
-                    WaitKind::Immediate => true,
-                    WaitKind::Rise => now && !last,
-                    WaitKind::Fall => !now && last,
-                    WaitKind::High => now,
-                    WaitKind::Low => !now,
-                };
-                if let Barrier::Wait { last, .. } = &mut self.barrier {
-                    *last = now;
-                }
+            Barrier::Wait(mut w) => {
                 // LinuxCNC semantics: a timeout is not an error, the program goes on.
-                ok || self.cycle >= deadline
+                let value = w.poll(self.input_value(w.index, w.input), self.cycle);
+                self.barrier = Barrier::Wait(w);
+                let Some(value) = value else { return };
+                let pose = self.setpoints.pose_mm;
+                input_wait::publish_end(&mut self.snap.wait, &w, value, pose);
+                if w.answer {
+                    // The program goes on with #5399 = value: hold for its next piece.
+                    self.barrier = Barrier::Probe;
+                    return;
+                }
+                true
             }
         };
         if met {
@@ -1006,6 +996,12 @@ impl MachineTask {
             w.set(self.motion);
         }
         if let Some(w) = &mut self.snapshot_out {
+            // Whatever ended a wait or its hold (abort, e-stop, a fault) cleared the barrier.
+            input_wait::publish_barrier(
+                &mut self.snap.wait,
+                matches!(self.barrier, Barrier::Wait(_)),
+                self.barrier == Barrier::Probe,
+            );
             w.set(self.snap);
         }
     }
@@ -1216,7 +1212,9 @@ impl Task for MachineTask {
                 }
             }
             MachineCmd::Continue { job, items } => {
-                let waiting = self.barrier == Barrier::Probe && self.snap.probe.job == job;
+                let waiting = self.barrier == Barrier::Probe
+                    && (self.snap.probe.waiting && self.snap.probe.job == job
+                        || self.snap.wait.waiting && self.snap.wait.job == job);
                 let Motion::Job {
                     job: current,
                     items: total,
@@ -1225,7 +1223,9 @@ impl Task for MachineTask {
                     return Err(RejectReason::Other("no job is running"));
                 };
                 if current != job || !waiting {
-                    return Err(RejectReason::Other("the job is not waiting after a probe"));
+                    return Err(RejectReason::Other(
+                        "the job is not waiting after a probe or an M66",
+                    ));
                 }
                 self.current = Motion::Job {
                     job,
@@ -1233,6 +1233,7 @@ impl Task for MachineTask {
                 };
                 self.barrier = Barrier::None;
                 self.snap.probe.waiting = false;
+                self.snap.wait.waiting = false;
                 self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
             }
             MachineCmd::OptionalStop { on } => self.snap.optional_stop = on,
