@@ -612,6 +612,25 @@ mod tests {
     }
 
     #[test]
+    fn an_m66_makes_a_job_live_and_only_what_follows_it_is_checked_when_it_runs() {
+        // The dry run leaves #5399 at 0: it takes the "else" branch, far outside the soft
+        // limits; the machine may answer -1 (a timeout), so that branch is checked against
+        // the limits only when its piece is planned, with the answer known.
+        let text = "G21 G90\nG0 X10 Y10 Z-5\nM66 P0 L3 Q1\n\
+                    O1 if [#5399 LT 0]\n  G0 X20\nO1 else\n  G0 X900\nO1 endif\nM2\n";
+        let j = prepare_text(Some("m66.ngc"), text).expect("prepared");
+        assert!(j.probing.is_some(), "runs piece by piece");
+        // Without an M66 (or a probe) a job is checked whole and runs from its plan.
+        let j = prepare_text(None, "G21 G90\nM62 P0\nG0 X20\nM2\n").expect("prepared");
+        assert!(j.probing.is_none());
+        // Before the first M66 the soft limits hold as for any job.
+        let e = prepare_text(Some("m66.ngc"), "G21 G90\nG0 X900\nM66 P0 L0\nM2\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2"), "{e}");
+    }
+
+    #[test]
     fn mdi_lines_need_no_program_end_and_errors_name_line_one() {
         let cfg = sim();
         let start = [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
