@@ -78,14 +78,20 @@ fn a_job_branches_on_5399_after_a_timed_out_and_after_a_satisfied_m66() {
     assert!((x(&s) - 31.0).abs() < 0.01, "X[30 + #5399]: {s}");
 }
 
-#[test]
-fn an_abort_at_an_m66_stops_the_job_and_the_machine_takes_the_next_one() {
+/// A daemon whose job `name` waits at its M66 for an input that nothing raises.
+fn held_at_an_m66(name: &str) -> (Daemon, Client) {
     let d = Daemon::start_sim();
     let mut c = d.client();
     ready(&mut c);
     probe_input(&mut c, false);
-    run_text(&mut c, &branch("100000"), "m66-abort.ngc");
+    run_text(&mut c, &branch("100000"), name);
     waiting_at_the_m66(&mut c);
+    (d, c)
+}
+
+#[test]
+fn an_abort_at_an_m66_stops_the_job_and_the_machine_takes_the_next_one() {
+    let (_d, mut c) = held_at_an_m66("m66-abort.ngc");
     ok(&mut c, "job.abort", Value::Null);
     let s = wait_job_end(&mut c, "the aborted job", GUARD);
     assert_eq!(s["job"]["state"], json!("aborted"), "{s}");
@@ -102,12 +108,7 @@ fn an_abort_at_an_m66_stops_the_job_and_the_machine_takes_the_next_one() {
 
 #[test]
 fn an_estop_at_an_m66_fails_the_job() {
-    let d = Daemon::start_sim();
-    let mut c = d.client();
-    ready(&mut c);
-    probe_input(&mut c, false);
-    run_text(&mut c, &branch("100000"), "m66-estop.ngc");
-    waiting_at_the_m66(&mut c);
+    let (_d, mut c) = held_at_an_m66("m66-estop.ngc");
     ok(&mut c, "estop", Value::Null);
     let s = wait_job_end(&mut c, "the job after an e-stop", GUARD);
     assert_eq!(s["job"]["state"], json!("failed"), "{s}");
