@@ -91,7 +91,20 @@ fn held_at_an_m66(name: &str) -> (Daemon, Client) {
 
 #[test]
 fn an_abort_at_an_m66_stops_the_job_and_the_machine_takes_the_next_one() {
-    let (_d, mut c) = held_at_an_m66("m66-abort.ngc");
+    let (d, mut c) = held_at_an_m66("m66-abort.ngc");
+    // `hytask status` says what the job waits for.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_hytask"))
+        .arg("status")
+        .arg("--socket")
+        .arg(&d.socket)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("waiting at line 3: M66 on digital input 1 (rise)"),
+        "{stdout}"
+    );
     ok(&mut c, "job.abort", Value::Null);
     let s = wait_job_end(&mut c, "the aborted job", GUARD);
     assert_eq!(s["job"]["state"], json!("aborted"), "{s}");
