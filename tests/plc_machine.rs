@@ -352,7 +352,8 @@ fn bad_bindings_are_refused_naming_key_and_variable() {
 /// `[plc] m66_digital`: M66 P0 waits on the PLC's `coolant_pump`: L4 (low) passes at once,
 /// L3 (high) waits until the operator forces it on (the timeouts are far beyond the hang
 /// guard, so only the PLC variable can end these waits), and a wait that times out lets
-/// the program go on, as LinuxCNC's M66 does.
+/// the program go on, as LinuxCNC's M66 does, with #5399 = 1 after the PLC's answer and -1
+/// after the timeout (the end positions show it).
 #[test]
 fn m66_waits_on_a_plc_variable() {
     let (d, _dir) = start(|t| {
@@ -365,7 +366,7 @@ fn m66_waits_on_a_plc_variable() {
     ready(&mut c);
     run_text(
         &mut c,
-        "G21 G90\nM66 P0 L4 Q100000\nG0 X20\nM66 P0 L3 Q100000\nG0 X40\nM2\n",
+        "G21 G90\nM66 P0 L4 Q100000\nG0 X20\nM66 P0 L3 Q100000\nG0 X[39 + #5399]\nM2\n",
         "m66.ngc",
     );
     let s = wait_status(&mut c, "waiting at the M66 L3", HANG, |s| {
@@ -398,7 +399,7 @@ fn m66_waits_on_a_plc_variable() {
     // Nothing turns the pump on: the wait times out after 0.3 s and the job goes on.
     run_text(
         &mut c,
-        "G21 G90\nM66 P0 L3 Q0.3\nG0 X10\nM2\n",
+        "G21 G90\nM66 P0 L3 Q0.3\nG0 X[11 + #5399]\nM2\n",
         "m66-timeout.ngc",
     );
     let s = wait_job_end(&mut c, "job end", HANG);

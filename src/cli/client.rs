@@ -351,6 +351,16 @@ fn print_status(s: &Value) {
             j["progress"].as_f64().unwrap_or(0.0) * 100.0
         );
     }
+    let w = &j["input_wait"];
+    if w.is_object() {
+        println!(
+            "  waiting at line {}: M66 on {} input {} ({})",
+            w["line"],
+            w["input"].as_str().unwrap_or("?"),
+            w["index"],
+            w["until"].as_str().unwrap_or("?")
+        );
+    }
     for f in s["faults"].as_array().into_iter().flatten() {
         println!("  fault: {}", f.as_str().unwrap_or(""));
     }

@@ -132,6 +132,22 @@ pub struct JobStatus {
     pub distance_to_go_mm: f64,
     /// Why it ended, when it failed or was aborted.
     pub reason: Option<String>,
+    /// The M66 the job waits at, while the machine waits for its input (issue 11).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_wait: Option<InputWaitStatus>,
+}
+
+/// An M66 in progress: the machine stands at `line`, waiting for input `index`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct InputWaitStatus {
+    /// Source line of the M66.
+    pub line: u32,
+    /// "digital" (`P` word) or "analog" (`E` word).
+    pub input: String,
+    /// Input number.
+    pub index: u32,
+    /// What it waits for (`L` word): "immediate", "rise", "fall", "high" or "low".
+    pub until: String,
 }
 
 /// Overrides in effect.

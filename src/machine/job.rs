@@ -32,8 +32,9 @@
 //! planning error; both were, and are, refused before anything moves.
 //!
 //! Preparations are serialised ([`prepare`] waits for the one in progress): parallel loads
-//! cannot add up their peaks. A job that probes (G38.x) is prepared whole as before and runs
-//! piece by piece ([`super::probing`]).
+//! cannot add up their peaks. A job that probes (G38.x) or waits for an input (M66) is
+//! prepared whole as before and runs piece by piece ([`super::probing`]): what follows the
+//! probe or the M66 may depend on what the machine measures or reads (#5061–#5070, #5399).
 
 use super::probing::ProbingSource;
 use crate::config::MachineConfig;
@@ -68,7 +69,8 @@ pub struct PreparedJob {
     /// plan of the whole program with simulated probes (each trips at its programmed end):
     /// it validates the job and estimates its time; the job then runs piece by piece.
     pub plan: Plan,
-    /// Set when the program probes (G38.x): what to interpret again, live, when it runs.
+    /// Set when the program probes (G38.x) or waits for an input (M66): what to interpret
+    /// again, live, when it runs.
     pub probing: Option<ProbingSource>,
     /// Set for a job too large to keep its items: `plan.items` is empty and the feeder plans
     /// the job again from this.
@@ -193,7 +195,7 @@ enum Streamed {
     /// Planned to the end: the summary, the number of commands and the persistent
     /// parameters the program leaves.
     Planned(Box<Finished>, usize, Box<gcode::VarFile>),
-    /// The program probes: it must be prepared whole.
+    /// The program probes or waits for an input: it must be prepared whole.
     Probes,
     /// The batch consumer asked to stop.
     Stopped,
@@ -223,7 +225,7 @@ fn stream_pass(
     let (mut chunk, mut commands) = (Vec::new(), 0);
     loop {
         let more = run.next_chunk(&mut chunk).map_err(gcode)?;
-        if first_probe_line(&chunk).is_some() {
+        if first_piece_end(&chunk).is_some() {
             return Ok(Streamed::Probes);
         }
         commands += chunk.len();
@@ -284,20 +286,13 @@ fn digest(items: &[Item]) -> u64 {
     h.finish()
 }
 
-/// Line of the first probe move, if the program probes.
-pub fn first_probe_line(canon: &[Canon]) -> Option<u32> {
-    canon
-        .iter()
-        .find(|c| matches!(c.cmd, CanonCmd::StraightProbe { .. }))
-        .map(|c| c.loc.line)
-}
-
-/// Plans a job before it runs: validation and estimates. A program without probes is checked
-/// in full. One that probes is checked in full up to and including its first probe; what
-/// follows depends on the measurements (the dry run's simulated probe runs each move to its
-/// programmed end, which may be far from where the machine will touch), so those pieces are
-/// checked against the soft limits when they are planned, before they move, and the estimate
-/// plans them without soft limits.
+/// Plans a job before it runs: validation and estimates. A program without probes or M66 is
+/// checked in full. One that probes is checked in full up to and including its first probe
+/// or M66; what follows depends on the measurements (the dry run's simulated probe runs each
+/// move to its programmed end, which may be far from where the machine will touch) or on the
+/// input read (the dry run leaves #5399 as it is, so it may take the other branch), so those
+/// pieces are checked against the soft limits when they are planned, before they move, and
+/// the estimate plans them without soft limits.
 fn plan_job(
     canon: &[Canon],
     motion: &MotionConfig,
@@ -305,10 +300,7 @@ fn plan_job(
     name: &str,
 ) -> Result<Plan, ApiError> {
     let refuse = |e: motion::PlanError| ApiError::Gcode(format!("{name}: {e}"));
-    let Some(k) = canon
-        .iter()
-        .position(|c| matches!(c.cmd, CanonCmd::StraightProbe { .. }))
-    else {
+    let Some(k) = first_piece_end(canon) else {
         return motion::plan_from(canon, motion, start_mm).map_err(refuse);
     };
     let first = motion::plan_from(&canon[..=k], motion, start_mm).map_err(refuse)?;
@@ -318,6 +310,17 @@ fn plan_job(
         a.max_mm = 1e9;
     }
     Ok(motion::plan_from(canon, &relaxed, start_mm).unwrap_or(first))
+}
+
+/// Where a live job's first piece ends: the first probe move or M66, if any. What follows it
+/// depends on what the machine measures (G38.x) or reads (M66, into #5399).
+pub fn first_piece_end(canon: &[Canon]) -> Option<usize> {
+    canon.iter().position(|c| {
+        matches!(
+            c.cmd,
+            CanonCmd::StraightProbe { .. } | CanonCmd::Wait { .. }
+        )
+    })
 }
 
 /// Line of the first probe move of a prepared job, if it probes.
@@ -334,7 +337,7 @@ fn probing_source(
     text: &str,
     opts: &InterpOptions,
 ) -> Option<ProbingSource> {
-    first_probe_line(canon)?;
+    first_piece_end(canon)?;
     Some(ProbingSource {
         name: name.to_string(),
         text: text.to_string(),
@@ -609,6 +612,25 @@ mod tests {
             msg.contains("far.ngc") && msg.contains("line 3") && msg.contains("400"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn an_m66_makes_a_job_live_and_only_what_follows_it_is_checked_when_it_runs() {
+        // The dry run leaves #5399 at 0: it takes the "else" branch, far outside the soft
+        // limits; the machine may answer -1 (a timeout), so that branch is checked against
+        // the limits only when its piece is planned, with the answer known.
+        let text = "G21 G90\nG0 X10 Y10 Z-5\nM66 P0 L3 Q1\n\
+                    O1 if [#5399 LT 0]\n  G0 X20\nO1 else\n  G0 X900\nO1 endif\nM2\n";
+        let j = prepare_text(Some("m66.ngc"), text).expect("prepared");
+        assert!(j.probing.is_some(), "runs piece by piece");
+        // Without an M66 (or a probe) a job is checked whole and runs from its plan.
+        let j = prepare_text(None, "G21 G90\nM62 P0\nG0 X20\nM2\n").expect("prepared");
+        assert!(j.probing.is_none());
+        // Before the first M66 the soft limits hold as for any job.
+        let e = prepare_text(Some("m66.ngc"), "G21 G90\nG0 X900\nM66 P0 L0\nM2\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2"), "{e}");
     }
 
     #[test]

@@ -11,6 +11,12 @@
 //! task to continue. Everything but the probe itself is off the realtime path; the probe
 //! input is checked inside the servo cycle by the interpolator.
 //!
+//! M66 works the same way (issue 11; LinuxCNC's M66 is a queue buster too): the session
+//! ends a piece at every M66 (`Session::live_waits`), the runner marks that piece's last
+//! wait item with `answer`, the machine waits for the input (or the timeout, in servo
+//! cycles), publishes the value read (-1 on a timeout) and holds; the runner hands it to
+//! the interpreter as #5399 and queues the next piece, which may branch on it.
+//!
 //! An error that only shows with the measured values (say a probed Z that sends the next
 //! move past a soft limit) ends the job with the error's file, line and column; the
 //! machine is standing still at the probe when it is found.
@@ -44,8 +50,37 @@ pub struct FirstPiece {
     pub session: Session,
     /// The first piece's plan.
     pub plan: Plan,
-    /// Whether a probe ends it (otherwise the program has no probe after all).
+    /// Whether a probe or an M66 ends it (otherwise the program has none after all).
     pub more: bool,
+    /// What ends it.
+    pub end: PieceEnd,
+}
+
+/// Marks the M66 that ends a piece (its last wait item) so that the machine publishes what
+/// it reads and holds for the next piece; the waits before it in the piece (none: every
+/// M66 ends a piece) stay as they are.
+fn mark_answer(plan: &mut Plan, end: &PieceEnd) {
+    if !matches!(end, PieceEnd::Wait { .. }) {
+        return;
+    }
+    let last = plan.items.iter_mut().rev().find_map(|i| match i {
+        Item::Aux(a) => match &mut a.kind {
+            AuxKind::Wait { answer, .. } => Some(answer),
+            _ => None,
+        },
+        Item::Segment(_) => None,
+    });
+    if let Some(answer) = last {
+        *answer = true;
+    }
+}
+
+/// Where a piece stopped, as the machine published it.
+enum Stop {
+    /// The probe move's result.
+    Probe(super::servo::ProbeSnapshot),
+    /// The M66's: what #5399 gets, and where the machine stands.
+    Wait(f64, [f64; NUM_AXES]),
 }
 
 /// Opens the live session and plans the first piece.
@@ -60,13 +95,16 @@ pub fn first_piece(
     opts.initial_position = Some(p);
     let gcode = |e: crate::gcode::GcodeError| ApiError::Gcode(e.to_string());
     let mut session = Session::open_str(&src.name, &src.text, &opts).map_err(gcode)?;
+    session.live_waits(true);
     let (canon, end) = session.next_piece().map_err(gcode)?;
-    let plan = motion::plan_continue(&canon, cfg, start_mm, FoldState::new(cfg))
+    let mut plan = motion::plan_continue(&canon, cfg, start_mm, FoldState::new(cfg))
         .map_err(|e| ApiError::Gcode(format!("{}: {e}", src.name)))?;
+    mark_answer(&mut plan, &end);
     Ok(FirstPiece {
         session,
         plan,
-        more: matches!(end, PieceEnd::Probe { .. }),
+        more: end != PieceEnd::End,
+        end,
     })
 }
 
@@ -123,13 +161,14 @@ pub enum RunnerEnd {
 }
 
 impl PieceRunner {
-    /// Queues the first piece, then waits for each probe result and queues the next piece,
-    /// until the program ends, the job is cancelled, or a piece fails.
+    /// Queues the first piece, then waits for each probe result or M66 answer and queues the
+    /// next piece, until the program ends, the job is cancelled, or a piece fails.
     pub fn run(mut self, first: FirstPiece) -> RunnerEnd {
         let FirstPiece {
             mut session,
             plan,
             more,
+            mut end,
         } = first;
         if !more {
             self.keep_parameters(&session);
@@ -138,27 +177,38 @@ impl PieceRunner {
             return RunnerEnd::Done;
         }
         let mut plan = plan;
+        let mut seen_wait_seq = None;
         loop {
-            let Some(snap) = self.wait_for_probe() else {
+            let Some(stop) = self.wait_for_stop(&end, &mut seen_wait_seq) else {
                 return RunnerEnd::Done;
             };
-            let p = snap.probe;
             let state = plan.end_state.clone();
-            session.probe_result(&ProbeResult {
-                tripped: p.tripped,
-                probed: state.program_xyzabc(&p.probed_mm),
-                stopped: state.program_xyzabc(&p.stopped_mm),
-            });
-            let (canon, end) = match session.next_piece() {
+            let start_mm = match stop {
+                Stop::Probe(p) => {
+                    session.probe_result(&ProbeResult {
+                        tripped: p.tripped,
+                        probed: state.program_xyzabc(&p.probed_mm),
+                        stopped: state.program_xyzabc(&p.stopped_mm),
+                    });
+                    p.stopped_mm
+                }
+                Stop::Wait(value, stopped_mm) => {
+                    session.wait_result(value);
+                    stopped_mm
+                }
+            };
+            let canon;
+            (canon, end) = match session.next_piece() {
                 Ok(piece) => piece,
                 Err(e) => return RunnerEnd::Failed(e.to_string()),
             };
-            plan = match motion::plan_continue(&canon, &self.cfg, p.stopped_mm, state) {
+            plan = match motion::plan_continue(&canon, &self.cfg, start_mm, state) {
                 Ok(plan) => plan,
                 Err(e) => return RunnerEnd::Failed(format!("{}: {e}", self.name)),
             };
+            mark_answer(&mut plan, &end);
             append_messages(&mut plan, &self.messages);
-            if !matches!(end, PieceEnd::Probe { .. }) {
+            if end == PieceEnd::End {
                 self.keep_parameters(&session);
             }
             // Queue what fits, release the machine, then queue the rest as it drains: the
@@ -175,10 +225,7 @@ impl PieceRunner {
                     CommandStatus::Accepted | CommandStatus::Done
                 )
             });
-            if !accepted || !self.feed(&plan.items[first..]) {
-                return RunnerEnd::Done;
-            }
-            if !matches!(end, PieceEnd::Probe { .. }) {
+            if !accepted || !self.feed(&plan.items[first..]) || end == PieceEnd::End {
                 return RunnerEnd::Done;
             }
         }
@@ -189,18 +236,24 @@ impl PieceRunner {
         *self.parameters.lock().unwrap_or_else(|p| p.into_inner()) = Some(session.parameters());
     }
 
-    /// Waits until the machine publishes the result of this job's next probe; `None` when
-    /// the job was cancelled first.
-    fn wait_for_probe(&mut self) -> Option<MachineSnapshot> {
+    /// Waits until the machine publishes the end of this job's piece that ended with `end`:
+    /// the result of its probe, or the answer to its M66 (one not seen before: `seen_wait`
+    /// is the last one taken); `None` when the job was cancelled first.
+    fn wait_for_stop(&mut self, end: &PieceEnd, seen_wait: &mut Option<u32>) -> Option<Stop> {
+        let probe = matches!(end, PieceEnd::Probe { .. });
         loop {
             if self.cancel.load(Ordering::Acquire) {
                 return None;
             }
             if let Some(s) = self.snapshot.latest() {
-                if s.probe.seq != self.seen_probe_seq && s.probe.job == self.job && s.probe.waiting
-                {
-                    self.seen_probe_seq = s.probe.seq;
-                    return Some(s);
+                let (p, w) = (s.probe, s.wait);
+                if probe && p.seq != self.seen_probe_seq && p.job == self.job && p.waiting {
+                    self.seen_probe_seq = p.seq;
+                    return Some(Stop::Probe(p));
+                }
+                if !probe && *seen_wait != Some(w.seq) && w.job == self.job && w.waiting {
+                    *seen_wait = Some(w.seq);
+                    return Some(Stop::Wait(w.value, w.stopped_mm));
                 }
             }
             std::thread::sleep(Duration::from_millis(1));

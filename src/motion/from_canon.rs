@@ -462,6 +462,7 @@ pub fn fold_from(
                 input: *input,
                 kind: *kind,
                 timeout_s: *timeout_s,
+                answer: false,
             })),
             CanonCmd::StraightProbe { end, kind } => {
                 // A move of its own, from rest to rest, between two barriers: the machine

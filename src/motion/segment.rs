@@ -233,6 +233,10 @@ pub enum AuxKind {
         kind: WaitKind,
         /// Timeout, s.
         timeout_s: f64,
+        /// The M66 ends a piece of a live job: the machine publishes what it read (-1 after
+        /// a timeout) and holds until the next piece is queued (see
+        /// `machine::servo::input_wait`). Set by the piece runner; false from the planner.
+        answer: bool,
     },
     /// `(MSG, …)`: the text is `Plan::messages[id]` (items stay heap-free).
     Message {

@@ -11,6 +11,10 @@
 //!     "threads":[{"name":"servo","period_us":1000,"priority":80,"cycles":5000,
 //!                 "latency_us":{"min":3.1,"avg":12.0,"max":80.5},"exec_us":{...},"overruns":0}]}}
 //! ```
+//!
+//! While a job waits at an M66 for its input, `job` also holds
+//! `"input_wait":{"line":3,"input":"digital","index":1,"until":"rise"}` (`until`: the `L`
+//! word as immediate, rise, fall, high or low); the member is absent otherwise.
 
 use super::{no_params, ControlError};
 use crate::machine::api::MachineApi;

@@ -169,7 +169,7 @@ impl Machine {
             elapsed_s: 0.0,
             distance_mm: job.plan.distance_mm,
             distance_to_go_mm: job.plan.distance_mm,
-            reason: None,
+            ..JobStatus::default()
         };
         let previous = book.active.replace(ActiveJob {
             id,
@@ -222,8 +222,11 @@ impl Machine {
         cancel: &Arc<AtomicBool>,
         (messages, measured): (&Arc<Mutex<Vec<String>>>, &Measured),
     ) -> Result<(std::thread::JoinHandle<()>, u64), ApiError> {
-        if self.config.motion.probe_input.is_none() {
-            let line = job::first_probe_line_of(job).unwrap_or(0);
+        // A job that only waits for inputs (M66) runs piece by piece without a probe.
+        if let (None, Some(line)) = (
+            &self.config.motion.probe_input,
+            job::first_probe_line_of(job),
+        ) {
             return Err(ApiError::Rejected(format!(
                 "{}: line {line} probes (G38.x) but the machine has no probe input \
                  (set motion.probe_input)",

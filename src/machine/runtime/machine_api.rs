@@ -74,6 +74,7 @@ impl MachineApi for Machine {
         let mut job = book.status.clone();
         if let Some(a) = &book.active {
             apply_progress(&mut job, a, sp);
+            job.input_wait = crate::machine::servo::input_wait::status(&snap.wait, a.id);
         }
         let mut faults: Vec<String> = book.faults.iter().cloned().collect();
         if matches!(snap.mode, Mode::Fault | Mode::Estop) {

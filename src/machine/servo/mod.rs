@@ -30,9 +30,12 @@ pub mod can_bus;
 pub mod can_delay;
 pub mod can_pdo_names;
 pub mod can_setup;
+pub mod input_wait;
 pub mod interp_task;
 pub mod io_task;
 pub mod json_views;
+#[cfg(test)]
+mod m66_tests;
 pub mod machine_task;
 pub mod monitor_task;
 #[cfg(test)]
@@ -306,6 +309,36 @@ pub struct MachineSnapshot {
     pub probe: ProbeSnapshot,
     /// Optional stop: M1 holds the job as M0 does.
     pub optional_stop: bool,
+    /// The M66 in progress, or the last one's result.
+    pub wait: InputWaitSnapshot,
+}
+
+/// M66 as the machine carries it out ([`input_wait`]). While `pending`, the machine waits
+/// for input `index`; when the wait ends it sets `value` and, for a wait that ends a piece of
+/// a live job, holds with `waiting` set until the next piece, interpreted with #5399 =
+/// `value`, arrives (`MachineCmd::Continue`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct InputWaitSnapshot {
+    /// Incremented with every M66 that ended (met or timed out).
+    pub seq: u32,
+    /// Job of the M66 in progress or of the last one.
+    pub job: u32,
+    /// Its source line.
+    pub line: u32,
+    /// Its input number (`P` or `E` word).
+    pub index: u32,
+    /// An analog input (`E`), not a digital one (`P`).
+    pub analog: bool,
+    /// The `L` word (0 immediate, 1 rise, 2 fall, 3 high, 4 low).
+    pub mode: u8,
+    /// The machine waits for the input now.
+    pub pending: bool,
+    /// What the last M66 read (0/1 digital, the reading analog), -1 when it timed out.
+    pub value: f64,
+    /// The job holds after the M66 until its next piece is queued.
+    pub waiting: bool,
+    /// Commanded pose at rest at the M66: where the next piece starts.
+    pub stopped_mm: [f64; NUM_AXES],
 }
 
 /// The result of the last G38 move, published when the machine reaches its end. While
@@ -343,6 +376,7 @@ impl Default for MachineSnapshot {
             last_trip: None,
             probe: ProbeSnapshot::default(),
             optional_stop: false,
+            wait: InputWaitSnapshot::default(),
         }
     }
 }

@@ -88,17 +88,15 @@ impl PlcLink {
         }
     }
 
-    /// The level M66 sees on input `index` when the PLC provides it (`None`: a physical
-    /// input). An analog value counts as high above 0.5, as for physical inputs.
-    pub fn m66_level(&self, index: u32, input: InputKind) -> Option<bool> {
+    /// What M66 reads on input `index` when the PLC provides it (`None`: a physical input):
+    /// 0 or 1 for a digital one, the variable's value for an analog one.
+    pub fn m66_value(&self, index: u32, input: InputKind) -> Option<f64> {
         let i = index as usize;
         match input {
             InputKind::Digital if i < self.setup.m66_digital => {
-                Some(self.cmd.m66_digital & (1 << i) != 0)
+                Some(f64::from(u8::from(self.cmd.m66_digital & (1 << i) != 0)))
             }
-            InputKind::Analog if i < self.setup.m66_analog => {
-                self.cmd.m66_analog.get(i).map(|v| *v > 0.5)
-            }
+            InputKind::Analog if i < self.setup.m66_analog => self.cmd.m66_analog.get(i).copied(),
             _ => None,
         }
     }

@@ -26,19 +26,23 @@ struct Outcome {
     start_z: f64,
 }
 
-/// Runs `text` as job 1 with a surface at `surface_z` (the probe is active while the actual
-/// Z is at or below it; `None`: never).
-fn run_probing(r: &mut Rig, text: &str, surface_z: Option<f64>) -> Outcome {
+/// A live job (job 1) started on the rig: the real piece runner's thread and the `Run`.
+pub(super) struct Live {
+    pub(super) h: CommandHandle,
+    pub(super) cancel: Arc<AtomicBool>,
+    pub(super) thread: std::thread::JoinHandle<RunnerEnd>,
+    pub(super) start: [f64; NUM_AXES],
+}
+
+/// Starts `text` as job 1, piece by piece, as the daemon starts a probing or M66 job.
+pub(super) fn start_live(r: &mut Rig, name: &str, text: &str) -> Live {
     let cfg = crate::config::load(
         &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sim-fast.toml"),
     )
     .expect("config");
-    let mut start = [0.0; NUM_AXES];
-    for (i, s) in start.iter_mut().take(3).enumerate() {
-        *s = r.feedback(i).actual;
-    }
+    let start = r.position();
     let src = ProbingSource {
-        name: "probe.ngc".into(),
+        name: name.into(),
         text: text.into(),
         opts: job::interp_options(&cfg),
     };
@@ -67,6 +71,23 @@ fn run_probing(r: &mut Rig, text: &str, surface_z: Option<f64>) -> Outcome {
             manual: false,
         })
         .expect("queue");
+    Live {
+        h,
+        cancel,
+        thread,
+        start,
+    }
+}
+
+/// Runs `text` as job 1 with a surface at `surface_z` (the probe is active while the actual
+/// Z is at or below it; `None`: never).
+fn run_probing(r: &mut Rig, text: &str, surface_z: Option<f64>) -> Outcome {
+    let Live {
+        h,
+        cancel,
+        thread,
+        start,
+    } = start_live(r, "probe.ngc", text);
     let io = r.sim_io[0].clone().expect("sim io");
     let mut probes = Vec::new();
     let mut seq = 0;

@@ -4,6 +4,7 @@
 
 use super::{Barrier, MachineTask};
 use crate::gcode::canon::{InputKind, SpindleDir};
+use crate::machine::servo::input_wait::{self, InputWait};
 use crate::machine::servo::{JobError, JobEvent};
 use crate::motion::AuxKind;
 use crate::plc::link::RequestKind;
@@ -93,15 +94,14 @@ impl MachineTask {
                 input,
                 kind,
                 timeout_s,
+                answer,
             } => {
-                let cycles = (timeout_s / self.setup.period_s).max(0.0) as u64;
-                self.barrier = Barrier::Wait {
-                    index,
-                    input,
-                    kind,
-                    deadline: self.cycle + cycles,
-                    last: self.input_level(index, input),
-                };
+                let (period, now) = (self.setup.period_s, self.input_value(index, input));
+                let w = InputWait::start(
+                    index, input, kind, timeout_s, period, self.cycle, now, answer, line,
+                );
+                self.barrier = Barrier::Wait(w);
+                input_wait::publish_start(&mut self.snap.wait, &w, self.job_id);
                 done = false;
             }
             AuxKind::Message { id } => self.emit_job(JobEvent::Message { id, line }),
@@ -170,18 +170,20 @@ impl MachineTask {
         }
     }
 
-    pub(super) fn input_level(&self, index: u32, input: InputKind) -> bool {
+    /// What M66 reads on an input: 0/1 for a digital one, the reading of an analog one.
+    pub(super) fn input_value(&self, index: u32, input: InputKind) -> f64 {
         // `[plc] m66_digital` / `m66_analog`: the PLC's variables.
-        if let Some(v) = self.plc.as_ref().and_then(|p| p.m66_level(index, input)) {
+        if let Some(v) = self.plc.as_ref().and_then(|p| p.m66_value(index, input)) {
             return v;
         }
         match input {
-            InputKind::Digital => self.inputs.di(index as usize),
+            InputKind::Digital => f64::from(u8::from(self.inputs.di(index as usize))),
             InputKind::Analog => self
                 .inputs
                 .analog
                 .get(index as usize)
-                .is_some_and(|v| *v > 0.5),
+                .copied()
+                .unwrap_or(0.0),
         }
     }
 }

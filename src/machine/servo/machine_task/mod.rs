@@ -14,12 +14,13 @@
 //! thread's overrun event; both are handled at this task's safe point (deferred handlers,
 //! step 6), so a fault found in cycle n starts the controlled stop in cycle n + 1.
 
+use super::input_wait::InputWait;
 use super::plc_link::PlcLink;
 use super::{
     AxisFeedback, DriveControl, FaultEvent, Inputs, JobError, JobEvent, JobNews, MachineSnapshot,
     ModeEvent, MonitorSnapshot, MotionControl, Outputs, Setpoints,
 };
-use crate::gcode::canon::{InputKind, SpindleDir, WaitKind};
+use crate::gcode::canon::SpindleDir;
 use crate::gcode::NUM_AXES;
 use crate::machine::api::Mode;
 use crate::machine::mode::{Fact, ModeMachine};
@@ -88,16 +89,11 @@ enum Barrier {
         since: u64,
     },
     /// M66 waits for an input.
-    Wait {
-        index: u32,
-        input: InputKind,
-        kind: WaitKind,
-        deadline: u64,
-        last: bool,
-    },
+    Wait(InputWait),
     /// M0 (or M1 with optional stop on): held until `resume`.
     ProgramStop,
-    /// The end of a probe move: held until the next piece of the program is queued.
+    /// The end of a probe move, or an M66 that answered a live job: held until the next
+    /// piece of the program is queued.
     Probe,
     /// M6 or M100–M199 handled by the PLC: held until it answers request `seq`.
     Plc {

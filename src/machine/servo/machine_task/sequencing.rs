@@ -3,11 +3,11 @@
 //! these run in order each step and are the task's sequencing, not its command handling.
 
 use super::{Barrier, MachineTask, Motion};
-use crate::gcode::canon::WaitKind;
 use crate::gcode::NUM_AXES;
 use crate::machine::api::Mode;
 use crate::machine::mode::{Fact, Request};
 use crate::machine::safety::Trip;
+use crate::machine::servo::input_wait;
 use crate::machine::servo::{JobEvent, ModeEvent};
 use crate::motion::InterpState;
 use crate::rt::prelude::*;
@@ -34,26 +34,19 @@ impl MachineTask {
                 }
                 at
             }
-            Barrier::Wait {
-                index,
-                input,
-                kind,
-                deadline,
-                last,
-            } => {
-                let now = self.input_level(index, input);
-                let ok = match kind {
-                    WaitKind::Immediate => true,
-                    WaitKind::Rise => now && !last,
-                    WaitKind::Fall => !now && last,
-                    WaitKind::High => now,
-                    WaitKind::Low => !now,
-                };
-                if let Barrier::Wait { last, .. } = &mut self.barrier {
-                    *last = now;
-                }
+            Barrier::Wait(mut w) => {
                 // LinuxCNC semantics: a timeout is not an error, the program goes on.
-                ok || self.cycle >= deadline
+                let value = w.poll(self.input_value(w.index, w.input), self.cycle);
+                self.barrier = Barrier::Wait(w);
+                let Some(value) = value else { return };
+                let pose = self.setpoints.pose_mm;
+                input_wait::publish_end(&mut self.snap.wait, &w, value, pose);
+                if w.answer {
+                    // The program goes on with #5399 = value: hold for its next piece.
+                    self.barrier = Barrier::Probe;
+                    return;
+                }
+                true
             }
         };
         if met {
@@ -243,6 +236,12 @@ impl MachineTask {
             w.set(self.motion);
         }
         if let Some(w) = &mut self.snapshot_out {
+            // Whatever ended a wait or its hold (abort, e-stop, a fault) cleared the barrier.
+            input_wait::publish_barrier(
+                &mut self.snap.wait,
+                matches!(self.barrier, Barrier::Wait(_)),
+                self.barrier == Barrier::Probe,
+            );
             w.set(self.snap);
         }
     }

@@ -215,7 +215,9 @@ impl Task for MachineTask {
                 }
             }
             MachineCmd::Continue { job, items } => {
-                let waiting = self.barrier == Barrier::Probe && self.snap.probe.job == job;
+                let waiting = self.barrier == Barrier::Probe
+                    && (self.snap.probe.waiting && self.snap.probe.job == job
+                        || self.snap.wait.waiting && self.snap.wait.job == job);
                 let Motion::Job {
                     job: current,
                     items: total,
@@ -224,7 +226,9 @@ impl Task for MachineTask {
                     return Err(RejectReason::Other("no job is running"));
                 };
                 if current != job || !waiting {
-                    return Err(RejectReason::Other("the job is not waiting after a probe"));
+                    return Err(RejectReason::Other(
+                        "the job is not waiting after a probe or an M66",
+                    ));
                 }
                 self.current = Motion::Job {
                     job,
@@ -232,6 +236,7 @@ impl Task for MachineTask {
                 };
                 self.barrier = Barrier::None;
                 self.snap.probe.waiting = false;
+                self.snap.wait.waiting = false;
                 self.motion.aux_done_seq = self.motion.aux_done_seq.wrapping_add(1);
             }
             MachineCmd::OptionalStop { on } => self.snap.optional_stop = on,
