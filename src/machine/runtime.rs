@@ -24,6 +24,7 @@ use super::servo::interp_task::InterpolatorTask;
 use super::servo::io_task::{IoTask, SimPlate, SimSpindle};
 use super::servo::machine_task::{MachineCmd, MachineSetup, MachineTask, SpindleIo};
 use super::servo::monitor_task::MonitorTask;
+use super::servo::spindle_follow::sim_spindle_for;
 use super::servo::status::StatusSnapshot;
 use super::servo::{
     ports, FaultEvent, JobEvent, JobNews, MachineSnapshot, ModeEvent, QueueItem, Setpoints,
@@ -313,6 +314,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         can_tx.push((format!("can.{}.tx", b.iface), CanTxTask(b.tx)));
     }
     let overrun_injection = Arc::new(AtomicU32::new(0));
+    let spindle_simulated = sim_spindle.is_some();
     let mut io_task = IoTask::new(io, io_map.clone(), sim_spindle).with_plates(plates);
     if sim_io.iter().all(Option::is_some) {
         io_task = io_task.with_overrun_injection(overrun_injection.clone());
@@ -326,7 +328,8 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
     let machine = app.add_periodic("machine", machine_task, schedule)?;
     app.add_periodic(
         "interpolator",
-        InterpolatorTask::new(motion_cfg.clone(), axes.clone(), queue_r),
+        InterpolatorTask::new(motion_cfg.clone(), axes.clone(), queue_r)
+            .with_sim_spindle(sim_spindle_for(config, spindle_simulated)),
         schedule,
     )?;
     let mut guards = Vec::new();

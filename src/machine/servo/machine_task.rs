@@ -397,6 +397,10 @@ pub struct MachineTask {
     last_mode: Mode,
     spindle_dir: Option<SpindleDir>,
     spindle_rpm: f64,
+    /// Errors of spindle-synchronised moves, seen once each.
+    sync_errors: super::spindle_follow::SyncErrors,
+    /// The spindle direction output is reversed (a rigid tap coming out).
+    spindle_reversed: bool,
     /// Cycle at which the path of the current job was complete (settling since).
     settle_since: Option<u64>,
     /// Job id of the current or last motion, and how it ended.
@@ -459,6 +463,8 @@ impl MachineTask {
             last_mode: Mode::Estop,
             spindle_dir: None,
             spindle_rpm: 0.0,
+            sync_errors: Default::default(),
+            spindle_reversed: false,
             settle_since: None,
             job_id: 0,
             ended: None,
@@ -628,8 +634,10 @@ impl MachineTask {
         let rpm = (self.spindle_rpm * self.snap.spindle_override).clamp(0.0, sp.max_rpm);
         self.outputs.set_do(sp.enable, self.spindle_dir.is_some());
         if let Some(d) = sp.direction {
-            self.outputs
-                .set_do(d, self.spindle_dir == Some(SpindleDir::CounterClockwise));
+            self.outputs.set_do(
+                d,
+                (self.spindle_dir == Some(SpindleDir::CounterClockwise)) != self.spindle_reversed,
+            );
         }
         if let Some(s) = sp.speed {
             if s < self.outputs.analog.len() {
@@ -696,7 +704,11 @@ impl MachineTask {
                 done = false;
             }
             AuxKind::Message { id } => self.emit_job(JobEvent::Message { id, line }),
-            AuxKind::OverrideEnable { .. } | AuxKind::UserMcode { .. } => {}
+            AuxKind::OverrideEnable { .. }
+            | AuxKind::UserMcode { .. }
+            | AuxKind::SpindleSyncEnd => {}
+            // The interpolator task runs the move and goes on by itself.
+            AuxKind::SpindleSync { .. } => done = false,
             AuxKind::ProgramStop => {
                 self.program_stop(line);
                 done = false;
@@ -1080,6 +1092,16 @@ impl Task for MachineTask {
         }
         self.poll_plc();
         self.motion.probe_input = self.setup.probe_input.is_some_and(|i| self.inputs.di(i));
+        self.motion.spindle_rpm = self.snap.spindle_rpm;
+        if self.setpoints.spindle_reversed != self.spindle_reversed {
+            self.spindle_reversed = self.setpoints.spindle_reversed;
+            self.apply_spindle();
+        }
+        if let Some(e) = self.sync_errors.take(&self.setpoints) {
+            if self.current != Motion::None && self.stopping.is_none() {
+                self.job_error(JobError::SpindleSync(e), self.setpoints.line);
+            }
+        }
         if self.mode.mode() == Mode::Estop {
             // The quick stop is requested until the drives are off.
             self.drive.quick_stop = self
