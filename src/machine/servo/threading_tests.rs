@@ -201,3 +201,65 @@ fn a_spindle_too_fast_for_the_axis_stops_the_job_with_an_error_naming_the_speeds
     // Stopped at the start: the axis never tried to follow.
     assert!(z_min > -5.0 - 1e-9, "Z went to {z_min}");
 }
+
+#[test]
+fn feed_override_and_feed_hold_do_not_act_on_a_synchronised_move() {
+    let mut r = Rig::new();
+    r.ready();
+    r.send_until_done(
+        MachineCmd::Overrides {
+            feed: 0.5,
+            rapid: 1.0,
+            spindle: 1.0,
+        },
+        10,
+    );
+    let text = "G21 G90 G18\nG0 X150 Y150 Z-5\nM3 S1000\nG33 Z-35 K1.5\nG0 Z-5\nM5\nM2\n";
+    start(&mut r, 1, text);
+    // Through the thread: a hold is asked for in its middle.
+    let (mut top, mut prev_z, mut paused) = (0.0f64, None, None);
+    let dt = r.motion_cfg.servo_period_s;
+    let mut held_at = None;
+    for _ in 0..100_000 {
+        r.rt.run_cycles(1);
+        let sp = r.sp.latest().expect("setpoints");
+        let z = sp.pose_mm[2];
+        if sp.line == 4 {
+            // Past the catch-up after the index, before the run-out.
+            if let (Some(p), true) = (prev_z, (-30.0..-12.0).contains(&z)) {
+                top = top.max((p - z) / dt);
+            }
+            if z < -15.0 && paused.is_none() {
+                paused = Some(r.built_machine.send(MachineCmd::Pause).expect("queue"));
+            }
+        }
+        prev_z = Some(z);
+        while let Some(n) = r.jobs.pop() {
+            assert!(
+                !matches!(
+                    n.event,
+                    JobEvent::Error { .. } | JobEvent::Failed { .. } | JobEvent::Aborted { .. }
+                ),
+                "{n:?}"
+            );
+        }
+        if paused
+            .as_ref()
+            .is_some_and(|h| h.status() == CommandStatus::Done)
+        {
+            held_at = Some(z);
+            break;
+        }
+    }
+    // The thread ran at pitch × speed (25 mm/s), not at half of it, and the hold took
+    // effect only at its end.
+    assert!(
+        (top - 25.0).abs() < 0.25,
+        "top speed along the thread {top} mm/s"
+    );
+    let held_at = held_at.expect("the hold never took effect");
+    assert!((held_at + 35.0).abs() < 1e-6, "held at Z {held_at}");
+    r.send_until_done(MachineCmd::Resume, 10);
+    let end = run_to_end(&mut r, 100_000, |_| {});
+    assert!(matches!(end, JobEvent::Finished { .. }), "{end:?}");
+}
