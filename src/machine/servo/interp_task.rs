@@ -142,6 +142,10 @@ impl InterpolatorTask {
         else {
             return;
         };
+        if self.sp.abort_ack != self.last_abort {
+            // Aborting: the interpolator drops the move with the rest of the job.
+            return;
+        }
         match self.follow.start(&self.cfg, at, end_mm, pitch_mm, tap) {
             Ok(StartOutcome::Following) => {}
             Ok(StartOutcome::RunPlanned) => self.interp.aux_done(),
