@@ -1,6 +1,8 @@
 //! Lathe programs through the planner and the interpolator: the feeds of G33 and of the
-//! G76 passes advance their pitch per spindle revolution (velocity-locked to the commanded
-//! spindle speed, each from rest to rest), and what cannot be executed yet is refused.
+//! G76 passes advance their pitch per spindle revolution (the plan is velocity-locked to the
+//! commanded spindle speed, each from rest to rest, between the markers that let a machine
+//! with a spindle position run them position-locked instead), G33.1 goes in and back out,
+//! and what cannot be executed is refused.
 #![allow(clippy::unwrap_used)]
 
 mod motion_util;
@@ -97,12 +99,53 @@ fn what_the_planner_cannot_lock_to_the_spindle_is_refused() {
         Err(e) => e.to_string(),
         Ok(_) => panic!("planned: {text}"),
     };
-    let e = refused("G21 G18\nM3 S100\nG33.1 Z-5 K1\nM2\n");
-    assert!(e.contains("line 3") && e.contains("rigid tapping"), "{e}");
     let e = refused("G21 G18\nG96 S100 D2000 M3\nG33 Z-5 K1\nM2\n");
     assert!(e.contains("line 3") && e.contains("G96"), "{e}");
     let e = refused("G21 G18\nM3 S100\nG33 Z-5 K0\nM2\n");
     assert!(e.contains("line 3") && e.contains("pitch"), "{e}");
+}
+
+#[test]
+fn g33_1_is_planned_in_and_back_out_between_the_synchronisation_markers() {
+    let (cfg, p) = plan_text("G21 G18 G90\nG0 X0 Z2\nM3 S300\nG33.1 Z-10 K1.25\nM5\nM2\n").unwrap();
+    let marks: Vec<&AuxKind> = p
+        .items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Aux(a) if a.line == 4 => Some(&a.kind),
+            _ => None,
+        })
+        .collect();
+    match marks.as_slice() {
+        [AuxKind::SpindleSync {
+            end_mm,
+            pitch_mm,
+            tap: true,
+        }, AuxKind::SpindleSyncEnd] => {
+            assert!((end_mm[2] + 10.0).abs() < 1e-12 && (pitch_mm - 1.25).abs() < 1e-12);
+        }
+        other => panic!("{other:?}"),
+    }
+    let tr = run(&p, &cfg);
+    assert_within_limits(&tr, &cfg);
+    let on_line: Vec<f64> = (0..tr.lines.len())
+        .filter(|&i| tr.lines[i] == 4)
+        .map(|i| tr.poses_mm[i][2])
+        .collect();
+    let deepest = on_line.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!((deepest + 10.0).abs() < 1e-5, "deepest {deepest}"); // sampled once a period
+    let end = last(&tr);
+    assert!((end[2] - 2.0).abs() < 1e-9, "back at the start: {end:?}");
+    // Inches: the pitch along the path is in mm.
+    let (_, p) = plan_text("G20 G18 G90\nG0 X0 Z0.1\nM3 S300\nG33.1 Z-0.5 K0.05\nM2\n").unwrap();
+    let pitch = p.items.iter().find_map(|i| match i {
+        Item::Aux(AuxItem {
+            kind: AuxKind::SpindleSync { pitch_mm, .. },
+            ..
+        }) => Some(*pitch_mm),
+        _ => None,
+    });
+    assert_eq!(pitch, Some(0.05 * 25.4));
 }
 
 /// The spindle speeds the plan commands, in order.

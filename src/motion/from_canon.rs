@@ -281,20 +281,7 @@ pub fn fold_from(
             CanonCmd::StraightFeed(p) if st.sync_pitch.is_some() => {
                 check_finite(p, line)?;
                 let end = st.to_machine(p);
-                let pitch = st.sync_pitch.unwrap_or(0.0);
-                let feed = super::spindle_sync::feed_mm_s(
-                    pitch,
-                    st.scale(),
-                    st.spindle_rpm,
-                    st.css,
-                    line,
-                )?;
-                // From rest to rest: the whole move is at pitch per revolution.
-                let saved = st.control;
-                st.control = MotionControl::ExactStop;
-                push_line(&mut out, &st, cfg, end, false, 0, feed, line)?;
-                st.control = saved;
-                st.pos_mm = end;
+                push_synced(&mut out, &mut st, cfg, end, false, line)?;
             }
             CanonCmd::StraightTraverse(p) | CanonCmd::StraightFeed(p) => {
                 check_finite(p, line)?;
@@ -419,14 +406,12 @@ pub fn fold_from(
             // Feeds locked to the spindle (G33, G76): see spindle_sync.
             CanonCmd::StartSpeedFeedSync { pitch } => st.sync_pitch = Some(*pitch),
             CanonCmd::StopSpeedFeedSync => st.sync_pitch = None,
-            // Rigid tapping reverses the spindle at the bottom and follows it back out:
-            // refused, never run as plain feeds that would strip the thread.
-            CanonCmd::RigidTap { .. } => {
-                return Err(PlanError::Unsupported {
-                    line,
-                    what: "rigid tapping (G33.1) is interpreted but not executed by this planner"
-                        .into(),
-                })
+            // Rigid tapping: in to the end point locked to the spindle, which reverses
+            // there, and back out along the same helix to the start.
+            CanonCmd::RigidTap { end } => {
+                check_finite(end, line)?;
+                let end = st.to_machine(end);
+                push_synced(&mut out, &mut st, cfg, end, true, line)?;
             }
             CanonCmd::MistOn => out.steps.push(aux(AuxKind::Mist(true))),
             CanonCmd::MistOff => out.steps.push(aux(AuxKind::Mist(false))),
@@ -546,6 +531,45 @@ fn polyline_feed_length_mm(start: [f64; NUM_AXES], points: &[[f64; NUM_AXES]]) -
         prev = *m;
     }
     total
+}
+
+/// A spindle-synchronised move (G33 and the G76 passes; G33.1 with `tap`) from the current
+/// position to `end`, between [`AuxKind::SpindleSync`] and [`AuxKind::SpindleSyncEnd`]. The
+/// segments in between are planned velocity-locked to the commanded spindle speed (pitch ×
+/// rpm, from rest to rest; G33.1 in and back out): what a trace shows, and what a machine
+/// without a spindle position would run. A machine with one follows the measured spindle
+/// position instead (`motion::spindle_lock`).
+fn push_synced(
+    out: &mut Folded,
+    st: &mut FoldState,
+    cfg: &MotionConfig,
+    end: [f64; NUM_AXES],
+    tap: bool,
+    line: u32,
+) -> Result<(), PlanError> {
+    let pitch = st.sync_pitch.unwrap_or(0.0);
+    let feed = super::spindle_sync::feed_mm_s(pitch, st.scale(), st.spindle_rpm, st.css, line)?;
+    let start = st.pos_mm;
+    let sync = AuxKind::SpindleSync {
+        end_mm: end,
+        pitch_mm: pitch * st.scale(),
+        tap,
+    };
+    out.steps.push(Step::Aux(AuxItem { kind: sync, line }));
+    let saved = st.control;
+    st.control = MotionControl::ExactStop;
+    push_line(out, st, cfg, end, false, 0, feed, line)?;
+    st.pos_mm = end;
+    if tap {
+        push_line(out, st, cfg, start, false, 0, feed, line)?;
+        st.pos_mm = start;
+    }
+    st.control = saved;
+    out.steps.push(Step::Aux(AuxItem {
+        kind: AuxKind::SpindleSyncEnd,
+        line,
+    }));
+    Ok(())
 }
 
 #[allow(clippy::too_many_arguments)]

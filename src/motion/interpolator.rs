@@ -141,6 +141,11 @@ pub struct Interpolator {
     probe_stop: bool,
     /// At rest after a trip: dropping the rest of the probe move up to its `ProbeEnd`.
     probe_flush: bool,
+    /// The machine runs spindle-synchronised moves itself ([`Self::set_external_sync`]).
+    external_sync: bool,
+    /// Between `SpindleSync` and `SpindleSyncEnd` with `external_sync`: the planned
+    /// segments are skipped (the machine has run the move).
+    sync_skip: bool,
     aux_ring: [Option<AuxItem>; AUX_RING],
     aux_head: usize,
     aux_len: usize,
@@ -173,6 +178,8 @@ impl Interpolator {
             probe: None,
             probe_stop: false,
             probe_flush: false,
+            external_sync: false,
+            sync_skip: false,
             aux_ring: [None; AUX_RING],
             aux_head: 0,
             aux_len: 0,
@@ -209,6 +216,14 @@ impl Interpolator {
         } else {
             1.0
         };
+    }
+
+    /// The machine runs each spindle-synchronised move ([`AuxKind::SpindleSync`]) itself,
+    /// locked to the measured spindle position: the interpolator stops at its `SpindleSync`
+    /// barrier and, after `aux_done`, skips the velocity-locked segments planned for it,
+    /// continuing from their end. Off (the default), it runs those segments as planned.
+    pub fn set_external_sync(&mut self, on: bool) {
+        self.external_sync = on;
     }
 
     /// Feed hold: decelerate to a stop on the path.
@@ -271,6 +286,10 @@ impl Interpolator {
         while *budget > 0 && !self.waiting && self.aux_len < AUX_RING {
             *budget -= 1;
             match src.pop() {
+                Some(Item::Segment(s)) if self.sync_skip => {
+                    self.out.pose_mm = s.end_mm;
+                    self.moved = true;
+                }
                 Some(Item::Segment(s)) => {
                     if s.v0_mm_s.iter().all(|v| *v == 0.0) && s.kind != SegmentKind::Dwell {
                         // Starting from rest (zero velocity and acceleration): the scale can
@@ -292,6 +311,8 @@ impl Interpolator {
                             self.probe = None;
                             self.probe_stop = false;
                         }
+                        AuxKind::SpindleSync { .. } => self.sync_skip = self.external_sync,
+                        AuxKind::SpindleSyncEnd => self.sync_skip = false,
                         _ => {}
                     }
                     self.push_aux(a);
@@ -507,6 +528,7 @@ impl Interpolator {
                 self.probe = None;
                 self.probe_stop = false;
                 self.probe_flush = false;
+                self.sync_skip = false;
                 self.aux_len = 0;
                 // At rest: the next job starts at the planned speed.
                 self.k = 1.0;

@@ -269,6 +269,22 @@ pub enum AuxKind {
         /// G38.2 .. G38.5.
         kind: ProbeKind,
     },
+    /// A spindle-synchronised move begins (G33, a G76 pass, G33.1): the feed segments up to
+    /// [`AuxKind::SpindleSyncEnd`] are the move planned locked to the commanded spindle
+    /// speed (what a plot or a trace shows). A machine with a spindle position instead runs
+    /// the move itself, locked to the measured spindle position
+    /// ([`crate::motion::spindle_lock`]), and the interpolator skips those segments
+    /// ([`crate::motion::Interpolator::set_external_sync`]). A barrier: the move starts at rest.
+    SpindleSync {
+        /// Where the move ends (G33.1: the bottom of the tap, from where it comes back).
+        end_mm: [f64; NUM_AXES],
+        /// Path length per spindle revolution, mm.
+        pitch_mm: f64,
+        /// G33.1: reverse the spindle at the bottom and follow it back out.
+        tap: bool,
+    },
+    /// The spindle-synchronised move ends (see [`AuxKind::SpindleSync`]).
+    SpindleSyncEnd,
     /// M100–M199.
     UserMcode {
         /// 100..=199.
@@ -295,6 +311,7 @@ impl AuxKind {
                 | AuxKind::AnalogOutput { synced: true, .. }
                 | AuxKind::Message { .. }
                 | AuxKind::OverrideEnable { .. }
+                | AuxKind::SpindleSyncEnd
         )
     }
 }

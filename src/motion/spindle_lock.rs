@@ -67,6 +67,13 @@ pub enum LockError {
     /// Rigid tapping with a stopped spindle (it would wait for an index forever).
     #[error("rigid tapping / threading needs the spindle turning (M3/M4 with S > 0)")]
     SpindleStopped,
+    /// Rigid tapping on a machine without a spindle position (encoder): it cannot reverse
+    /// with the spindle.
+    #[error(
+        "rigid tapping (G33.1) needs a spindle position (encoder with index); this machine \
+         has none"
+    )]
+    NoSpindlePosition,
 }
 
 /// Where the follower is.
@@ -154,11 +161,11 @@ impl SpindleLock {
                     self.rev0 = sp.index_at;
                     self.dir = if sp.rps < 0.0 { -1.0 } else { 1.0 };
                     self.phase = LockPhase::In;
-                    self.follow(dt, sp, self.end())?;
+                    self.follow(dt, sp, self.end(), None)?;
                 }
             }
             LockPhase::In => {
-                self.follow(dt, sp, self.end())?;
+                self.follow(dt, sp, self.end(), None)?;
                 match self.mode {
                     LockMode::Thread if self.s >= self.length - 1e-9 && self.v <= 1e-9 => {
                         self.s = self.length;
@@ -173,15 +180,21 @@ impl SpindleLock {
                 }
             }
             LockPhase::Out => {
-                self.follow(dt, sp, None)?;
-                if self.target(sp) <= 0.0 && self.s <= 0.0 {
+                // Braking into the start point, not past it (the start may be at a limit).
+                self.follow(dt, sp, None, Some(0.0))?;
+                if self.target(sp) <= 0.0 && self.s <= 1e-6 {
                     self.phase = LockPhase::Park;
                 }
             }
             LockPhase::Park => {
                 // Back to the start point (a few µm at most) and to rest.
                 let v_des = -self.s.signum() * (2.0 * self.amax * self.s.abs()).sqrt();
+                let inside = self.s >= 0.0;
                 self.slew(dt, v_des);
+                if inside {
+                    // Never past the start point (it may be at a soft limit).
+                    self.s = self.s.max(0.0);
+                }
                 if self.s.abs() <= self.amax * dt * dt && self.v.abs() <= self.amax * dt {
                     self.s = 0.0;
                     self.v = 0.0;
@@ -209,9 +222,15 @@ impl SpindleLock {
 
     /// One cycle of following the spindle position: feed-forward of the spindle speed plus a
     /// correction of the lag (fastest approach that can still stop at half the acceleration,
-    /// linear near zero), limited in velocity, in acceleration, and (with `end`) so that the
-    /// axis can stop at the end of the move.
-    fn follow(&mut self, dt: f64, sp: &SpindleSample, end: Option<f64>) -> Result<(), LockError> {
+    /// linear near zero), limited in velocity, in acceleration, and (with `end`, going in;
+    /// with `start`, coming out) so that the axis can stop there.
+    fn follow(
+        &mut self,
+        dt: f64,
+        sp: &SpindleSample,
+        end: Option<f64>,
+        start: Option<f64>,
+    ) -> Result<(), LockError> {
         let v_sync = self.pitch * self.dir * sp.rps;
         if v_sync.abs() > self.vmax {
             return Err(LockError::SpindleTooFast {
@@ -231,11 +250,18 @@ impl SpindleLock {
             let room = (end - self.s).max(0.0);
             v_des = v_des.min((1.6 * self.amax * room).sqrt());
         }
+        if let Some(start) = start {
+            let room = (self.s - start).max(0.0);
+            v_des = v_des.max(-(1.6 * self.amax * room).sqrt());
+        }
         self.slew(dt, v_des);
         if let Some(end) = end {
             if self.s > end {
                 self.s = end;
             }
+        }
+        if let Some(start) = start {
+            self.s = self.s.max(start);
         }
         Ok(())
     }

@@ -1,13 +1,15 @@
-//! Spindle-synchronised feeds (G33, G76 passes): the feed of a move between
+//! Spindle-synchronised feeds (G33, G76 passes, G33.1): the feed of a move between
 //! `START_SPEED_FEED_SYNC(pitch)` and `STOP_SPEED_FEED_SYNCH()` is `pitch` per spindle
 //! revolution.
 //!
-//! The planner locks it to the commanded spindle speed (velocity synchronisation, like G95):
-//! the path speed is pitch × rpm, and each synchronised move starts and ends at rest (exact
-//! stop), so its whole cruise advances exactly one pitch per revolution of a spindle that
-//! runs at its commanded speed. Following a measured spindle *position* (LinuxCNC's index
-//! wait and position lock) is not done; neither is constant surface speed, so a synchronised
-//! move under G96 (S is then a surface speed, not an rpm) is refused, as is rigid tapping.
+//! The planner plans each synchronised move locked to the commanded spindle speed
+//! (velocity synchronisation, like G95): the path speed is pitch × rpm, from rest to rest
+//! (G33.1: in and back out). That plan is what a trace or a plot shows. The machine
+//! runs it locked to the *measured* spindle position instead, as LinuxCNC's motion does:
+//! the plan marks the move with `AuxKind::SpindleSync` / `SpindleSyncEnd`, and the servo
+//! cycle waits for the index and follows the spindle ([`super::spindle_lock`]). Constant
+//! surface speed is not combined with synchronised moves: under G96 (S is then a surface
+//! speed, not an rpm) they are refused.
 
 use super::PlanError;
 

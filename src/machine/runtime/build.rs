@@ -14,6 +14,7 @@ use crate::machine::servo::interp_task::InterpolatorTask;
 use crate::machine::servo::io_task::{IoTask, SimPlate, SimSpindle};
 use crate::machine::servo::machine_task::{MachineSetup, MachineTask, SpindleIo};
 use crate::machine::servo::monitor_task::MonitorTask;
+use crate::machine::servo::spindle_follow::sim_spindle_for;
 use crate::machine::servo::QueueItem;
 use crate::rt::prelude::{buffer, Deployment, FullPolicy, OverrunPolicy, Schedule};
 use std::sync::atomic::AtomicU32;
@@ -139,6 +140,7 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
         can_tx.push((format!("can.{}.tx", b.iface), CanTxTask(b.tx)));
     }
     let overrun_injection = Arc::new(AtomicU32::new(0));
+    let spindle_simulated = sim_spindle.is_some();
     let mut io_task = IoTask::new(io, io_map.clone(), sim_spindle).with_plates(plates);
     if sim_io.iter().all(Option::is_some) {
         io_task = io_task.with_overrun_injection(overrun_injection.clone());
@@ -152,7 +154,8 @@ pub fn build(config: &MachineConfig) -> Result<Built, DeployError> {
     let machine = app.add_periodic("machine", machine_task, schedule)?;
     app.add_periodic(
         "interpolator",
-        InterpolatorTask::new(motion_cfg.clone(), axes.clone(), queue_r),
+        InterpolatorTask::new(motion_cfg.clone(), axes.clone(), queue_r)
+            .with_sim_spindle(sim_spindle_for(config, spindle_simulated)),
         schedule,
     )?;
     let mut guards = Vec::new();

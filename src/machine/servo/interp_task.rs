@@ -7,10 +7,15 @@
 //! segment queue of the current job: queue items stamped with an older job id (leftovers of
 //! an aborted job) are discarded, at most [`MAX_DISCARD_PER_CYCLE`] per cycle.
 
+use super::spindle_follow::{SpindleFollower, StartOutcome};
 use super::{ports, AxisFeedback, MotionControl, QueueItem, Setpoints};
 use crate::gcode::NUM_AXES;
+use crate::machine::sim_spindle::SimSpindleParams;
 use crate::motion::kinematics::{Kinematics, Machine};
-use crate::motion::{InterpState, Interpolator, Item, MotionConfig, SegmentSource};
+use crate::motion::spindle_lock::LockError;
+use crate::motion::{
+    AuxItem, AuxKind, InterpState, Interpolator, Item, MotionConfig, SegmentSource,
+};
 use crate::rt::prelude::*;
 
 /// Bound on stale items dropped per cycle (bounded work per cycle).
@@ -70,6 +75,8 @@ pub struct InterpolatorTask {
     sp: Setpoints,
     last_abort: u32,
     last_aux_done: u32,
+    /// Spindle-synchronised moves (G33, G76, G33.1).
+    follow: SpindleFollower,
 }
 
 impl InterpolatorTask {
@@ -95,7 +102,84 @@ impl InterpolatorTask {
             sp: Setpoints::default(),
             last_abort: 0,
             last_aux_done: 0,
+            follow: SpindleFollower::new(None),
         }
+    }
+
+    /// The simulated machine's spindle, with a position and an index pulse: synchronised
+    /// moves follow it ([`super::spindle_follow`]).
+    pub fn with_sim_spindle(mut self, p: Option<SimSpindleParams>) -> Self {
+        self.follow = SpindleFollower::new(p);
+        self.interp = self.fresh_interp(self.sp.pose_mm);
+        self
+    }
+
+    /// An idle interpolator at `pose` with this task's settings.
+    fn fresh_interp(&self, pose: [f64; NUM_AXES]) -> Interpolator {
+        let mut i = Interpolator::new(&self.cfg, pose);
+        i.set_external_sync(self.follow.has_spindle());
+        i.set_feed_override(self.control.feed_override);
+        i.set_rapid_override(self.control.rapid_override);
+        i
+    }
+
+    fn sync_error(&mut self, e: LockError) {
+        self.sp.sync_error = Some(e);
+        self.sp.sync_error_seq = self.sp.sync_error_seq.wrapping_add(1);
+    }
+
+    /// Starts the synchronised move the interpolator has stopped at, if `aux` is one.
+    fn start_sync(&mut self, aux: Option<AuxItem>, at: [f64; NUM_AXES]) {
+        let Some(AuxItem {
+            kind:
+                AuxKind::SpindleSync {
+                    end_mm,
+                    pitch_mm,
+                    tap,
+                },
+            ..
+        }) = aux
+        else {
+            return;
+        };
+        if self.sp.abort_ack != self.last_abort {
+            // Aborting: the interpolator drops the move with the rest of the job.
+            return;
+        }
+        match self.follow.start(&self.cfg, at, end_mm, pitch_mm, tap) {
+            Ok(StartOutcome::Following) => {}
+            Ok(StartOutcome::RunPlanned) => self.interp.aux_done(),
+            // Not started: the tool is at rest; the machine aborts the job.
+            Err(e) => self.sync_error(e),
+        }
+    }
+
+    /// One cycle of the running synchronised move: its pose replaces the interpolator's,
+    /// which waits at the move's barrier meanwhile.
+    fn follow_step(&mut self, dt_s: f64) {
+        let Some(f) = self.follow.step(dt_s) else {
+            return;
+        };
+        if let Some(e) = f.error {
+            self.sync_error(e);
+        }
+        if f.done {
+            self.interp.aux_done();
+        }
+        if f.stopped {
+            // Aborted (or failed) on the line: the rest of the job is dropped from here.
+            self.interp = self.fresh_interp(f.pose_mm);
+            self.interp.abort();
+        }
+        self.sp.pose_mm = f.pose_mm;
+        match self.kin.inverse(&f.pose_mm) {
+            Ok(j) => self.sp.joints = j,
+            // Out of reach: stop here (the joints keep their last value).
+            Err(_) => self.follow.stop(),
+        }
+        self.sp.distance_to_go_mm = f.to_go_mm;
+        self.sp.state = InterpState::Running;
+        self.sp.scale = 1.0;
     }
 
     /// The actual pose from the axis feedback (commanded joints where there is none).
@@ -118,9 +202,8 @@ impl InterpolatorTask {
             }
         }
         let pose = self.kin.forward(&joints).unwrap_or(self.sp.pose_mm);
-        self.interp = Interpolator::new(&self.cfg, pose);
-        self.interp.set_feed_override(self.control.feed_override);
-        self.interp.set_rapid_override(self.control.rapid_override);
+        self.follow.cancel();
+        self.interp = self.fresh_interp(pose);
         self.sp.joints = joints;
         self.sp.pose_mm = pose;
         self.sp.state = InterpState::Idle;
@@ -161,6 +244,11 @@ impl Task for InterpolatorTask {
 
     fn update(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         let c = self.control;
+        let dt_s = ctx.period_ns as f64 * 1e-9;
+        self.follow.spindle_step(dt_s, c.spindle_rpm);
+        let spindle = self.follow.sample();
+        self.sp.spindle_revs = spindle.revs;
+        self.sp.spindle_rps = spindle.rps;
         if c.track_actual {
             self.track();
         } else {
@@ -181,7 +269,12 @@ impl Task for InterpolatorTask {
             }
             if c.abort_seq != self.last_abort {
                 self.last_abort = c.abort_seq;
-                self.interp.abort();
+                if self.follow.active() {
+                    // The follower brakes on the line, then aborts the interpolator.
+                    self.follow.stop();
+                } else {
+                    self.interp.abort();
+                }
             }
             if c.aux_done_seq != self.last_aux_done {
                 self.last_aux_done = c.aux_done_seq;
@@ -194,7 +287,6 @@ impl Task for InterpolatorTask {
                 consumed: &mut self.sp.items_consumed,
             };
             let out = *self.interp.step(&mut src);
-            let dt_s = ctx.period_ns as f64 * 1e-9;
             // Planned time passes only while a move runs (or decelerates into a hold): the
             // scale keeps its last value at a barrier (M0, M66, spindle at speed), where
             // the job stands still.
@@ -217,7 +309,10 @@ impl Task for InterpolatorTask {
             if out.aux.is_some() {
                 self.sp.aux_seq = self.sp.aux_seq.wrapping_add(1);
             }
-            if matches!(out.state, InterpState::Idle | InterpState::Done) {
+            self.start_sync(out.aux, out.pose_mm);
+            self.follow_step(dt_s);
+            self.sp.spindle_reversed = self.follow.reversed();
+            if matches!(self.sp.state, InterpState::Idle | InterpState::Done) {
                 self.sp.abort_ack = self.last_abort;
             }
         }

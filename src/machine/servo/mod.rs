@@ -45,9 +45,12 @@ pub mod plc_link;
 mod probe_tests;
 #[cfg(test)]
 mod program_stop_tests;
+pub mod spindle_follow;
 pub mod status;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod threading_tests;
 
 use super::api::Mode;
 use super::safety::Trip;
@@ -161,6 +164,9 @@ pub struct MotionControl {
     pub job: u32,
     /// The probe input is active this cycle (false when the machine has none).
     pub probe_input: bool,
+    /// Commanded spindle speed, rpm (negative for M4, 0 when stopped): what the simulated
+    /// spindle of spindle-synchronised moves follows.
+    pub spindle_rpm: f64,
 }
 
 impl Default for MotionControl {
@@ -174,6 +180,7 @@ impl Default for MotionControl {
             rapid_override: 1.0,
             job: 0,
             probe_input: false,
+            spindle_rpm: 0.0,
         }
     }
 }
@@ -212,6 +219,16 @@ pub struct Setpoints {
     /// Actual pose (forward kinematics of the axis feedback) in the cycle the probe
     /// tripped: LinuxCNC's probed position is the feedback position too.
     pub probe_pose_mm: [f64; NUM_AXES],
+    /// Spindle position, revolutions (the simulated spindle's; 0 without one).
+    pub spindle_revs: f64,
+    /// Spindle speed measured, rev/s (signed).
+    pub spindle_rps: f64,
+    /// A rigid tap has reversed the spindle (until the tap is out).
+    pub spindle_reversed: bool,
+    /// The last spindle-synchronised move that failed, and why.
+    pub sync_error: Option<crate::motion::spindle_lock::LockError>,
+    /// Incremented with each `sync_error`.
+    pub sync_error_seq: u32,
 }
 
 impl Default for Setpoints {
@@ -232,6 +249,11 @@ impl Default for Setpoints {
             job: 0,
             probe_tripped: false,
             probe_pose_mm: [0.0; NUM_AXES],
+            spindle_revs: 0.0,
+            spindle_rps: 0.0,
+            spindle_reversed: false,
+            sync_error: None,
+            sync_error_seq: 0,
         }
     }
 }
@@ -459,7 +481,7 @@ pub enum JobEvent {
 
 /// Errors that end a job without faulting the machine (LinuxCNC reports them and stops the
 /// program).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum JobError {
     /// G38.2/G38.3 started with the probe already active.
     ProbeAlreadyTripped(ProbeKind),
@@ -474,6 +496,8 @@ pub enum JobError {
         /// The M code.
         mcode: u32,
     },
+    /// A spindle-synchronised move (G33, G76, G33.1) could not follow the spindle.
+    SpindleSync(crate::motion::spindle_lock::LockError),
 }
 
 impl std::fmt::Display for JobError {
@@ -498,6 +522,7 @@ impl std::fmt::Display for JobError {
                 f,
                 "M{mcode}: the PLC did not finish it within plc.mcode_timeout_s"
             ),
+            JobError::SpindleSync(e) => write!(f, "{e}"),
             JobError::NoProbeInput => {
                 f.write_str("the program probes (G38.x) but the machine has no probe input: set motion.probe_input")
             }

@@ -38,8 +38,10 @@ impl MachineTask {
         let rpm = (self.spindle_rpm * self.snap.spindle_override).clamp(0.0, sp.max_rpm);
         self.outputs.set_do(sp.enable, self.spindle_dir.is_some());
         if let Some(d) = sp.direction {
-            self.outputs
-                .set_do(d, self.spindle_dir == Some(SpindleDir::CounterClockwise));
+            self.outputs.set_do(
+                d,
+                (self.spindle_dir == Some(SpindleDir::CounterClockwise)) != self.spindle_reversed,
+            );
         }
         if let Some(s) = sp.speed {
             if s < self.outputs.analog.len() {
@@ -105,7 +107,11 @@ impl MachineTask {
                 done = false;
             }
             AuxKind::Message { id } => self.emit_job(JobEvent::Message { id, line }),
-            AuxKind::OverrideEnable { .. } | AuxKind::UserMcode { .. } => {}
+            AuxKind::OverrideEnable { .. }
+            | AuxKind::UserMcode { .. }
+            | AuxKind::SpindleSyncEnd => {}
+            // The interpolator task runs the move and goes on by itself.
+            AuxKind::SpindleSync { .. } => done = false,
             AuxKind::ProgramStop => {
                 self.program_stop(line);
                 done = false;

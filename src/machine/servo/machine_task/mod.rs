@@ -151,6 +151,10 @@ pub struct MachineTask {
     last_mode: Mode,
     spindle_dir: Option<SpindleDir>,
     spindle_rpm: f64,
+    /// Errors of spindle-synchronised moves, seen once each.
+    sync_errors: super::spindle_follow::SyncErrors,
+    /// The spindle direction output is reversed (a rigid tap coming out).
+    spindle_reversed: bool,
     /// Cycle at which the path of the current job was complete (settling since).
     settle_since: Option<u64>,
     /// Job id of the current or last motion, and how it ended.
@@ -213,6 +217,8 @@ impl MachineTask {
             last_mode: Mode::Estop,
             spindle_dir: None,
             spindle_rpm: 0.0,
+            sync_errors: Default::default(),
+            spindle_reversed: false,
             settle_since: None,
             job_id: 0,
             ended: None,
@@ -359,6 +365,7 @@ mod aux;
 mod commands;
 mod plc;
 mod sequencing;
+mod spindle_sync;
 mod task_hooks;
 
 pub use commands::MachineCmd;

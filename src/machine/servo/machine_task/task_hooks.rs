@@ -79,6 +79,7 @@ impl Task for MachineTask {
         }
         self.poll_plc();
         self.motion.probe_input = self.setup.probe_input.is_some_and(|i| self.inputs.di(i));
+        self.poll_spindle_sync();
         if self.mode.mode() == Mode::Estop {
             // The quick stop is requested until the drives are off.
             self.drive.quick_stop = self
