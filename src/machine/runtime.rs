@@ -137,6 +137,7 @@ pub struct Machine {
 }
 
 mod events;
+mod remote_loss;
 pub use events::describe_trip;
 use events::{apply_progress, bridge_loop, internal_operation, Receivers};
 
@@ -1066,6 +1067,10 @@ impl MachineApi for Machine {
 
     fn job_abort(&self) -> Result<(), ApiError> {
         self.command(MachineCmd::Abort).map(|_| ())
+    }
+
+    fn remote_lost(&self, message: &str, critical: bool) {
+        self.stop_for_lost_remote(message, critical);
     }
 
     fn job_step(&self) -> Result<(), ApiError> {
