@@ -87,3 +87,18 @@ fn losing_a_critical_remote_stops_the_job_under_control_and_names_it() {
         daemon.log()
     );
 }
+
+/// A machine file's `[[remote]]` tables are checked like the rest, each problem named by key.
+#[test]
+fn remotes_of_a_machine_file_are_checked_by_key() {
+    let base = std::fs::read_to_string(support::fast_sim()).unwrap();
+    let text = format!("{base}\n[[remote]]\nname = \"vision\"\ntimeout_s = 0\n");
+    let e = hytask::config::parse(&text, "m.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("remote[0].timeout_s"), "{e}");
+    assert!(e.contains("add a [zenoh] table"), "{e}");
+    let ok = format!("{base}\n[zenoh]\n\n[[remote]]\nname = \"vision\"\ncritical = true\n");
+    let m = hytask::config::parse(&ok, "m.toml").unwrap();
+    assert!(m.remotes[0].critical && m.remotes[0].machine() == "vision");
+}
