@@ -2,8 +2,9 @@
 //! fault, and a critical peer stops the machine under control. Runs on a Zenoh thread,
 //! never on the servo thread; it meets the machine task only through its command queue.
 
-#[allow(clippy::wildcard_imports)]
-use super::*;
+use super::{lock, Machine, ACCEPT_TIMEOUT};
+use crate::machine::servo::machine_task::MachineCmd;
+use serde_json::json;
 
 impl Machine {
     /// Pushes `message` on the `fault` topic, and when `critical` aborts what runs with a
