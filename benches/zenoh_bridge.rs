@@ -19,8 +19,10 @@
 //! runs one round of 5 samples as a smoke test.
 #![allow(clippy::unwrap_used)]
 
+#[path = "../tests/zenoh_support/mod.rs"]
+mod zenoh_support;
+
 use hytask::bridge::Bridge;
-use hytask::config::ZenohConfig;
 use hytask::machine::api::*;
 use hytask::rt::data_object::DataObject;
 use hytask::rt::json::JsonPortReader;
@@ -164,16 +166,10 @@ fn main() {
         (1, 5)
     };
     let rate_hz: f64 = env_or("ZENOH_BENCH_RATE_HZ", 2000.0);
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
-    let cfg: ZenohConfig = toml::from_str(&format!(
-        "key = \"bench\"\nlisten = [\"{endpoint}\"]\nport_rate_hz = {rate_hz}\nports = [\"bench.stamp\"]"
-    ))
-    .unwrap();
+    let (cfg, endpoint) = zenoh_support::bridge_config(
+        "bench",
+        &format!("port_rate_hz = {rate_hz}\nports = [\"bench.stamp\"]"),
+    );
 
     let mill = hytask::machine::deploy_from(None).unwrap();
     let machine = Arc::new(BenchMachine {
@@ -234,13 +230,7 @@ fn main() {
         }
     });
 
-    let mut cc = zenoh::Config::default();
-    cc.insert_json5("mode", "\"client\"").unwrap();
-    cc.insert_json5("connect/endpoints", &json!([endpoint]).to_string())
-        .unwrap();
-    cc.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    let client = zenoh::open(cc).wait().unwrap();
+    let client = zenoh_support::client(&endpoint);
     // Ring channels: a FIFO subscriber nobody drains (the other side's, during a window)
     // fills up and then blocks the session's receive path, replies included.
     let ring = || zenoh::handlers::RingChannel::new(64);

@@ -17,15 +17,16 @@
 //! one round of 1 s windows as a smoke test. Figures in benches/README.md, Zenoh section.
 #![allow(clippy::unwrap_used)]
 
+#[path = "../tests/zenoh_support/mod.rs"]
+mod zenoh_support;
+
 use hytask::bridge::Bridge;
-use hytask::config::ZenohConfig;
 use hytask::daemon::Deployed;
 use hytask::machine::api::MachineApi;
 use hytask::machine::Machine;
-use serde_json::json;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use zenoh::Wait;
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
@@ -77,25 +78,10 @@ struct Exported {
 }
 
 fn export(machine: &Arc<Machine>) -> Exported {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
-    let cfg: ZenohConfig = toml::from_str(&format!(
-        "key = \"bench\"\nlisten = [\"{endpoint}\"]\nport_rate_hz = 1000.0"
-    ))
-    .unwrap();
+    let (cfg, endpoint) = zenoh_support::bridge_config("bench", "port_rate_hz = 1000.0");
     let api: Arc<dyn MachineApi> = machine.clone();
     let bridge = Bridge::start(api, "bench", &cfg).unwrap();
-    let mut c = zenoh::Config::default();
-    c.insert_json5("mode", "\"client\"").unwrap();
-    c.insert_json5("connect/endpoints", &json!([endpoint]).to_string())
-        .unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    let client = zenoh::open(c).wait().unwrap();
+    let client = zenoh_support::client(&endpoint);
     let received = Arc::new(AtomicU64::new(0));
     let r = received.clone();
     client
@@ -107,11 +93,9 @@ fn export(machine: &Arc<Machine>) -> Exported {
         .wait()
         .unwrap();
     // Publications flowing before the window starts (hang guard: 60 s).
-    let t0 = Instant::now();
-    while received.load(Ordering::Relaxed) < 100 {
-        assert!(t0.elapsed() < Duration::from_secs(60), "no publication");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    zenoh_support::wait_for("publications", Duration::from_secs(60), || {
+        received.load(Ordering::Relaxed) >= 100
+    });
     Exported {
         bridge,
         client,
@@ -147,8 +131,7 @@ fn main() {
         (1, 1.0)
     };
     let machine = Machine::deploy(hytask::machine::load_config(None).unwrap()).unwrap();
-    machine.estop_reset().unwrap();
-    machine.machine_on().unwrap();
+    zenoh_support::switch_on(&*machine);
     println!(
         "servo thread wake-up latency, 1 kHz, {rounds} rounds of {secs} s windows, realtime {}",
         machine.servo_thread().realtime()

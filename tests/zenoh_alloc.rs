@@ -12,73 +12,38 @@
 
 mod counting_alloc;
 mod support;
+mod zenoh_support;
 
 use hytask::bridge::Bridge;
-use hytask::config::ZenohConfig;
+use hytask::machine::api::MachineApi;
 use serde_json::{json, Value};
 use std::collections::BTreeSet;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use zenoh::Wait;
 
 /// Hang guard of every wait: a loaded host may run the machine slower than real time.
 const GUARD: Duration = Duration::from_secs(120);
 
-/// A query through the bridge; panics on an error reply.
+/// A query through the bridge (waiting for its route); panics on an error reply.
 fn call(s: &zenoh::Session, key: &str, payload: Value) -> Value {
-    let replies = s
-        .get(key)
-        .payload(payload.to_string())
-        .timeout(GUARD)
-        .wait()
-        .unwrap();
-    let reply = replies.recv().unwrap();
-    match reply.result() {
-        Ok(sample) => serde_json::from_slice(&sample.payload().to_bytes()).unwrap(),
-        Err(e) => panic!("{key}: {:?}", e.payload().try_to_string()),
-    }
+    zenoh_support::query(s, key, Some(&payload), GUARD).unwrap_or_else(|e| panic!("{key}: {e}"))
 }
 
-fn wait_until(
-    what: &str,
-    machine: &dyn hytask::machine::api::MachineApi,
-    f: impl Fn(&Value) -> bool,
-) {
-    let t0 = Instant::now();
-    loop {
-        let s = serde_json::to_value(machine.status()).unwrap();
-        if f(&s) {
-            return;
-        }
-        assert!(t0.elapsed() < GUARD, "waited too long for {what}: {s}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+fn wait_until(what: &str, machine: &dyn MachineApi, f: impl Fn(&Value) -> bool) {
+    zenoh_support::wait_status(what, machine, GUARD, f)
 }
 
 #[test]
 fn the_servo_thread_allocates_nothing_while_the_bridge_exports_the_machine() {
     assert_eq!(counting_alloc::in_rt_steps(), 0);
     let machine = hytask::machine::deploy_from(Some(&support::fast_sim())).unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
-    let cfg: ZenohConfig = toml::from_str(&format!(
-        "key = \"mill\"\nlisten = [\"{endpoint}\"]\nport_rate_hz = 1000.0\nstatus_rate_hz = 50.0"
-    ))
-    .unwrap();
+    let (cfg, endpoint) =
+        zenoh_support::bridge_config("mill", "port_rate_hz = 1000.0\nstatus_rate_hz = 50.0");
     let bridge = Bridge::start(machine.clone(), "mill", &cfg).unwrap();
     assert!(!bridge.port_keys().is_empty(), "no port exported");
 
-    let mut c = zenoh::Config::default();
-    c.insert_json5("mode", "\"client\"").unwrap();
-    c.insert_json5("connect/endpoints", &json!([endpoint]).to_string())
-        .unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    let s = zenoh::open(c).wait().unwrap();
+    let s = zenoh_support::client(&endpoint);
     // Kinds of key seen (`port`, `event`, `status`, `events`), counted on Zenoh's thread.
     let seen = Arc::new(Mutex::new(BTreeSet::new()));
     let seen2 = seen.clone();
@@ -98,19 +63,7 @@ fn the_servo_thread_allocates_nothing_while_the_bridge_exports_the_machine() {
 
     // Operated from the remote peer: every call runs on the bridge's call workers and its
     // command through the machine task's queue into servo cycles.
-    let t0 = Instant::now();
-    while s
-        .get("hytask/mill/control/estop.reset")
-        .timeout(GUARD)
-        .wait()
-        .unwrap()
-        .recv()
-        .is_err()
-    {
-        // The route to the queryable is still being learnt.
-        assert!(t0.elapsed() < GUARD, "the bridge never answered");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    call(&s, "hytask/mill/control/estop.reset", Value::Null);
     call(&s, "hytask/mill/control/machine.on", Value::Null);
     call(&s, "hytask/mill/control/home", Value::Null);
     wait_until("homed and idle", &*machine, |s| {

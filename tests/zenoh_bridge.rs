@@ -12,19 +12,18 @@ mod zenoh_support;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use support::Daemon;
 use zenoh::Wait;
-use zenoh_support::free_port;
+use zenoh_support::{client, free_port};
 
 const GUARD: Duration = Duration::from_secs(60);
 
-/// The simulated mill on a simulated clock with `[zenoh]` on `tcp/127.0.0.1:<port>`.
+/// The simulated mill on a simulated clock with `[zenoh]` (key `mill`) on a loopback port.
 fn daemon_with_zenoh(extra: &str) -> (Daemon, String, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     let base = support::sim_clock_config(dir.path(), support::SIM_SPEED, None);
-    let port = free_port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let mut text = std::fs::read_to_string(&base).unwrap();
     text.push_str(&format!(
         "\n[zenoh]\nkey = \"mill\"\nlisten = [\"{endpoint}\"]\nport_rate_hz = 100.0\n{extra}\n"
@@ -34,46 +33,13 @@ fn daemon_with_zenoh(extra: &str) -> (Daemon, String, tempfile::TempDir) {
     (Daemon::start(&config), endpoint, dir)
 }
 
-fn client(endpoint: &str) -> zenoh::Session {
-    let mut c = zenoh::Config::default();
-    c.insert_json5("mode", "\"client\"").unwrap();
-    c.insert_json5("connect/endpoints", &json!([endpoint]).to_string())
-        .unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    zenoh::open(c).wait().unwrap()
-}
-
-/// The first reply to a query on `key` with `payload`: Ok(result JSON) or Err(error JSON).
-/// Retries while no queryable answers (the route is still being learnt).
+/// [`zenoh_support::query`] with the hang guard.
 fn get(s: &zenoh::Session, key: &str, payload: Option<Value>) -> Result<Value, Value> {
-    let t0 = Instant::now();
-    loop {
-        let mut q = s.get(key).timeout(GUARD);
-        if let Some(p) = &payload {
-            q = q.payload(p.to_string());
-        }
-        let replies = q.wait().unwrap();
-        if let Ok(reply) = replies.recv() {
-            let decode = |b: &zenoh::bytes::ZBytes| -> Value {
-                serde_json::from_slice(&b.to_bytes()).unwrap()
-            };
-            return match reply.result() {
-                Ok(sample) => Ok(decode(sample.payload())),
-                Err(e) => Err(decode(e.payload())),
-            };
-        }
-        assert!(t0.elapsed() < GUARD, "no reply on {key}");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    zenoh_support::query(s, key, payload.as_ref(), GUARD)
 }
 
-fn wait_for(what: &str, mut f: impl FnMut() -> bool) {
-    let t0 = Instant::now();
-    while !f() {
-        assert!(t0.elapsed() < GUARD * 2, "waited too long for {what}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+fn wait_for(what: &str, f: impl FnMut() -> bool) {
+    zenoh_support::wait_for(what, GUARD * 2, f)
 }
 
 #[test]
@@ -215,4 +181,35 @@ fn eclipse_zenoh_from_python_watches_and_operates_the_mill() {
             "step {step} missing:\n{stdout}"
         );
     }
+}
+
+/// A machine served by `hytask serve` declares its liveliness token like a peer process: a
+/// remote that lists it (`[[remote]]`) sees it lost as soon as the daemon dies, not by a
+/// call's timeout (its `timeout_s` here is far beyond the hang guard).
+#[test]
+fn a_remote_listing_the_mill_sees_it_lost_when_its_daemon_dies() {
+    let (mut daemon, endpoint, _dir) = daemon_with_zenoh("");
+    // A peer session, as a remote user's (`hytask serve`, `hytask peer`) is.
+    let s = zenoh_support::peer_session(&endpoint);
+    // The token is there while the daemon serves.
+    zenoh_support::wait_token(&s, "hytask/mill/alive", GUARD);
+    let cfg = hytask::config::remote::RemoteConfig {
+        name: "mill".into(),
+        machine: None,
+        timeout_s: 3600.0,
+        critical: false,
+        check: true,
+    };
+    let link = hytask::bridge::remote::RemoteLink::connect(&s, &cfg).unwrap();
+    let lost = std::sync::Arc::new(std::sync::Mutex::new(None));
+    let l2 = lost.clone();
+    link.on_lost(move |msg, _| *l2.lock().unwrap() = Some(msg.to_owned()));
+    assert!(link.alive());
+    daemon.child.as_mut().unwrap().kill().unwrap();
+    wait_for("the loss seen through the liveliness token", || {
+        lost.lock().unwrap().is_some()
+    });
+    assert!(!link.alive());
+    let msg = lost.lock().unwrap().clone().unwrap();
+    assert!(msg.contains("'mill'") && msg.contains("lost"), "{msg}");
 }

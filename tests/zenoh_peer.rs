@@ -128,7 +128,13 @@ fn remote_cfg(machine: &str, timeout_s: f64, critical: bool) -> RemoteConfig {
 
 /// A remote process stand-in: tasks `worker` and `other` served as `machine`.
 fn remote(machine: &str, port: u16) -> RunningPeer {
-    let cfg = zenoh_cfg(port, None);
+    remote_linked(machine, port, None)
+}
+
+/// [`remote`], also connecting to `local` (a restarted remote reaches the local side
+/// without waiting for its reconnection attempts).
+fn remote_linked(machine: &str, port: u16, local: Option<u16>) -> RunningPeer {
+    let cfg = zenoh_cfg(port, local);
     let session = hytask::bridge::session::open(&cfg).unwrap();
     let mut app = Deployment::new();
     app.add_periodic("worker", Worker::default(), SCHED)
@@ -150,8 +156,19 @@ struct Local {
 /// The local side: proxies `worker` and `other` of the remote, importing `worker`'s event
 /// and port.
 fn local(machine: &str, remote_port: u16, timeout_s: f64, critical: bool) -> Local {
-    let session =
-        hytask::bridge::session::open(&zenoh_cfg(free_port(), Some(remote_port))).unwrap();
+    local_at(free_port(), machine, remote_port, timeout_s, critical)
+}
+
+/// A remote serving `machine` and the local side reaching it.
+fn pair(machine: &str, timeout_s: f64, critical: bool) -> (RunningPeer, Local) {
+    let port = free_port();
+    let peer = remote(machine, port);
+    (peer, local(machine, port, timeout_s, critical))
+}
+
+/// [`local`], listening on `port`.
+fn local_at(port: u16, machine: &str, remote_port: u16, timeout_s: f64, critical: bool) -> Local {
+    let session = hytask::bridge::session::open(&zenoh_cfg(port, Some(remote_port))).unwrap();
     let link = RemoteLink::connect(&session, &remote_cfg(machine, timeout_s, critical)).unwrap();
     let proxy = RemoteProxy::<WorkCmd>::new(&link, "worker", "local")
         .unwrap()
@@ -183,9 +200,7 @@ fn wait_final(h: &CommandHandle) -> CommandStatus {
 
 #[test]
 fn a_remote_operation_completes_and_its_event_and_port_arrive() {
-    let port = free_port();
-    let peer = remote("rt-far", port);
-    let mut l = local("rt-far", port, 30.0, false);
+    let (peer, mut l) = pair("rt-far", 30.0, false);
     let h = l.worker.send(WorkCmd::Work(5)).unwrap();
     assert_eq!(wait_final(&h), CommandStatus::Done);
     let t0 = Instant::now();
@@ -264,9 +279,7 @@ fn missing_remote_names_are_refused_by_name() {
 
 #[test]
 fn a_slow_remote_delays_only_its_own_commands() {
-    let port = free_port();
-    let peer = remote("slow-far", port);
-    let l = local("slow-far", port, 3.0, false);
+    let (peer, l) = pair("slow-far", 3.0, false);
     // `worker` is busy far longer than timeout_s: its command fails with the timeout...
     let slow = l.worker.send(WorkCmd::Work(600_000)).unwrap();
     // ... while `other`, another remote task behind another proxy, answers meanwhile.
@@ -287,9 +300,7 @@ fn a_slow_remote_delays_only_its_own_commands() {
 
 #[test]
 fn a_lost_critical_remote_fails_pending_commands_and_calls_the_stop_hook() {
-    let port = free_port();
-    let peer = remote("lost-far", port);
-    let l = local("lost-far", port, 600.0, true);
+    let (peer, l) = pair("lost-far", 600.0, true);
     let stops = Arc::new(AtomicU32::new(0));
     let message = Arc::new(Mutex::new(String::new()));
     let (s, m) = (stops.clone(), message.clone());
@@ -323,11 +334,75 @@ fn a_lost_critical_remote_fails_pending_commands_and_calls_the_stop_hook() {
         message.lock().unwrap()
     );
     assert!(!l.link.alive());
-    // New commands are refused while it is lost.
+    l.rt.stop();
+}
+
+/// Until `f` holds (hang guard).
+fn wait_for(what: &str, f: impl Fn() -> bool) {
+    let t0 = Instant::now();
+    while !f() {
+        assert!(t0.elapsed() < GUARD, "waited too long for {what}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// A remote restarted after its loss: a command accepted meanwhile waits for it (its
+/// `timeout_s` is far beyond the hang guard) and runs once its liveliness token is back,
+/// instead of failing because the local side has not seen it back yet.
+#[test]
+fn a_command_accepted_while_the_remote_is_lost_runs_once_it_is_back() {
+    let (port, local_port) = (free_port(), free_port());
+    let peer = remote("back-far", port);
+    let l = local_at(local_port, "back-far", port, 600.0, false);
+    assert_eq!(
+        wait_final(&l.worker.send(WorkCmd::Work(1)).unwrap()),
+        CommandStatus::Done
+    );
+    peer.stop();
+    wait_for("the loss", || !l.link.alive());
+    let h = l.worker.send(WorkCmd::Work(1)).unwrap();
+    wait_for("the command accepted while lost", || {
+        h.status() == CommandStatus::Accepted
+    });
+    let peer = remote_linked("back-far", port, Some(local_port));
+    assert_eq!(
+        wait_final(&h),
+        CommandStatus::Done,
+        "{}",
+        l.link.last_error()
+    );
+    assert!(l.link.alive());
+    l.rt.stop();
+    peer.stop();
+}
+
+/// A remote that does not come back within `timeout_s`: the command accepted while it was
+/// lost fails then, with an error naming the remote, also given to the loss hook.
+#[test]
+fn a_command_for_a_remote_not_back_within_its_timeout_fails_naming_it() {
+    let (peer, l) = pair("gone-far", 5.0, false);
+    let reports = Arc::new(Mutex::new(Vec::<String>::new()));
+    let r = reports.clone();
+    l.link
+        .on_lost(move |msg, _| r.lock().unwrap().push(msg.to_owned()));
+    peer.stop();
+    wait_for("the loss", || !l.link.alive());
     let h = l.worker.send(WorkCmd::Work(1)).unwrap();
     assert_eq!(
         wait_final(&h),
-        CommandStatus::Rejected(RejectReason::Other("remote peer lost"))
+        CommandStatus::Failed("remote peer lost and not back within timeout_s")
     );
+    let e = l.link.last_error();
+    assert!(
+        e.contains("'far'") && e.contains("worker.work") && e.contains("not back within"),
+        "{e}"
+    );
+    wait_for("the report to the loss hook", || {
+        reports
+            .lock()
+            .unwrap()
+            .iter()
+            .any(|m| m.contains("not back within"))
+    });
     l.rt.stop();
 }

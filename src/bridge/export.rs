@@ -48,6 +48,11 @@ pub struct Bridge {
     session: zenoh::Session,
     prefix: String,
     ports: Vec<String>,
+    /// `hytask/<machine>/alive`: remote users (`bridge::remote`) see the machine or peer lost
+    /// the moment Zenoh withdraws it (stop, crash, broken link), not by a timeout.
+    token: Option<zenoh::liveliness::LivelinessToken>,
+    /// The `[[remote]]` peers watched ([`Self::watch`]).
+    remotes: Vec<super::remote::RemoteLink>,
 }
 
 /// One exported port or event, found in the task list.
@@ -137,6 +142,8 @@ impl Bridge {
                 }),
             )?,
         ];
+        // Declared last: a remote user sees the machine alive once it answers.
+        let token = Some(super::remote::declare_alive(&session, &m)?);
         tracing::info!("zenoh: exporting machine '{m}' under {prefix}/");
         Ok(Bridge {
             stop,
@@ -144,7 +151,21 @@ impl Bridge {
             session,
             prefix,
             ports: port_keys,
+            token,
+            remotes: Vec::new(),
         })
+    }
+
+    /// Watches the machine's `[[remote]]` peers on this bridge's session ([`super::watch`]),
+    /// for as long as the bridge runs.
+    pub fn watch(
+        &mut self,
+        machine: &Arc<dyn MachineApi>,
+        remotes: &[crate::config::remote::RemoteConfig],
+    ) -> Result<(), super::remote::RemoteError> {
+        let links = super::watch::watch(&self.session, machine, remotes)?;
+        self.remotes.extend(links);
+        Ok(())
     }
 
     /// `hytask/<machine>`.
@@ -163,6 +184,9 @@ impl Bridge {
     }
 
     fn shut(&mut self) {
+        // Withdrawn first: remote users stop sending before the queryable goes away.
+        drop(self.token.take());
+        self.remotes.clear();
         self.stop.store(true, Ordering::Release);
         for t in self.threads.drain(..) {
             let _ = t.join();

@@ -10,6 +10,7 @@
 //! | `hytask/<machine>/<task>/port/<object>` | publication (and queryable): a data object |
 //! | `hytask/<machine>/<task>/event/<name>` | publication: a realtime event of the task |
 //! | `hytask/<machine>/<task>/op/<name>` | queryable: a task operation, run as a command |
+//! | `hytask/<machine>/alive` | liveliness token, while the exporter runs (`remote::alive_key`) |
 //!
 //! Names keep their dots (`axis.x.position_mm`); characters Zenoh reserves (`/ * $ # ?`)
 //! and spaces become `_`.

@@ -6,7 +6,9 @@
 //! realtime tasks only through the lock-free primitives (data-object readers, deferred event
 //! subscriptions, the command queues behind the control methods). Keys are in [`keys`],
 //! payloads (JSON) in [`codec`], the session settings in [`session`], the exporter in
-//! [`export`] and its pool of call workers in [`calls`].
+//! [`export`] and its pool of call workers in [`calls`]; peers of other processes in
+//! [`remote`] (and [`remote_host`], the `hytask peer` side), those a machine depends on
+//! (`[[remote]]`) in [`watch`].
 //!
 //! Enabled by a `[zenoh]` table in the machine file (`config::zenoh`), local-only by default.
 //!
@@ -26,6 +28,7 @@ pub mod keys;
 pub mod remote;
 pub mod remote_host;
 pub mod session;
+pub mod watch;
 
 pub use export::Bridge;
 

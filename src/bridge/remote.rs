@@ -24,9 +24,17 @@
 //!   the remote has them before it runs the operation (Zenoh keeps the order of one link).
 //!
 //! A slow or vanished remote delays only the proxy's own commands: they fail after
-//! `timeout_s`, or at once when the remote is lost. A `critical` remote also calls the
-//! hook given to [`RemoteLink::on_lost`] (the host stops its machine safely there) and the
-//! proxy emits `<proxy>.peer_lost`.
+//! `timeout_s`, or at once when the remote is lost under them (the call was sent, or the
+//! remote was there when it was accepted). A `critical` remote also calls the hook given to
+//! [`RemoteLink::on_lost`] (the host stops its machine safely there) and the proxy emits
+//! `<proxy>.peer_lost`.
+//!
+//! A command accepted while the remote is lost waits for it, up to `timeout_s`: a restarted
+//! peer process is back once its liveliness token arrives, which can be a little after the
+//! process answers. Only then is the call sent; a remote not back by then fails the command
+//! and the loss hook is called again with an error naming the remote (`critical` false: the
+//! stop, if any, happened at the loss). Callers such as the cell's selection need not know
+//! whether the peer was seen back yet.
 //!
 //! Operations are forwarded one at a time, in order (the worker runs one call after the
 //! other): the proxied command type should use `NextCommand::AfterCompletion`.
@@ -183,6 +191,8 @@ impl RemoteLink {
 
     /// Runs `hook(message, critical)` (on a Zenoh thread) each time the remote is lost:
     /// report it there, and stop the machine safely when `critical` (`[[remote]] critical`).
+    /// Also called (on a proxy's worker, `critical` false) when a command accepted while the
+    /// remote was lost gives up waiting for it after `timeout_s`.
     pub fn on_lost(&self, hook: impl Fn(&str, bool) + Send + Sync + 'static) {
         *lock(&self.inner.on_lost) = Some(Box::new(hook));
     }
@@ -265,6 +275,34 @@ impl LinkShared {
         tracing::warn!("{msg}");
         *lock(&self.last_error) = msg;
     }
+
+    /// Waits until the remote is alive, up to `timeout` or until `stop` (a worker thread,
+    /// never realtime); false if it is not back by then.
+    fn wait_alive(&self, timeout: Duration, stop: &AtomicBool) -> bool {
+        let t0 = Instant::now();
+        while !self.alive.load(Ordering::Acquire) {
+            if t0.elapsed() >= timeout || stop.load(Ordering::Acquire) {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        true
+    }
+
+    /// A command gave up waiting for the remote: logged, kept, and reported through the
+    /// loss hook (not critical: the loss itself already was).
+    fn not_back(&self, what: &str) {
+        let msg = format!(
+            "{what}: remote peer '{}' (hytask/{}) lost and not back within timeout_s = {} s",
+            self.cfg.name,
+            self.cfg.machine(),
+            self.cfg.timeout_s
+        );
+        self.fail(msg.clone());
+        if let Some(h) = &*lock(&self.on_lost) {
+            h(&msg, false);
+        }
+    }
 }
 
 fn fetch_tasks(
@@ -313,6 +351,7 @@ enum Outcome {
     Timeout,
     Unreachable,
     Lost,
+    NotBack,
 }
 
 impl Outcome {
@@ -324,6 +363,7 @@ impl Outcome {
             Self::Timeout,
             Self::Unreachable,
             Self::Lost,
+            Self::NotBack,
         ]
         .into_iter()
         .find(|o| *o as u8 == v)
@@ -338,6 +378,7 @@ impl Outcome {
             Self::Timeout => Progress::Failed("remote peer: no final status within timeout_s"),
             Self::Unreachable => Progress::Failed("remote peer unreachable"),
             Self::Lost => Progress::Failed("remote peer lost"),
+            Self::NotBack => Progress::Failed("remote peer lost and not back within timeout_s"),
         }
     }
 }
@@ -417,6 +458,42 @@ type ImportFn = Box<
 >;
 type ForwardFn = Box<dyn FnOnce(&mut Configure<'_>, &str) -> Box<dyn Forward> + Send>;
 
+/// A call handed to the worker: its sequence number, the command, and the link as the
+/// proxy saw it when it accepted the command.
+struct Call<C> {
+    seq: u64,
+    cmd: C,
+    seen: LinkSeen,
+}
+
+/// The link at a command's acceptance: a call made for a remote that was there must not be
+/// sent to (or wait for) a later incarnation of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct LinkSeen {
+    /// The remote was alive.
+    alive: bool,
+    /// Its loss count.
+    losses: u64,
+}
+
+impl LinkSeen {
+    fn now(link: &LinkShared) -> Self {
+        // Losses first: a loss between the two loads then shows as a changed count.
+        let losses = link.losses.load(Ordering::Acquire);
+        Self {
+            alive: link.alive.load(Ordering::Acquire),
+            losses,
+        }
+    }
+
+    /// The remote was lost under this call: it was there at acceptance and is gone now, or
+    /// it was lost again since.
+    fn lost_since(&self, link: &LinkShared) -> bool {
+        let now = Self::now(link);
+        now.losses != self.losses || (self.alive && !now.alive)
+    }
+}
+
 /// Queued calls between the proxy's step and its worker.
 const CALL_QUEUE: usize = 16;
 /// Remote values queued between two steps of the proxy.
@@ -431,11 +508,12 @@ pub struct RemoteProxy<C: RemoteCommand> {
     forwards: Vec<ForwardFn>,
     pumps: Vec<Box<dyn Pump>>,
     subscribers: Subscribers,
-    calls: BufferWriter<(u64, C)>,
-    calls_rx: Option<BufferReader<(u64, C)>>,
+    calls: BufferWriter<Call<C>>,
+    calls_rx: Option<BufferReader<Call<C>>>,
     results: Arc<Results>,
     next_seq: u64,
-    waiting: Option<u64>,
+    /// The call in progress and the link as it was when it was accepted.
+    waiting: Option<(u64, LinkSeen)>,
     losses_seen: u64,
     lost_event: Option<EventSource<u32>>,
     stop: Arc<AtomicBool>,
@@ -538,16 +616,21 @@ impl<C: RemoteCommand> RemoteProxy<C> {
             .name(format!("zenoh-remote-{}", link.name()))
             .spawn(move || {
                 while !stop.load(Ordering::Acquire) {
-                    let Some((seq, cmd)) = rx.pop() else {
+                    let Some(c) = rx.pop() else {
                         std::thread::sleep(Duration::from_millis(1));
                         continue;
                     };
-                    for f in &mut forwards {
-                        f.publish(&link.inner.session);
-                    }
-                    let outcome = call(&link, &task, &cmd);
+                    let outcome = match reach(&link, &task, &c, &stop) {
+                        Ok(()) => {
+                            for f in &mut forwards {
+                                f.publish(&link.inner.session);
+                            }
+                            call(&link, &task, &c.cmd)
+                        }
+                        Err(o) => o,
+                    };
                     results.outcome.store(outcome as u8, Ordering::Relaxed);
-                    results.seq.store(seq, Ordering::Release);
+                    results.seq.store(c.seq, Ordering::Release);
                 }
             })
             .map(|_| ())
@@ -586,17 +669,39 @@ fn subscribe<T: Send + DeserializeOwned + 'static>(
     Ok(rx)
 }
 
-/// One forwarded call, on the worker thread.
-fn call<C: RemoteCommand>(link: &RemoteLink, task: &str, cmd: &C) -> Outcome {
-    let l = &link.inner;
+/// `remote peer '<name>': <task>.<op>`, how the worker's messages name a call.
+fn describe<C: RemoteCommand>(l: &LinkShared, task: &str, cmd: &C) -> (String, &'static str) {
     let op = C::operations()
         .get(cmd.operation_index())
         .map_or("?", |o| o.name);
-    let what = format!("remote peer '{}': {task}.{op}", l.cfg.name);
-    if !link.alive() {
-        l.fail(format!("{what}: not sent, the peer is lost"));
-        return Outcome::Lost;
+    (format!("remote peer '{}': {task}.{op}", l.cfg.name), op)
+}
+
+/// Before a call is sent: a remote lost under it fails it unsent; a remote that was already
+/// lost when it was accepted is waited for, up to `timeout_s`.
+fn reach<C: RemoteCommand>(
+    link: &RemoteLink,
+    task: &str,
+    c: &Call<C>,
+    stop: &AtomicBool,
+) -> Result<(), Outcome> {
+    let l = &link.inner;
+    let (what, _) = describe(l, task, &c.cmd);
+    if !c.seen.alive && !l.wait_alive(Duration::from_secs_f64(l.cfg.timeout_s), stop) {
+        l.not_back(&what);
+        return Err(Outcome::NotBack);
     }
+    if c.seen.lost_since(l) {
+        l.fail(format!("{what}: not sent, the peer was lost"));
+        return Err(Outcome::Lost);
+    }
+    Ok(())
+}
+
+/// One forwarded call, on the worker thread.
+fn call<C: RemoteCommand>(link: &RemoteLink, task: &str, cmd: &C) -> Outcome {
+    let l = &link.inner;
+    let (what, op) = describe(l, task, cmd);
     let key = keys::op(l.cfg.machine(), task, op);
     let timeout = Duration::from_secs_f64(l.cfg.timeout_s);
     let t0 = Instant::now();
@@ -690,16 +795,20 @@ impl<C: RemoteCommand> Task for RemoteProxy<C> {
         Ok(())
     }
 
+    /// Accepted even while the remote is lost: the worker waits for it (module doc).
     fn accept(&mut self, cmd: &C, _: &StepContext) -> Result<(), RejectReason> {
-        if !self.link.alive() {
-            return Err(RejectReason::Other("remote peer lost"));
-        }
         self.next_seq += 1;
         let seq = self.next_seq;
+        let seen = LinkSeen::now(&self.link.inner);
         // A copy goes to the worker (commands are small values; no allocation here).
-        match self.calls.try_push((seq, cmd.clone())) {
+        let call = Call {
+            seq,
+            cmd: cmd.clone(),
+            seen,
+        };
+        match self.calls.try_push(call) {
             Ok(()) => {
-                self.waiting = Some(seq);
+                self.waiting = Some((seq, seen));
                 Ok(())
             }
             Err(_) => Err(RejectReason::Busy),
@@ -707,7 +816,7 @@ impl<C: RemoteCommand> Task for RemoteProxy<C> {
     }
 
     fn progress(&mut self, _: &C, _: &StepContext) -> Progress {
-        let Some(seq) = self.waiting else {
+        let Some((seq, seen)) = self.waiting else {
             return Progress::Done;
         };
         if self.results.seq.load(Ordering::Acquire) == seq {
@@ -718,7 +827,7 @@ impl<C: RemoteCommand> Task for RemoteProxy<C> {
                 Outcome::progress,
             );
         }
-        if !self.link.alive() {
+        if seen.lost_since(&self.link.inner) {
             self.waiting = None;
             return Progress::Failed("remote peer lost");
         }

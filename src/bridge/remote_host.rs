@@ -5,7 +5,6 @@
 //! Only what a task host has is supported: `tasks`, `call`, `status` (threads, no axes),
 //! ports and events by name. Machine methods (jog, jobs, homing...) answer "not supported".
 
-use super::remote::declare_alive;
 use super::{Bridge, BridgeError};
 use crate::config::ZenohConfig;
 use crate::machine::api::*;
@@ -27,11 +26,11 @@ pub struct PeerHost {
     call_timeout: Duration,
 }
 
-/// A running peer: its host, exporter and liveliness token. [`stop`](Self::stop) ends all.
+/// A running peer: its host and exporter (which holds the liveliness token).
+/// [`stop`](Self::stop) ends all.
 pub struct RunningPeer {
     host: Arc<PeerHost>,
     bridge: Option<Bridge>,
-    token: Option<zenoh::liveliness::LivelinessToken>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -52,14 +51,11 @@ impl PeerHost {
             events: broadcast::channel(64).0,
             call_timeout: Duration::from_secs_f64(cfg.call_timeout_s),
         });
-        let m = cfg.key.clone().unwrap_or_else(|| name.to_owned());
-        let bridge = Bridge::start_on(session.clone(), host.clone(), name, cfg)?;
-        // Declared last: remote users see the peer alive once it answers.
-        let token = declare_alive(&session, &m)?;
+        // The exporter declares the liveliness token, as for a machine.
+        let bridge = Bridge::start_on(session, host.clone(), name, cfg)?;
         Ok(RunningPeer {
             host,
             bridge: Some(bridge),
-            token: Some(token),
         })
     }
 
@@ -74,7 +70,6 @@ impl PeerHost {
 impl RunningPeer {
     /// Withdraws the liveliness token, stops exporting, then stops the tasks.
     pub fn stop(mut self) {
-        drop(self.token.take());
         if let Some(b) = self.bridge.take() {
             b.stop();
         }

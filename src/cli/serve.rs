@@ -36,12 +36,13 @@ pub fn run(args: ServeArgs) -> anyhow::Result<ExitCode> {
     let machine = crate::machine::deploy_from(args.config.as_deref())?;
     // The Zenoh bridge (if configured) exports the machine once it runs; it stops after the
     // machine has, so remote peers see its last status and events.
+    // It also watches the `[[remote]]` peers the machine depends on.
     let bridge = match &config.zenoh {
-        Some(z) => Some(crate::bridge::Bridge::start(
-            machine.clone(),
-            &config.machine.name,
-            z,
-        )?),
+        Some(z) => {
+            let mut b = crate::bridge::Bridge::start(machine.clone(), &config.machine.name, z)?;
+            b.watch(&(machine.clone() as _), &config.remotes)?;
+            Some(b)
+        }
         None => None,
     };
     let listener = claim.bind()?;

@@ -12,7 +12,9 @@
 //! ```
 //!
 //! Losing a remote is seen through its liveliness token (`hytask/<machine>/alive`), which
-//! `hytask peer` declares; Zenoh withdraws it when the process dies or its link breaks.
+//! every exporter declares (`hytask peer`, and `hytask serve` with `[zenoh]`); Zenoh
+//! withdraws it when the process dies or its link breaks. A machine file may list
+//! `[[remote]]` tables too: the daemon watches them (`bridge::watch`).
 
 use serde::{Deserialize, Serialize};
 

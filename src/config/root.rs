@@ -61,6 +61,10 @@ pub struct MachineConfig {
     /// `[zenoh]`: export the task interfaces over Zenoh; absent: no bridge.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub zenoh: Option<super::ZenohConfig>,
+    /// `[[remote]]`: peers in other processes watched over Zenoh (needs `[zenoh]`); losing
+    /// a `critical` one stops the machine under control (`bridge::watch`).
+    #[serde(default, rename = "remote", skip_serializing_if = "Vec::is_empty")]
+    pub remotes: Vec<super::remote::RemoteConfig>,
 }
 
 impl MachineConfig {
@@ -154,6 +158,16 @@ impl MachineConfig {
         }
         if let Some(z) = &self.zenoh {
             z.validate(&mut issues);
+        }
+        for p in super::remote::RemoteConfig::problems(&self.remotes) {
+            let (key, msg) = p.split_once(": ").unwrap_or(("remote", &p));
+            issues.push(key, msg);
+        }
+        if !self.remotes.is_empty() && self.zenoh.is_none() {
+            issues.push(
+                "remote",
+                "a [[remote]] is reached over Zenoh: add a [zenoh] table",
+            );
         }
         issues.into_vec()
     }

@@ -430,6 +430,11 @@ pub trait MachineApi: Send + Sync + 'static {
     fn job_step(&self) -> Result<(), ApiError> {
         Err(self.not_a_machine_error("job.step"))
     }
+    /// A remote peer this host watches (`[[remote]]`) was lost, as `message` says: report
+    /// it, and stop safely when `critical`. Default: nothing runs that a loss could stop.
+    fn remote_lost(&self, message: &str, critical: bool) {
+        tracing::error!("{message} (critical: {critical})");
+    }
     /// Optional stop on or off (whether M1 holds the job as M0 does); returns the new state.
     /// A machine without program stops does not support it.
     fn set_optional_stop(&self, on: bool) -> Result<bool, ApiError> {

@@ -124,6 +124,7 @@ pub struct Machine {
 }
 
 mod events;
+mod remote_loss;
 pub use events::describe_trip;
 use events::Receivers;
 

@@ -274,6 +274,10 @@ impl MachineApi for Machine {
         self.command(MachineCmd::Abort).map(|_| ())
     }
 
+    fn remote_lost(&self, message: &str, critical: bool) {
+        self.stop_for_lost_remote(message, critical);
+    }
+
     fn job_step(&self) -> Result<(), ApiError> {
         self.command(MachineCmd::Step).map(|_| ())
     }
