@@ -142,7 +142,48 @@ const CASES: &[(&str, &str)] = &[
          acc(in := a); g := acc.sum + g; IF g > 1000 THEN g := 0; END_IF;\n\
          t(IN := a > 0, PT := T#30ms); q := t.Q XOR gb; gb := NOT q;\nEND_PROGRAM\n",
     ),
+    (
+        "negated BOOL operands, constants on the left, INT_TO_REAL, x op (y op k)",
+        "PROGRAM T\nVAR_INPUT a, b : INT; p, q : BOOL; u : UDINT; END_VAR\n\
+         VAR c, d : INT; e, f, g : BOOL; r : REAL; l : LREAL; w : UDINT; END_VAR\n\
+         e := p AND NOT q; f := p OR NOT q; g := (a > b) AND NOT e OR NOT f;\n\
+         c := LIMIT(0, a, 9); d := 7 - a; d := d + 3 * b; c := MAX(-2, c);\n\
+         IF 5 < a THEN c := c + 1; END_IF; IF 3 >= b THEN d := 100 / (d + 50); END_IF;\n\
+         e := 4 = a; f := 2 <> b; g := 1 > u; w := 3 + u;\n\
+         r := INT_TO_REAL(a) * 0.5 + INT_TO_REAL(b); l := INT_TO_LREAL(a) - 0.25;\n\
+         c := c + b * 3; d := d * (a MOD 4); c := c - a * 2; d := (b + 1) - d;\n\
+         w := w + u / 3; e := e XOR (a + 1 = 0); c := c + (b - 7);\nEND_PROGRAM\n",
+    ),
 ];
+
+/// The forms of the third generation of fusion fire on the code that needs them (a test
+/// that fails if a rule stops matching).
+#[test]
+fn operand_negation_swaps_conversions_and_reordering_fire() {
+    use hytask::plc::vm::{Bin, Op};
+    let has = |src: &str, want: &dyn Fn(&Op) -> bool| {
+        let p = compile("t.st", src, Options::default()).unwrap();
+        assert!(p.code().iter().any(want), "{src}: {:?}", p.code());
+    };
+    let head = "PROGRAM T\nVAR a, b, c : INT; p, q, e : BOOL; r : REAL; END_VAR\n";
+    has(&format!("{head}e := p AND NOT q;\nEND_PROGRAM\n"), &|op| {
+        matches!(op, Op::PushLL(Bin::AndN, ..) | Op::BinLL(Bin::AndN, ..))
+    });
+    has(&format!("{head}e := p OR NOT q;\nEND_PROGRAM\n"), &|op| {
+        matches!(op, Op::BinLL(Bin::OrN, ..))
+    });
+    has(
+        &format!("{head}IF 5 < a THEN a := 0; END_IF;\nEND_PROGRAM\n"),
+        &|op| matches!(op, Op::JfLI(Bin::CmpI(hytask::plc::vm::Cmp::Gt), _, 5, _)),
+    );
+    has(
+        &format!("{head}r := INT_TO_REAL(a) * 0.5;\nEND_PROGRAM\n"),
+        &|op| matches!(op, Op::LoadIToF(..)),
+    );
+    has(&format!("{head}a := a + b * 3;\nEND_PROGRAM\n"), &|op| {
+        matches!(op, Op::BinLS(Bin::Add(_), 0, 0))
+    });
+}
 
 #[test]
 fn targeted_cases_behave_the_same_fused() {

@@ -1,11 +1,14 @@
-//! Peephole fusion of common instruction sequences, after code generation. Two passes:
+//! Peephole fusion of common instruction sequences, after code generation. Three passes:
 //! first an operand load or constant followed by a binary operation becomes one
 //! instruction, as does a load or constant followed by a store (block inputs,
-//! assignments); then the three-address forms `x op y -> d`, `x op k -> d`, the
+//! assignments), a negated BOOL operand of AND/OR (`a AND NOT x`), a load converted to
+//! float (`INT_TO_REAL(x)`), and a constant left operand of a commutative operation is
+//! moved to the right; then the three-address forms `x op y -> d`, `x op k -> d`, the
 //! compare-and-branch forms `IF x op y` / `IF x op k`, `x op y` / `x op k` pushed, a
-//! store of a binary result, a pair of loads, and a jump to the next instruction (an IF without ELSE) disappear into one
-//! instruction each. Fewer dispatches per scan, same effect. A sequence is never fused
-//! across a jump target.
+//! store of a binary result, a pair of loads, and a jump to the next instruction (an IF
+//! without ELSE) disappear into one instruction each; last `x op (y op2 k)` with a
+//! commutative `op` is reordered so both operations fuse. Fewer dispatches per scan, same
+//! effect. A sequence is never fused across a jump target.
 
 use super::diag::Span;
 use super::vm::{Bin, Op};
@@ -31,11 +34,51 @@ fn bin(op: Op) -> Option<Bin> {
     })
 }
 
-/// A rewrite: the replacement (`None` deletes) and how many instructions it consumes.
-type Rewrite = (Option<Op>, usize);
+/// A rewrite: the replacement (none, one or two instructions) and how many instructions it
+/// consumes.
+type Rewrite = ([Option<Op>; 2], usize);
+
+/// `b` with its operands swapped, when `a b c = c b' a` for every pair of integer or BOOL
+/// cells (floats are left alone: which NaN a float operation returns depends on the order).
+fn swapped(b: Bin) -> Option<Bin> {
+    use super::vm::Cmp;
+    let flip = |c: Cmp| match c {
+        Cmp::Lt => Cmp::Gt,
+        Cmp::Gt => Cmp::Lt,
+        Cmp::Le => Cmp::Ge,
+        Cmp::Ge => Cmp::Le,
+        c => c,
+    };
+    Some(match b {
+        Bin::Add(_) | Bin::Mul(_) | Bin::And | Bin::Or | Bin::Xor | Bin::MinMaxI(_) => b,
+        Bin::CmpI(c) => Bin::CmpI(flip(c)),
+        Bin::CmpU(c) => Bin::CmpU(flip(c)),
+        _ => return None,
+    })
+}
 
 /// First pass: operand fusion.
 fn pairs(w: &[Op], _at: usize) -> Option<Rewrite> {
+    if let [Op::LoadL(x), Op::NotB, op, ..] = *w {
+        // `a AND NOT x`, `a OR NOT x` (BOOL): the negation rides on the operand.
+        let b = match op {
+            Op::And => Some(Bin::AndN),
+            Op::Or => Some(Bin::OrN),
+            _ => None,
+        };
+        if let Some(b) = b {
+            return Some(([Some(Op::BinL(b, x)), None], 3));
+        }
+    }
+    if let [Op::Push(c), Op::LoadL(y), op, ..] = *w {
+        // `k op y` becomes `y op' k`, which fuses further (`LIMIT(0, x, 9)`, `IF 5 < x`).
+        if let Some(b) = bin(op).and_then(swapped) {
+            return Some(([Some(Op::LoadL(y)), Some(Op::BinC(b, c))], 3));
+        }
+    }
+    if let [Op::LoadL(x), Op::IToF(s), ..] = *w {
+        return Some(([Some(Op::LoadIToF(x, s)), None], 2));
+    }
     let fused = match (*w.first()?, *w.get(1)?) {
         (Op::LoadL(s), Op::StoreL(d)) => Op::MovL(s, d),
         (Op::Push(c), Op::StoreL(d)) => Op::SetL(d, c),
@@ -46,24 +89,24 @@ fn pairs(w: &[Op], _at: usize) -> Option<Rewrite> {
         (Op::Push(c), b) => Op::BinC(bin(b)?, c),
         _ => return None,
     };
-    Some((Some(fused), 2))
+    Some(([Some(fused), None], 2))
 }
 
-/// A constant of operation `b` in 32 bits, when it fits exactly: a signed 32-bit integer
-/// for integer and bit operations, a single-precision float for float operations (every
-/// REAL constant is one).
-enum Compact {
-    Int(i32),
-    Float(f32),
-}
-
-fn compact(b: Bin, c: u64) -> Option<Compact> {
+/// The fused form of operation `b` with constant `c` carried in 32 bits, when it fits
+/// exactly: `int` with a signed 32-bit integer for integer and bit operations, `float` with
+/// a single-precision float for float operations (every REAL constant is one).
+fn with_const(
+    b: Bin,
+    c: u64,
+    int: impl FnOnce(i32) -> Op,
+    float: impl FnOnce(f32) -> Op,
+) -> Option<Op> {
     if b.float() {
         let v = f64::from_bits(c) as f32;
-        ((v as f64).to_bits() == c).then_some(Compact::Float(v))
+        ((v as f64).to_bits() == c).then(|| float(v))
     } else {
         let v = c as i64 as i32;
-        (v as i64 as u64 == c).then_some(Compact::Int(v))
+        (v as i64 as u64 == c).then(|| int(v))
     }
 }
 
@@ -74,47 +117,60 @@ fn triples(w: &[Op], at: usize) -> Option<Rewrite> {
         let fused = match (a, b, c) {
             (Op::LoadL(x), Op::BinL(b, y), Op::StoreL(d)) => Some(Op::BinLL(b, x, y, d)),
             (Op::LoadL(x), Op::BinL(b, y), Op::Jz(t)) => Some(Op::JfLL(b, x, y, t)),
-            (Op::LoadL(x), Op::BinC(b, k), Op::StoreL(d)) => match compact(b, k) {
-                Some(Compact::Int(k)) => Some(Op::BinLI(b, x, k, d)),
-                Some(Compact::Float(k)) => Some(Op::BinLF(b, x, k, d)),
-                None => None,
-            },
-            (Op::LoadL(x), Op::BinC(b, k), Op::Jz(t)) => match compact(b, k) {
-                Some(Compact::Int(k)) => Some(Op::JfLI(b, x, k, t)),
-                Some(Compact::Float(k)) => Some(Op::JfLF(b, x, k, t)),
-                None => None,
-            },
+            (Op::LoadL(x), Op::BinC(b, k), Op::StoreL(d)) => {
+                with_const(b, k, |k| Op::BinLI(b, x, k, d), |k| Op::BinLF(b, x, k, d))
+            }
+            (Op::LoadL(x), Op::BinC(b, k), Op::Jz(t)) => {
+                with_const(b, k, |k| Op::JfLI(b, x, k, t), |k| Op::JfLF(b, x, k, t))
+            }
             _ => None,
         };
         if fused.is_some() {
-            return Some((fused, 3));
+            return Some(([fused, None], 3));
         }
     }
     if let Op::Jmp(t) = a {
         if t as usize == at + 1 {
-            return Some((None, 1));
+            return Some(([None, None], 1));
         }
     }
     let fused = match (a, *w.get(1)?) {
         (Op::LoadL(x), Op::BinL(b, y)) => Op::PushLL(b, x, y),
-        (Op::LoadL(x), Op::BinC(b, k)) => match compact(b, k)? {
-            Compact::Int(k) => Op::PushLI(b, x, k),
-            Compact::Float(k) => Op::PushLF(b, x, k),
-        },
-        (Op::BinC(b, k), Op::StoreL(d)) => match compact(b, k)? {
-            Compact::Int(k) => Op::BinCSI(b, k, d),
-            Compact::Float(k) => Op::BinCSF(b, k, d),
-        },
+        (Op::LoadL(x), Op::BinC(b, k)) => {
+            with_const(b, k, |k| Op::PushLI(b, x, k), |k| Op::PushLF(b, x, k))?
+        }
+        (Op::BinC(b, k), Op::StoreL(d)) => {
+            with_const(b, k, |k| Op::BinCSI(b, k, d), |k| Op::BinCSF(b, k, d))?
+        }
         (Op::LoadL(x), Op::LoadL(y)) => Op::LoadLL(x, y),
         (Op::LoadL(x), Op::Jz(t)) => Op::JzL(x, t),
         (Op::BinL(b, y), Op::StoreL(d)) => Op::BinLS(b, y, d),
         (op, Op::StoreL(d)) => Op::BinS(bin(op)?, d),
         _ => return None,
     };
-    Some((Some(fused), 2))
+    Some(([Some(fused), None], 2))
 }
 
-fn targets(op: Op) -> Option<u32> {
+/// Third pass: `x op (y op2 k)` with a commutative `op` (`a := a + b * 3`) computes
+/// `y op2 k` first and takes `x` as the right operand, so both halves fuse.
+fn commuted(w: &[Op], _at: usize) -> Option<Rewrite> {
+    let [Op::LoadLL(x, y), Op::BinC(b2, k), last, ..] = *w else {
+        return None;
+    };
+    let push = with_const(b2, k, |k| Op::PushLI(b2, y, k), |k| Op::PushLF(b2, y, k))?;
+    let outer = match last {
+        Op::BinS(b, d) if swapped(b) == Some(b) => Op::BinLS(b, x, d),
+        op => match bin(op) {
+            Some(b) if swapped(b) == Some(b) => Op::BinL(b, x),
+            _ => return None,
+        },
+    };
+    Some(([Some(push), Some(outer)], 3))
+}
+
+/// The jump target or call entry an instruction carries, for reading or rewriting: the
+/// one list of branching instructions the pass keeps.
+fn target_mut(op: &mut Op) -> Option<&mut u32> {
     match op {
         Op::Jmp(t)
         | Op::Jz(t)
@@ -129,18 +185,13 @@ fn targets(op: Op) -> Option<u32> {
     }
 }
 
+fn targets(mut op: Op) -> Option<u32> {
+    target_mut(&mut op).copied()
+}
+
 fn retarget(op: &mut Op, map: &[u32]) {
-    match op {
-        Op::Jmp(t)
-        | Op::Jz(t)
-        | Op::Jnz(t)
-        | Op::CallInd(t)
-        | Op::JzL(_, t)
-        | Op::JfLL(_, _, _, t)
-        | Op::JfLI(_, _, _, t)
-        | Op::JfLF(_, _, _, t) => *t = map[*t as usize],
-        Op::Call { entry, .. } => *entry = map[*entry as usize],
-        _ => {}
+    if let Some(t) = target_mut(op) {
+        *t = map[*t as usize];
     }
 }
 
@@ -148,6 +199,7 @@ fn retarget(op: &mut Op, map: &[u32]) {
 pub fn optimize(ops: &mut Vec<Op>, spans: &mut Vec<Span>, entries: &mut [&mut u32]) {
     pass(ops, spans, entries, pairs);
     pass(ops, spans, entries, triples);
+    pass(ops, spans, entries, commuted);
 }
 
 /// One rewriting pass with `rule`, which sees the code from an instruction on (never
@@ -179,12 +231,13 @@ fn pass(
             .find(|&j| is_target[j])
             .unwrap_or(n.min(i + 3));
         match rule(&ops[i..end], i) {
-            Some((op, used)) => {
+            Some((out, used)) => {
                 let to = map[i];
                 map[i + 1..i + used].fill(to);
-                if let Some(op) = op {
+                for op in out.into_iter().flatten() {
                     new_ops.push(op);
-                    // The last instruction is the one that can fault or be reported.
+                    // The last instruction is the one that can fault or be reported (no
+                    // rule emits two instructions of which the first can fault).
                     new_spans.push(spans[i + used - 1]);
                 }
                 i += used;

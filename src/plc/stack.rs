@@ -24,7 +24,7 @@ fn effect(op: Op) -> (usize, usize) {
         BinL(..) | BinC(..) => (1, 1),
         BinLL(..) | BinLI(..) | BinLF(..) | JzL(..) | JfLL(..) | JfLI(..) | JfLF(..) => (0, 0),
         BinLS(..) | BinCSI(..) | BinCSF(..) => (1, 0),
-        PushLL(..) | PushLI(..) | PushLF(..) => (0, 1),
+        PushLL(..) | PushLI(..) | PushLF(..) | LoadIToF(..) => (0, 1),
         BinS(..) => (2, 0),
         LoadLL(..) => (0, 2),
     }

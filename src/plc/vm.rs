@@ -113,6 +113,10 @@ pub enum Bin {
     Div(IntKind),
     /// Integer remainder by a constant that is not zero.
     Mod(IntKind),
+    /// BOOL `a AND NOT b` (fused `NotB` + `And`).
+    AndN,
+    /// BOOL `a OR NOT b`.
+    OrN,
 }
 
 /// Integer `a / b` (`div`) or `a MOD b` of kind `k`, `b` not zero: truncating, the
@@ -174,6 +178,8 @@ impl Bin {
             }
             Bin::Div(k) => div_rem(k, a, b, true),
             Bin::Mod(k) => div_rem(k, a, b, false),
+            Bin::AndN => a & (b ^ 1),
+            Bin::OrN => a | (b ^ 1),
         }
     }
 }
@@ -383,6 +389,8 @@ pub enum Op {
     BinCSF(Bin, f32, u32),
     /// Fused `LoadL(x)` + `LoadL(y)`.
     LoadLL(u32, u32),
+    /// Fused `LoadL(x)` + `IToF(s)`: push `mem[x]` converted to float.
+    LoadIToF(u32, bool),
     /// Fused `LoadL(x)` + `Jz(t)`: jump if `mem[x]` is zero.
     JzL(u32, u32),
     /// Fused `LoadL(x)` + `BinL(b, y)` + `Jz(t)`: jump if `mem[x] b mem[y]` is zero
@@ -532,6 +540,7 @@ impl Vm<'_> {
                     let a = pop!();
                     mem[base + d as usize] = b.apply(a, (k as f64).to_bits());
                 }
+                Op::LoadIToF(x, s) => push!(fb(mem[base + x as usize] as i64 as f64, s)),
                 Op::LoadLL(x, y) => {
                     push!(mem[base + x as usize]);
                     push!(mem[base + y as usize]);
