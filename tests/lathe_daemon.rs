@@ -17,14 +17,7 @@ fn wait(m: &Machine, what: &str, pred: impl Fn(&Status) -> bool) -> Status {
 }
 
 fn deploy(config: &std::path::Path) -> Arc<Machine> {
-    let m = Machine::deploy(hytask::config::load(config).unwrap()).unwrap();
-    m.estop_reset().unwrap();
-    m.machine_on().unwrap();
-    m.home(None).unwrap();
-    wait(&m, "homed and idle", |s| {
-        s.mode == Mode::Idle && s.axes.iter().all(|a| a.homed)
-    });
-    m
+    support::deploy_homed(config)
 }
 
 /// Runs `program` to its end (whatever it is); returns the status then.

@@ -370,3 +370,17 @@ pub fn wait_machine(
         std::thread::sleep(Duration::from_millis(5));
     }
 }
+
+/// Deploys the machine of `config` in-process, resets e-stop, switches it on and homes it,
+/// then returns it once every axis is homed and the machine idle.
+pub fn deploy_homed(config: &std::path::Path) -> std::sync::Arc<hytask::machine::Machine> {
+    use hytask::machine::api::{MachineApi, Mode};
+    let m = hytask::machine::Machine::deploy(hytask::config::load(config).unwrap()).unwrap();
+    m.estop_reset().unwrap();
+    m.machine_on().unwrap();
+    m.home(None).unwrap();
+    wait_machine(&m, "homed and idle", |s| {
+        s.mode == Mode::Idle && s.axes.iter().all(|a| a.homed)
+    });
+    m
+}
