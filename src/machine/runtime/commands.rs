@@ -194,7 +194,10 @@ impl Machine {
             items,
             manual,
         }) {
-            Ok(_) => Ok(()),
+            // `Failed` means accepted and already ended (a job that fails in its first cycles,
+            // before this thread looked: easy on the unpaced simulated clock). It ran: its end
+            // event reports why, like any job's, so it stays the active job.
+            Ok(_) | Err(ApiError::Failed(_)) => Ok(()),
             Err(e) => {
                 cancel.store(true, Ordering::Release);
                 let mut book = lock(&self.book);
