@@ -15,7 +15,7 @@ mod counting_alloc;
 use counting_alloc::so_far as allocations;
 
 mod machine_rig;
-use machine_rig::{until_done, Homed};
+use machine_rig::{queue_next_piece, until_done, Homed};
 
 /// The `probe` input of tests/fixtures/sim-fast.toml (nothing else drives it on this rig).
 const DI: usize = 1;
@@ -74,19 +74,11 @@ fn an_m66_its_answer_and_the_next_piece_allocate_nothing() {
     session.wait_result(w.value);
     let (canon, _) = session.next_piece().unwrap();
     let state = first.plan.end_state.clone();
-    let second = hytask::motion::plan_continue(&canon, &motion_cfg, w.stopped_mm, state).unwrap();
-    for &item in &second.items {
-        queue.try_push(QueueItem { job: 1, item }).unwrap();
-    }
+    let next = queue_next_piece(&queue, &motion_cfg, &canon, w.stopped_mm, state);
 
     // Window 2: continue, and the next piece to the end of the job.
     let before = allocations();
-    let cont = machine
-        .send(MachineCmd::Continue {
-            job: 1,
-            items: second.items.len() as u64,
-        })
-        .unwrap();
+    let cont = machine.send(next).unwrap();
     until_done(&mut rt, &run, 20_000);
     let window2 = allocations() - before;
 

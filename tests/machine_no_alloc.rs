@@ -19,7 +19,7 @@ mod counting_alloc;
 use counting_alloc::so_far as allocations;
 
 mod machine_rig;
-use machine_rig::{until_done, Homed};
+use machine_rig::{queue_next_piece, until_done, Homed};
 
 /// The simulated mill (fast homing), homed and idle.
 fn homed() -> Homed {
@@ -122,21 +122,12 @@ fn a_probe_move_its_trip_stop_and_the_next_piece_allocate_nothing() {
     };
     session.probe_result(&r);
     let (canon, _) = session.next_piece().unwrap();
-    let second =
-        hytask::motion::plan_continue(&canon, &motion_cfg, s.stopped_mm, first.end_state.clone())
-            .unwrap();
-    for &item in &second.items {
-        queue.try_push(QueueItem { job: 1, item }).unwrap();
-    }
+    let state = first.end_state.clone();
+    let next = queue_next_piece(&queue, &motion_cfg, &canon, s.stopped_mm, state);
 
     // Window 2: continue, and the next piece to the end of the job.
     let before = allocations();
-    let cont = machine
-        .send(MachineCmd::Continue {
-            job: 1,
-            items: second.items.len() as u64,
-        })
-        .unwrap();
+    let cont = machine.send(next).unwrap();
     until_done(&mut rt, &run, 20_000);
     let window2 = allocations() - before;
 

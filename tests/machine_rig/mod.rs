@@ -108,3 +108,23 @@ impl Homed {
         }
     }
 }
+
+/// Plans the next piece of live job 1 from where the machine stopped (`stopped_mm`, after a
+/// probe trip or an M66 answer) and queues it, off the realtime path, as the piece runner
+/// does. Returns the `Continue` command that releases it.
+pub fn queue_next_piece(
+    queue: &BufferWriter<QueueItem>,
+    motion_cfg: &hytask::motion::MotionConfig,
+    canon: &[Canon],
+    stopped_mm: [f64; NUM_AXES],
+    state: hytask::motion::from_canon::FoldState,
+) -> MachineCmd {
+    let next = hytask::motion::plan_continue(canon, motion_cfg, stopped_mm, state).unwrap();
+    for &item in &next.items {
+        queue.try_push(QueueItem { job: 1, item }).unwrap();
+    }
+    MachineCmd::Continue {
+        job: 1,
+        items: next.items.len() as u64,
+    }
+}
