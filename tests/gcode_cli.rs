@@ -107,3 +107,50 @@ fn plan_takes_a_tool_table() {
     );
     assert!(String::from_utf8_lossy(&with.stdout).contains("job time:"));
 }
+
+/// A long trace sent to a file is written while interpreting (in chunks) and is the same
+/// text as through a pipe; a long program with an error at its end leaves the file as it
+/// was, so "no partial trace" holds for files too.
+#[test]
+fn canon_into_a_file_is_whole_or_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut prog = String::from("G21 F100\n");
+    for i in 0..20_000 {
+        prog.push_str(&format!("G1 X{}.5 Y{}\n", i % 97, i % 13));
+    }
+    let good = dir.path().join("good.ngc");
+    std::fs::write(&good, format!("{prog}M2\n")).unwrap();
+    let piped = hytask()
+        .args(["gcode", "canon"])
+        .arg(&good)
+        .output()
+        .unwrap();
+    assert!(piped.status.success());
+    assert!(piped.stdout.len() > 1 << 20, "several chunks long");
+
+    let to_file = |prog: &std::path::Path, name: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, b"kept\n").unwrap();
+        let file = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&path)
+            .unwrap();
+        let status = hytask()
+            .args(["gcode", "canon"])
+            .arg(prog)
+            .stdout(file)
+            .status()
+            .unwrap();
+        (status, std::fs::read(&path).unwrap())
+    };
+    let (status, text) = to_file(&good, "good.txt");
+    assert!(status.success());
+    assert_eq!(&text[..5], b"kept\n");
+    assert!(text[5..] == piped.stdout[..], "file and pipe traces differ");
+
+    let bad = dir.path().join("bad.ngc");
+    std::fs::write(&bad, format!("{prog}G1 X1 Y1 Z1 Q\nM2\n")).unwrap();
+    let (status, text) = to_file(&bad, "bad.txt");
+    assert!(!status.success());
+    assert_eq!(text, b"kept\n", "the partial trace was taken back");
+}

@@ -1,7 +1,8 @@
 //! `hytask gcode`: G-code tools. `canon` prints the canonical trace in `rs274 -g` layout so
 //! it can be diffed against LinuxCNC; `check` only validates a program.
 
-use crate::gcode::{load_file, trace_file, InterpOptions, LengthUnits};
+use crate::gcode::trace_spill::Spill;
+use crate::gcode::{load_file, trace_file, trace_file_spilled, InterpOptions, LengthUnits};
 use anyhow::Context as _;
 use std::io::Write as _;
 use std::path::PathBuf;
@@ -75,12 +76,26 @@ pub enum GcodeCommand {
     Check(InterpArgs),
 }
 
+/// Standard output as a [`Spill`] when it is a file or the null device.
+fn stdout_spill() -> Option<Spill> {
+    use std::os::fd::AsFd as _;
+    let fd = std::io::stdout().as_fd().try_clone_to_owned().ok()?;
+    Spill::onto(std::fs::File::from(fd))
+}
+
 /// Runs the subcommand.
 pub fn run(args: GcodeArgs) -> anyhow::Result<ExitCode> {
     match args.command {
         GcodeCommand::Canon(a) => {
-            // Formatted while interpreting; printed only once the whole program is valid.
-            let trace = trace_file(&a.file, &a.options()?)?;
+            // Formatted while interpreting; printed only once the whole program is valid,
+            // except onto a file or /dev/null, which can take a partial trace back.
+            let opts = a.options()?;
+            if let Some(mut spill) = stdout_spill() {
+                let rest = trace_file_spilled(&a.file, &opts, &mut spill)?;
+                spill.finish(&rest).context("writing the trace")?;
+                return Ok(ExitCode::SUCCESS);
+            }
+            let trace = trace_file(&a.file, &opts)?;
             let stdout = std::io::stdout();
             let mut lock = stdout.lock();
             lock.write_all(&trace).context("writing the trace")?;

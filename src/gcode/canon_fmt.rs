@@ -23,6 +23,18 @@ fn push_str(out: &mut Vec<u8>, s: &str) {
 
 /// Appends `v` formatted like C's `printf("%.4f", v)`.
 pub fn push_f4(out: &mut Vec<u8>, v: f64) {
+    // Zero is the most common number of a trace (the unused A/B/C of every move).
+    if v == 0.0 {
+        let s: &[u8; 7] = if v.is_sign_negative() {
+            b"-0.0000"
+        } else {
+            b"0.0000 "
+        };
+        let len = out.len() + 6 + usize::from(v.is_sign_negative());
+        out.extend_from_slice(s);
+        out.truncate(len);
+        return;
+    }
     // Fast path: exact when v*1e4 is far from a rounding tie and fits an integer; the slow
     // path (std formatting, correctly rounded like glibc) handles ties and huge values.
     let a = (v * 10_000.0).abs();

@@ -32,6 +32,7 @@ pub mod params;
 pub mod parser;
 pub mod session;
 pub mod tooltable;
+pub mod trace_spill;
 pub mod varfile;
 
 pub use canon::{Canon, CanonCmd, LengthUnits, Pose, ProbeKind, SourceLoc, NUM_AXES};
@@ -185,7 +186,23 @@ pub fn load_file_persistent(
 /// an error yields only the error.
 pub fn trace_file(path: &Path, opts: &InterpOptions) -> Result<Vec<u8>, GcodeError> {
     let (name, text, o) = read_program(path, opts)?;
-    interp::interpret_trace(&name, text, &o)
+    interp::interpret_trace(&name, text, &o, None)
+}
+
+/// [`trace_file`] that writes the trace to `spill` as it goes (in large chunks) and returns
+/// only the last, unwritten part; on an error the spill discards what it wrote (see
+/// [`trace_spill::Spill`]), so a program with an error still yields only the error.
+pub fn trace_file_spilled(
+    path: &Path,
+    opts: &InterpOptions,
+    spill: &mut trace_spill::Spill,
+) -> Result<Vec<u8>, GcodeError> {
+    let (name, text, o) = read_program(path, opts)?;
+    let out = interp::interpret_trace(&name, text, &o, Some(spill));
+    if out.is_err() {
+        spill.discard();
+    }
+    out
 }
 
 fn read_program(

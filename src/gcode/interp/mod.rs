@@ -198,15 +198,17 @@ impl Source {
 
 /// Where emitted commands go: a program (the library API) or directly the rs274-format
 /// trace (`hytask gcode canon`, which then never holds the whole `Vec<Canon>`).
-pub(crate) enum Sink {
+pub(crate) enum Sink<'s> {
     /// Collect the commands.
     Canon(Vec<Canon>),
     /// Format each command as it is emitted.
     Trace {
-        /// The text so far.
+        /// The text so far (not yet spilled).
         buf: Vec<u8>,
         /// Calls printed so far.
         seq: u64,
+        /// Where full chunks of the text go, if anywhere.
+        spill: Option<&'s mut crate::gcode::trace_spill::Spill>,
     },
 }
 
@@ -228,7 +230,7 @@ pub(crate) struct Frame {
 pub(crate) struct Interp<'a> {
     /// Borrowed for a one-shot run, owned by a [`crate::gcode::Session`].
     pub(crate) opts: Cow<'a, InterpOptions>,
-    pub(crate) out: Sink,
+    pub(crate) out: Sink<'a>,
     /// Commands emitted so far.
     count: usize,
     pub(crate) loc: SourceLoc,
@@ -364,7 +366,12 @@ impl<'a> Interp<'a> {
                 loc: self.loc.clone(),
                 cmd,
             }),
-            Sink::Trace { buf, seq } => crate::gcode::canon_fmt::write_call(buf, &cmd, seq),
+            Sink::Trace { buf, seq, spill } => {
+                crate::gcode::canon_fmt::write_call(buf, &cmd, seq);
+                if let Some(s) = spill {
+                    s.take_chunk(buf);
+                }
+            }
         }
         Ok(())
     }
@@ -394,7 +401,11 @@ impl<'a> Interp<'a> {
         match &mut self.out {
             Sink::Canon(v) => v.reserve(expect.min(self.yield_after)),
             // About 75 bytes per call of a CAM program's trace: no regrowth on the way.
-            Sink::Trace { buf, .. } => buf.reserve(expect * 80),
+            Sink::Trace { buf, spill, .. } => match spill {
+                // Written out in chunks: one chunk's worth stays in the cache.
+                Some(_) => buf.reserve(2 * crate::gcode::trace_spill::CHUNK),
+                None => buf.reserve(expect * 80),
+            },
         }
         self.files.push(src);
         self.loc = SourceLoc {
@@ -691,11 +702,13 @@ pub(crate) fn interpret_trace(
     name: &str,
     text: String,
     opts: &InterpOptions,
+    spill: Option<&mut crate::gcode::trace_spill::Spill>,
 ) -> Result<Vec<u8>, GcodeError> {
     let mut it = Interp::new(Cow::Borrowed(opts))?;
     it.out = Sink::Trace {
         buf: Vec::new(),
         seq: 0,
+        spill,
     };
     it.run(name, text)?;
     match it.out {
