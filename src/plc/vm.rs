@@ -400,6 +400,38 @@ pub enum Op {
     JfLI(Bin, u32, i32, u32),
     /// The same with a single-precision float constant.
     JfLF(Bin, u32, f32, u32),
+    // Fourth generation (`superop`): two operations in one dispatch. Offsets that are
+    // 16 bits wide keep the instruction at 16 bytes; a program whose cells lie further
+    // from the base keeps the two-instruction form.
+    /// Push `(mem[base + x] b1 k1) b2 k2` (fused `PushLI` + `BinC`: `a MOD 7 = 0`).
+    PushLIC(Bin, Bin, u16, i32, i32),
+    /// Pop `a`; `mem[base + d] = a b2 (mem[base + x] b1 mem[base + y])` (fused `PushLL` +
+    /// `BinS`: `... OR (p AND NOT q)`).
+    BinSLL(Bin, Bin, u16, u16, u16),
+    /// `mem[base + d] = (mem[base + y] b1 k) b2 mem[base + x]` (fused `PushLI` + `BinLS`:
+    /// `a := a + b * 3`).
+    BinLIL(Bin, Bin, u16, u16, u16, i32),
+    /// Pop `a`; `mem[base + d] = a b2 (float(mem[base + x]) b1 k)`, the conversion to
+    /// single precision if the flag says so (fused `LoadIToF` + `BinC` + `BinS`:
+    /// `r := r * 0.99 + INT_TO_REAL(a) * 0.01`).
+    BinSIToF(Bin, Bin, bool, u16, u16, f32),
+    /// `mem[base + d] = LIMIT(lo, mem[base + x], hi)` on signed cells (fused
+    /// `PushLI(MinMaxI(max))` + `BinCSI(MinMaxI(min))`).
+    ClampI(u16, u16, i32, i32),
+    /// `mem[base + d] = mem[base + src]`, then the standard block call (fused `MovL` +
+    /// `Std`: a block call carries its last input store, `t(IN := x)`).
+    StdMov {
+        /// The block.
+        fb: StdFb,
+        /// Instance address.
+        at: u32,
+        /// Whether `at` is relative to the base.
+        rel: bool,
+        /// Source cell (base-relative).
+        src: u32,
+        /// Input cell (base-relative).
+        d: u32,
+    },
 }
 
 /// The machine state of one scan, borrowed from the program's preallocated storage.
@@ -496,6 +528,17 @@ impl Vm<'_> {
                 depth += 1;
                 base = $nb;
                 pc = $entry as usize;
+            }};
+        }
+        macro_rules! std_call {
+            ($fb:expr, $at:expr, $rel:expr) => {{
+                let a = if $rel {
+                    base + $at as usize
+                } else {
+                    $at as usize
+                };
+                let n = $fb.members().len();
+                $fb.exec(&mut mem[a..a + n], self.now);
             }};
         }
         loop {
@@ -738,15 +781,44 @@ impl Vm<'_> {
                     let nb = pop!() as usize;
                     call!(entry, nb);
                 }
-                Op::Std { fb, at, rel } => {
-                    let a = if rel { base + at as usize } else { at as usize };
-                    let n = fb.members().len();
-                    fb.exec(&mut mem[a..a + n], self.now);
+                Op::Std { fb, at, rel } => std_call!(fb, at, rel),
+                Op::StdMov {
+                    fb,
+                    at,
+                    rel,
+                    src,
+                    d,
+                } => {
+                    mem[base + d as usize] = mem[base + src as usize];
+                    std_call!(fb, at, rel);
                 }
                 Op::StdInd(fb) => {
                     let a = pop!() as usize;
                     let n = fb.members().len();
                     fb.exec(&mut mem[a..a + n], self.now);
+                }
+                Op::PushLIC(b1, b2, x, k1, k2) => {
+                    let v = b1.apply(mem[base + x as usize], k1 as i64 as u64);
+                    push!(b2.apply(v, k2 as i64 as u64))
+                }
+                Op::BinSLL(b1, b2, x, y, d) => {
+                    let a = pop!();
+                    let v = b1.apply(mem[base + x as usize], mem[base + y as usize]);
+                    mem[base + d as usize] = b2.apply(a, v);
+                }
+                Op::BinLIL(b1, b2, y, x, d, k) => {
+                    let v = b1.apply(mem[base + y as usize], k as i64 as u64);
+                    mem[base + d as usize] = b2.apply(v, mem[base + x as usize]);
+                }
+                Op::BinSIToF(b1, b2, s, x, d, k) => {
+                    let a = pop!();
+                    let i = fb(mem[base + x as usize] as i64 as f64, s);
+                    let v = b1.apply(i, (k as f64).to_bits());
+                    mem[base + d as usize] = b2.apply(a, v);
+                }
+                Op::ClampI(x, d, lo, hi) => {
+                    let v = Bin::MinMaxI(true).apply(mem[base + x as usize], lo as i64 as u64);
+                    mem[base + d as usize] = Bin::MinMaxI(false).apply(v, hi as i64 as u64);
                 }
                 Op::Ret => {
                     if depth == 0 {
