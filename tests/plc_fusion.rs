@@ -157,14 +157,15 @@ const CASES: &[(&str, &str)] = &[
     (
         "two operations in one: MOD-compare, op of a pair, INT_TO_REAL scaled, LIMIT, block inputs",
         "PROGRAM T\nVAR_INPUT a, b : INT; p, q : BOOL; n : DINT; u : UINT; END_VAR\n\
-         VAR c, d : INT; e, f : BOOL; r : REAL; l : LREAL; t1, t2 : TON; k : DINT; w : UINT; END_VAR\n\
+         VAR c, d : INT; e, f : BOOL; r : REAL; l : LREAL; t1, t2, t3 : TON; t4 : TP; k : DINT; w : UINT; END_VAR\n\
          e := (a MOD 7 = 0) OR (p AND NOT q); f := (b + 2 > 0) AND (a < b);\n\
          f := f XOR (a MOD 3 <> 1) XOR (c >= d);\n\
          c := c + b * 3; d := d * (a - 7) + 0; k := k + n * 40000; w := w + u * 7;\n\
          r := r * 0.99 + INT_TO_REAL(a) * 0.01; l := l - INT_TO_LREAL(b) * 0.5;\n\
          r := r - INT_TO_REAL(b) / 3.0; l := l * INT_TO_LREAL(a) + 0.1;\n\
          c := LIMIT(0, c, 500); d := LIMIT(-5, d, 5); k := LIMIT(-70000, k, 70000);\n\
-         t1(IN := e, PT := T#30ms); t2(PT := T#5s, IN := f); f := t1.Q OR t2.Q;\n\
+         t1(IN := e, PT := T#30ms); t2(PT := T#50ms, IN := f); f := t1.Q OR t2.Q;\n\
+         t3(PT := T#1d3ms, IN := e); t4(IN := p); e := t3.Q OR t4.Q;\n\
          IF t1.Q THEN c := 0; END_IF;\nEND_PROGRAM\n",
     ),
 ];
@@ -216,7 +217,7 @@ fn two_operation_forms_fire_and_far_cells_stay_unfused() {
     };
     let head = "PROGRAM T\nVAR a, b, c : INT; p, q, e : BOOL; r : REAL; t : TON; END_VAR\n";
     type Want = dyn Fn(&Op) -> bool;
-    let cases: [(&str, &Want); 6] = [
+    let cases: [(&str, &Want); 8] = [
         ("e := (a MOD 7 = 0) OR q;", &|op| {
             matches!(op, Op::PushLIC(..))
         }),
@@ -231,6 +232,20 @@ fn two_operation_forms_fire_and_far_cells_stay_unfused() {
             matches!(op, Op::ClampI(_, _, 0, 500))
         }),
         ("t(IN := e, PT := T#5s);", &|op| {
+            matches!(
+                op,
+                Op::StdSetMov {
+                    k: 9_765_625,
+                    sh: 9,
+                    ..
+                }
+            )
+        }),
+        ("t(PT := T#5s, IN := e);", &|op| {
+            matches!(op, Op::StdSetMov { .. })
+        }),
+        // A constant that is not a 32-bit value shifted keeps its own store.
+        ("t(PT := T#1d3ms, IN := e);", &|op| {
             matches!(op, Op::StdMov { .. })
         }),
     ];

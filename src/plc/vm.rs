@@ -123,12 +123,23 @@ pub enum Bin {
 /// remainder with the sign of the dividend, 64-bit unsigned kinds unsigned, wrapped.
 #[inline(always)]
 fn div_rem(k: IntKind, a: u64, b: u64, div: bool) -> u64 {
+    let (sa, sb) = (a as i64, b as i64);
     let r = if k.bits() == 64 && !k.signed() {
         if div {
             a / b
         } else {
             a % b
         }
+    } else if k.bits() <= 32 && sa as i32 as i64 == sa && sb as i32 as i64 == sb {
+        // The 32-bit division is the faster instruction. It differs from the 64-bit one
+        // only for i32::MIN / -1 (-2^31 instead of 2^31), the same after wrapping to a
+        // kind of 32 bits or fewer.
+        let (a, b) = (sa as i32, sb as i32);
+        (if div {
+            a.wrapping_div(b)
+        } else {
+            a.wrapping_rem(b)
+        }) as i64 as u64
     } else if div {
         (a as i64).wrapping_div(b as i64) as u64
     } else {
@@ -432,6 +443,26 @@ pub enum Op {
         /// Input cell (base-relative).
         d: u32,
     },
+    /// `mem[base + d] = mem[base + src]`, `mem[base + d2] = k << sh`, then the standard
+    /// block call (fused `MovL` + `SetL` + `Std`: `t(IN := x, PT := T#5s)`).
+    StdSetMov {
+        /// The block.
+        fb: StdFb,
+        /// Whether `at` is relative to the base.
+        rel: bool,
+        /// Left shift of the constant.
+        sh: u8,
+        /// Instance address.
+        at: u16,
+        /// Source cell of the copied input (base-relative).
+        src: u16,
+        /// The copied input's cell (base-relative).
+        d: u16,
+        /// The constant input's cell (base-relative).
+        d2: u16,
+        /// The constant, shifted right by `sh`.
+        k: i32,
+    },
 }
 
 /// The machine state of one scan, borrowed from the program's preallocated storage.
@@ -542,9 +573,11 @@ impl Vm<'_> {
             }};
         }
         loop {
-            let op = ops[pc];
+            // Matched in place: each arm loads only its own operands (a copy of the whole
+            // instruction made every dispatch decode every field layout first).
+            let op = &ops[pc];
             pc += 1;
-            match op {
+            match *op {
                 Op::Push(v) => push!(v),
                 Op::BinL(b, o) => st[sp - 1] = b.apply(st[sp - 1], mem[base + o as usize]),
                 Op::BinC(b, c) => st[sp - 1] = b.apply(st[sp - 1], c),
@@ -790,6 +823,20 @@ impl Vm<'_> {
                     d,
                 } => {
                     mem[base + d as usize] = mem[base + src as usize];
+                    std_call!(fb, at, rel);
+                }
+                Op::StdSetMov {
+                    fb,
+                    rel,
+                    sh,
+                    at,
+                    src,
+                    d,
+                    d2,
+                    k,
+                } => {
+                    mem[base + d as usize] = mem[base + src as usize];
+                    mem[base + d2 as usize] = ((k as i64) << sh) as u64;
                     std_call!(fb, at, rel);
                 }
                 Op::StdInd(fb) => {
