@@ -154,6 +154,20 @@ const CASES: &[(&str, &str)] = &[
          c := c + b * 3; d := d * (a MOD 4); c := c - a * 2; d := (b + 1) - d;\n\
          w := w + u / 3; e := e XOR (a + 1 = 0); c := c + (b - 7);\nEND_PROGRAM\n",
     ),
+    (
+        "two operations in one: MOD-compare, op of a pair, INT_TO_REAL scaled, LIMIT, block inputs",
+        "PROGRAM T\nVAR_INPUT a, b : INT; p, q : BOOL; n : DINT; u : UINT; END_VAR\n\
+         VAR c, d : INT; e, f : BOOL; r : REAL; l : LREAL; t1, t2, t3 : TON; t4 : TP; k : DINT; w : UINT; END_VAR\n\
+         e := (a MOD 7 = 0) OR (p AND NOT q); f := (b + 2 > 0) AND (a < b);\n\
+         f := f XOR (a MOD 3 <> 1) XOR (c >= d);\n\
+         c := c + b * 3; d := d * (a - 7) + 0; k := k + n * 40000; w := w + u * 7;\n\
+         r := r * 0.99 + INT_TO_REAL(a) * 0.01; l := l - INT_TO_LREAL(b) * 0.5;\n\
+         r := r - INT_TO_REAL(b) / 3.0; l := l * INT_TO_LREAL(a) + 0.1;\n\
+         c := LIMIT(0, c, 500); d := LIMIT(-5, d, 5); k := LIMIT(-70000, k, 70000);\n\
+         t1(IN := e, PT := T#30ms); t2(PT := T#50ms, IN := f); f := t1.Q OR t2.Q;\n\
+         t3(PT := T#1d3ms, IN := e); t4(IN := p); e := t3.Q OR t4.Q;\n\
+         IF t1.Q THEN c := 0; END_IF;\nEND_PROGRAM\n",
+    ),
 ];
 
 /// The forms of the third generation of fusion fire on the code that needs them (a test
@@ -181,8 +195,78 @@ fn operand_negation_swaps_conversions_and_reordering_fire() {
         &|op| matches!(op, Op::LoadIToF(..)),
     );
     has(&format!("{head}a := a + b * 3;\nEND_PROGRAM\n"), &|op| {
-        matches!(op, Op::BinLS(Bin::Add(_), 0, 0))
+        // The fourth pass makes one instruction of the two (`BinLIL`).
+        matches!(
+            op,
+            Op::BinLS(Bin::Add(_), 0, 0) | Op::BinLIL(Bin::Mul(_), Bin::Add(_), 1, 0, 0, 3)
+        )
     });
+}
+
+/// The forms of the fourth generation (two operations in one instruction) fire on the code
+/// that needs them, and a cell beyond a 16-bit offset keeps the unfused pair (and the same
+/// behaviour).
+#[test]
+fn two_operation_forms_fire_and_far_cells_stay_unfused() {
+    use hytask::plc::vm::Op;
+    let code = |src: &str| {
+        compile("t.st", src, Options::default())
+            .unwrap()
+            .code()
+            .to_vec()
+    };
+    let head = "PROGRAM T\nVAR a, b, c : INT; p, q, e : BOOL; r : REAL; t : TON; END_VAR\n";
+    type Want = dyn Fn(&Op) -> bool;
+    let cases: [(&str, &Want); 8] = [
+        ("e := (a MOD 7 = 0) OR q;", &|op| {
+            matches!(op, Op::PushLIC(..))
+        }),
+        ("e := (a > b) OR (p AND NOT q);", &|op| {
+            matches!(op, Op::BinSLL(..))
+        }),
+        ("a := a + b * 3;", &|op| matches!(op, Op::BinLIL(..))),
+        ("r := r * 0.5 + INT_TO_REAL(a) * 0.25;", &|op| {
+            matches!(op, Op::BinSIToF(..))
+        }),
+        ("c := LIMIT(0, a, 500);", &|op| {
+            matches!(op, Op::ClampI(_, _, 0, 500))
+        }),
+        ("t(IN := e, PT := T#5s);", &|op| {
+            matches!(
+                op,
+                Op::StdSetMov {
+                    k: 9_765_625,
+                    sh: 9,
+                    ..
+                }
+            )
+        }),
+        ("t(PT := T#5s, IN := e);", &|op| {
+            matches!(op, Op::StdSetMov { .. })
+        }),
+        // A constant that is not a 32-bit value shifted keeps its own store.
+        ("t(PT := T#1d3ms, IN := e);", &|op| {
+            matches!(op, Op::StdMov { .. })
+        }),
+    ];
+    for (stmt, want) in cases {
+        let ops = code(&format!("{head}{stmt}\nEND_PROGRAM\n"));
+        assert!(ops.iter().any(want), "{stmt}: {ops:?}");
+    }
+    // The same statements on cells more than 65,535 cells from the base.
+    let far = "PROGRAM T\nVAR pad : ARRAY[0..70000] OF INT; a, b, c : INT; e, q : BOOL; r : REAL; END_VAR\n\
+               e := (a MOD 7 = 0) OR q; a := a + b * 3; r := r * 0.5 + INT_TO_REAL(a) * 0.25;\n\
+               c := LIMIT(0, a, 500); e := (a > b) OR (q AND NOT e);\nEND_PROGRAM\n";
+    let ops = code(far);
+    let two = |op: &Op| {
+        matches!(
+            op,
+            Op::PushLIC(..) | Op::BinSLL(..) | Op::BinLIL(..) | Op::BinSIToF(..) | Op::ClampI(..)
+        )
+    };
+    assert!(!ops.iter().any(two), "{ops:?}");
+    let (mut fused, mut plain) = both("far.st", far).unwrap();
+    same_behaviour("far", &mut fused, &mut plain, 6);
 }
 
 #[test]

@@ -317,6 +317,13 @@ const ARITHMETIC: &[Case] = &[
         steps: &[(1, "", "a=-3, b=-1, c=1, d=-3")],
     },
     Case {
+        name: "the most negative value divided by -1 wraps in its width; MOD -1 is 0",
+        cite: "ed.3 leaves overflow implementation-dependent; CODESYS/TwinCAT wrap (also checks the 32-bit division the VM uses for kinds of 32 bits or fewer)",
+        src: "VAR a : DINT := -2147483648; m : DINT := -1; q, r : DINT; u : UDINT := 4294967295; v : UDINT; l : LINT := -2147483648; lq, lr : LINT; i : INT := -32768; im : INT := -1; iq : INT; END_VAR q := a / m; r := a MOD m; v := u / 7; lq := l / -1; lr := l MOD m; iq := i / im;",
+        period_ms: 10,
+        steps: &[(1, "", "q=-2147483648, r=0, v=613566756, lq=2147483648, lr=0, iq=-32768")],
+    },
+    Case {
         name: "integer division by zero is a runtime fault with its line",
         cite: "ed.3 leaves it implementation-dependent (an error); CODESYS raises an exception",
         src: "VAR a, z : DINT; END_VAR\na := 1;\na := a / z;",

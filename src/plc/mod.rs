@@ -33,6 +33,7 @@ pub mod program;
 pub mod retain;
 mod stack;
 pub mod stdfb;
+mod superop;
 #[cfg(not(loom))]
 pub mod task;
 pub mod types;

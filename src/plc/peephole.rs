@@ -6,8 +6,9 @@
 //! moved to the right; then the three-address forms `x op y -> d`, `x op k -> d`, the
 //! compare-and-branch forms `IF x op y` / `IF x op k`, `x op y` / `x op k` pushed, a
 //! store of a binary result, a pair of loads, and a jump to the next instruction (an IF
-//! without ELSE) disappear into one instruction each; last `x op (y op2 k)` with a
-//! commutative `op` is reordered so both operations fuse. Fewer dispatches per scan, same
+//! without ELSE) disappear into one instruction each; then `x op (y op2 k)` with a
+//! commutative `op` is reordered so both operations fuse; last two operations that are
+//! still apart become one (`superop`). Fewer dispatches per scan, same
 //! effect. A sequence is never fused across a jump target.
 
 use super::diag::Span;
@@ -36,7 +37,7 @@ fn bin(op: Op) -> Option<Bin> {
 
 /// A rewrite: the replacement (none, one or two instructions) and how many instructions it
 /// consumes.
-type Rewrite = ([Option<Op>; 2], usize);
+pub(super) type Rewrite = ([Option<Op>; 2], usize);
 
 /// `b` with its operands swapped, when `a b c = c b' a` for every pair of integer or BOOL
 /// cells (floats are left alone: which NaN a float operation returns depends on the order).
@@ -95,12 +96,12 @@ fn pairs(w: &[Op], _at: usize) -> Option<Rewrite> {
 /// The fused form of operation `b` with constant `c` carried in 32 bits, when it fits
 /// exactly: `int` with a signed 32-bit integer for integer and bit operations, `float` with
 /// a single-precision float for float operations (every REAL constant is one).
-fn with_const(
+pub(super) fn with_const<T>(
     b: Bin,
     c: u64,
-    int: impl FnOnce(i32) -> Op,
-    float: impl FnOnce(f32) -> Op,
-) -> Option<Op> {
+    int: impl FnOnce(i32) -> T,
+    float: impl FnOnce(f32) -> T,
+) -> Option<T> {
     if b.float() {
         let v = f64::from_bits(c) as f32;
         ((v as f64).to_bits() == c).then(|| float(v))
@@ -200,6 +201,7 @@ pub fn optimize(ops: &mut Vec<Op>, spans: &mut Vec<Span>, entries: &mut [&mut u3
     pass(ops, spans, entries, pairs);
     pass(ops, spans, entries, triples);
     pass(ops, spans, entries, commuted);
+    pass(ops, spans, entries, super::superop::fuse);
 }
 
 /// One rewriting pass with `rule`, which sees the code from an instruction on (never

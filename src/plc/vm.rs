@@ -123,12 +123,23 @@ pub enum Bin {
 /// remainder with the sign of the dividend, 64-bit unsigned kinds unsigned, wrapped.
 #[inline(always)]
 fn div_rem(k: IntKind, a: u64, b: u64, div: bool) -> u64 {
+    let (sa, sb) = (a as i64, b as i64);
     let r = if k.bits() == 64 && !k.signed() {
         if div {
             a / b
         } else {
             a % b
         }
+    } else if k.bits() <= 32 && sa as i32 as i64 == sa && sb as i32 as i64 == sb {
+        // The 32-bit division is the faster instruction. It differs from the 64-bit one
+        // only for i32::MIN / -1 (-2^31 instead of 2^31), the same after wrapping to a
+        // kind of 32 bits or fewer.
+        let (a, b) = (sa as i32, sb as i32);
+        (if div {
+            a.wrapping_div(b)
+        } else {
+            a.wrapping_rem(b)
+        }) as i64 as u64
     } else if div {
         (a as i64).wrapping_div(b as i64) as u64
     } else {
@@ -400,6 +411,58 @@ pub enum Op {
     JfLI(Bin, u32, i32, u32),
     /// The same with a single-precision float constant.
     JfLF(Bin, u32, f32, u32),
+    // Fourth generation (`superop`): two operations in one dispatch. Offsets that are
+    // 16 bits wide keep the instruction at 16 bytes; a program whose cells lie further
+    // from the base keeps the two-instruction form.
+    /// Push `(mem[base + x] b1 k1) b2 k2` (fused `PushLI` + `BinC`: `a MOD 7 = 0`).
+    PushLIC(Bin, Bin, u16, i32, i32),
+    /// Pop `a`; `mem[base + d] = a b2 (mem[base + x] b1 mem[base + y])` (fused `PushLL` +
+    /// `BinS`: `... OR (p AND NOT q)`).
+    BinSLL(Bin, Bin, u16, u16, u16),
+    /// `mem[base + d] = (mem[base + y] b1 k) b2 mem[base + x]` (fused `PushLI` + `BinLS`:
+    /// `a := a + b * 3`).
+    BinLIL(Bin, Bin, u16, u16, u16, i32),
+    /// Pop `a`; `mem[base + d] = a b2 (float(mem[base + x]) b1 k)`, the conversion to
+    /// single precision if the flag says so (fused `LoadIToF` + `BinC` + `BinS`:
+    /// `r := r * 0.99 + INT_TO_REAL(a) * 0.01`).
+    BinSIToF(Bin, Bin, bool, u16, u16, f32),
+    /// `mem[base + d] = LIMIT(lo, mem[base + x], hi)` on signed cells (fused
+    /// `PushLI(MinMaxI(max))` + `BinCSI(MinMaxI(min))`).
+    ClampI(u16, u16, i32, i32),
+    /// `mem[base + d] = mem[base + src]`, then the standard block call (fused `MovL` +
+    /// `Std`: a block call carries its last input store, `t(IN := x)`).
+    StdMov {
+        /// The block.
+        fb: StdFb,
+        /// Instance address.
+        at: u32,
+        /// Whether `at` is relative to the base.
+        rel: bool,
+        /// Source cell (base-relative).
+        src: u32,
+        /// Input cell (base-relative).
+        d: u32,
+    },
+    /// `mem[base + d] = mem[base + src]`, `mem[base + d2] = k << sh`, then the standard
+    /// block call (fused `MovL` + `SetL` + `Std`: `t(IN := x, PT := T#5s)`).
+    StdSetMov {
+        /// The block.
+        fb: StdFb,
+        /// Whether `at` is relative to the base.
+        rel: bool,
+        /// Left shift of the constant.
+        sh: u8,
+        /// Instance address.
+        at: u16,
+        /// Source cell of the copied input (base-relative).
+        src: u16,
+        /// The copied input's cell (base-relative).
+        d: u16,
+        /// The constant input's cell (base-relative).
+        d2: u16,
+        /// The constant, shifted right by `sh`.
+        k: i32,
+    },
 }
 
 /// The machine state of one scan, borrowed from the program's preallocated storage.
@@ -498,10 +561,23 @@ impl Vm<'_> {
                 pc = $entry as usize;
             }};
         }
+        macro_rules! std_call {
+            ($fb:expr, $at:expr, $rel:expr) => {{
+                let a = if $rel {
+                    base + $at as usize
+                } else {
+                    $at as usize
+                };
+                let n = $fb.members().len();
+                $fb.exec(&mut mem[a..a + n], self.now);
+            }};
+        }
         loop {
-            let op = ops[pc];
+            // Matched in place: each arm loads only its own operands (a copy of the whole
+            // instruction made every dispatch decode every field layout first).
+            let op = &ops[pc];
             pc += 1;
-            match op {
+            match *op {
                 Op::Push(v) => push!(v),
                 Op::BinL(b, o) => st[sp - 1] = b.apply(st[sp - 1], mem[base + o as usize]),
                 Op::BinC(b, c) => st[sp - 1] = b.apply(st[sp - 1], c),
@@ -738,15 +814,58 @@ impl Vm<'_> {
                     let nb = pop!() as usize;
                     call!(entry, nb);
                 }
-                Op::Std { fb, at, rel } => {
-                    let a = if rel { base + at as usize } else { at as usize };
-                    let n = fb.members().len();
-                    fb.exec(&mut mem[a..a + n], self.now);
+                Op::Std { fb, at, rel } => std_call!(fb, at, rel),
+                Op::StdMov {
+                    fb,
+                    at,
+                    rel,
+                    src,
+                    d,
+                } => {
+                    mem[base + d as usize] = mem[base + src as usize];
+                    std_call!(fb, at, rel);
+                }
+                Op::StdSetMov {
+                    fb,
+                    rel,
+                    sh,
+                    at,
+                    src,
+                    d,
+                    d2,
+                    k,
+                } => {
+                    mem[base + d as usize] = mem[base + src as usize];
+                    mem[base + d2 as usize] = ((k as i64) << sh) as u64;
+                    std_call!(fb, at, rel);
                 }
                 Op::StdInd(fb) => {
                     let a = pop!() as usize;
                     let n = fb.members().len();
                     fb.exec(&mut mem[a..a + n], self.now);
+                }
+                Op::PushLIC(b1, b2, x, k1, k2) => {
+                    let v = b1.apply(mem[base + x as usize], k1 as i64 as u64);
+                    push!(b2.apply(v, k2 as i64 as u64))
+                }
+                Op::BinSLL(b1, b2, x, y, d) => {
+                    let a = pop!();
+                    let v = b1.apply(mem[base + x as usize], mem[base + y as usize]);
+                    mem[base + d as usize] = b2.apply(a, v);
+                }
+                Op::BinLIL(b1, b2, y, x, d, k) => {
+                    let v = b1.apply(mem[base + y as usize], k as i64 as u64);
+                    mem[base + d as usize] = b2.apply(v, mem[base + x as usize]);
+                }
+                Op::BinSIToF(b1, b2, s, x, d, k) => {
+                    let a = pop!();
+                    let i = fb(mem[base + x as usize] as i64 as f64, s);
+                    let v = b1.apply(i, (k as f64).to_bits());
+                    mem[base + d as usize] = b2.apply(a, v);
+                }
+                Op::ClampI(x, d, lo, hi) => {
+                    let v = Bin::MinMaxI(true).apply(mem[base + x as usize], lo as i64 as u64);
+                    mem[base + d as usize] = Bin::MinMaxI(false).apply(v, hi as i64 as u64);
                 }
                 Op::Ret => {
                     if depth == 0 {
