@@ -216,50 +216,13 @@ fn any_queue_can_feed_the_interpolator() {
 
 /// Stopping figures of a feed hold requested at every `every`-th period of `p`: the worst
 /// path length and time from the request to standing still, and the worst peak/limit ratio
-/// of any of those stops (the interpolator is cloned at each request point, so one nominal
-/// run serves every stop).
+/// of any of those stops.
 fn worst_hold(p: &Plan, cfg: &MotionConfig, every: usize) -> (f64, f64, f64) {
-    use hytask::motion::{Interpolator, SliceSource};
-    let mut it = Interpolator::new(cfg, p.start_mm);
-    let mut src = SliceSource::new(&p.items);
-    let (mut dist, mut time, mut ratio) = (0.0f64, 0.0f64, 0.0f64);
-    // The last four nominal poses: the stop's finite differences start from them.
-    let mut hist = [p.start_mm; 4];
-    for n in 0.. {
-        let out = *it.step(&mut src);
-        hist.rotate_left(1);
-        hist[3] = out.pose_mm;
-        if out.state == InterpState::Done {
-            break;
-        }
-        if n % every != 0 || n < 4 {
-            continue;
-        }
-        let (mut h, mut hs) = (it.clone(), src.clone());
-        h.hold();
-        let mut tr = trace::Trace {
-            dt_s: cfg.servo_period_s,
-            ..trace::Trace::default()
-        };
-        tr.poses_mm.extend_from_slice(&hist);
-        let mut d = 0.0;
-        for _ in 0..20_000 {
-            let o = *h.step(&mut hs);
-            let prev = *tr.poses_mm.last().unwrap();
-            d += (0..9)
-                .map(|a| (o.pose_mm[a] - prev[a]).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            tr.poses_mm.push(o.pose_mm);
-            if o.state != InterpState::Running {
-                break;
-            }
-        }
-        dist = dist.max(d);
-        time = time.max((tr.poses_mm.len() - 4) as f64 * cfg.servo_period_s);
-        ratio = ratio.max(tr.peaks().worst_ratio(cfg));
-    }
-    (dist, time, ratio)
+    hold_stops(p, cfg, |n| n % every == 0)
+        .iter()
+        .fold((0.0f64, 0.0f64, 0.0f64), |(d, t, r), s| {
+            (d.max(s.dist_mm), t.max(s.time_s), r.max(s.peak_ratio))
+        })
 }
 
 /// A feed hold requested anywhere on a dense curve (sine of 0.1 mm chords, G64 P0.01) or a

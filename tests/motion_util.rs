@@ -117,3 +117,66 @@ pub fn max_deviation(tr: &Trace, path: &[[f64; 9]]) -> f64 {
 pub fn last(tr: &Trace) -> [f64; 9] {
     *tr.poses_mm.last().unwrap()
 }
+
+/// One feed hold measured by [`hold_stops`].
+#[derive(Debug, Clone, Copy)]
+pub struct Stop {
+    /// Period of the request.
+    pub period: usize,
+    /// Path speed when the hold was requested, mm/s.
+    pub speed_mm_s: f64,
+    /// Path length from the request to standing still, mm.
+    pub dist_mm: f64,
+    /// Time from the request to standing still, s.
+    pub time_s: f64,
+    /// Worst peak/limit ratio of the stop's trace (with the four periods before it).
+    pub peak_ratio: f64,
+}
+
+/// A feed hold requested at every period `n` of a nominal run of `p` where `at(n)`: the
+/// interpolator is cloned at each request point, so one nominal run serves every stop.
+pub fn hold_stops(p: &Plan, cfg: &MotionConfig, at: impl Fn(usize) -> bool) -> Vec<Stop> {
+    use hytask::motion::{InterpState, Interpolator, SliceSource};
+    let dist =
+        |a: &[f64; 9], b: &[f64; 9]| (0..9).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let mut it = Interpolator::new(cfg, p.start_mm);
+    let mut src = SliceSource::new(&p.items);
+    let mut stops = Vec::new();
+    // The last four nominal poses: the stop's finite differences start from them.
+    let mut hist = [p.start_mm; 4];
+    for n in 0.. {
+        let out = *it.step(&mut src);
+        hist.rotate_left(1);
+        hist[3] = out.pose_mm;
+        if out.state == InterpState::Done {
+            break;
+        }
+        if n < 4 || !at(n) {
+            continue;
+        }
+        let (mut h, mut hs) = (it.clone(), src.clone());
+        h.hold();
+        let mut tr = Trace {
+            dt_s: cfg.servo_period_s,
+            ..Trace::default()
+        };
+        tr.poses_mm.extend_from_slice(&hist);
+        let mut d = 0.0;
+        for _ in 0..20_000 {
+            let o = *h.step(&mut hs);
+            d += dist(&o.pose_mm, tr.poses_mm.last().unwrap());
+            tr.poses_mm.push(o.pose_mm);
+            if o.state != InterpState::Running {
+                break;
+            }
+        }
+        stops.push(Stop {
+            period: n,
+            speed_mm_s: dist(&hist[3], &hist[2]) / cfg.servo_period_s,
+            dist_mm: d,
+            time_s: (tr.poses_mm.len() - 4) as f64 * cfg.servo_period_s,
+            peak_ratio: tr.peaks().worst_ratio(cfg),
+        });
+    }
+    stops
+}

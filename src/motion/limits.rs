@@ -4,7 +4,7 @@
 
 use super::config::{KinematicsConfig, MotionConfig};
 use super::profile::{Shape, Tangential};
-use super::segment::{Item, Segment, SegmentKind};
+use super::segment::{norm, Item, Segment, SegmentKind};
 use super::{PlanError, AXIS_NAMES};
 use crate::gcode::NUM_AXES;
 
@@ -17,6 +17,13 @@ pub struct Limits {
     pub acc: [f64; NUM_AXES],
     /// Planning jerk, (1 - reserve)·max, mm/s³.
     pub jerk: [f64; NUM_AXES],
+    /// Full acceleration, mm/s²: an arc's normal acceleration is planned against it with
+    /// the vector bound (see [`Limits::arc`]).
+    pub acc_full: [f64; NUM_AXES],
+    /// Full jerk, mm/s³.
+    pub jerk_full: [f64; NUM_AXES],
+    /// The interpolator's always-safe scale rates `(k̇ max, k̈ max)` ([`override_rates`]).
+    pub scale_floor: (f64, f64),
     /// Largest feed override.
     pub max_override: f64,
     /// Servo period, s: an acceleration step shows on the trace as jerk over one period.
@@ -42,6 +49,9 @@ impl Limits {
             vel: cfg.axes.map(|a| a.max_vel_mm_s),
             acc: cfg.axes.map(|a| a.max_acc_mm_s2 * keep),
             jerk: cfg.axes.map(|a| a.max_jerk_mm_s3 * keep),
+            acc_full: cfg.axes.map(|a| a.max_acc_mm_s2),
+            jerk_full: cfg.axes.map(|a| a.max_jerk_mm_s3),
+            scale_floor: override_rates(cfg),
             max_override: cfg.max_feed_override,
             servo_period_s: cfg.servo_period_s,
             fit_arcs: cfg.fit_arcs && matches!(cfg.kinematics, KinematicsConfig::Identity),
@@ -51,19 +61,42 @@ impl Limits {
 
     /// Largest acceleration step at a curvature step, mm/s² (`v²·|Δκ|` at a junction).
     pub fn step_budget_mm_s2(&self) -> f64 {
-        STEP_SHARE * self.jerk[0].min(self.jerk[1]) * self.servo_period_s
+        STEP_SHARE * self.arc_jerk() * self.servo_period_s
     }
 
-    /// Speed cap and tangential limits on an XY arc of curvature `kappa` at feed `feed`:
-    /// the normal acceleration `v²·κ` and the jerk terms of the curvature (`κ²·v³` and
-    /// `3κ·v·s''`) are taken out of the X/Y limits first, and the share of the jerk kept for
-    /// curvature steps ([`STEP_SHARE`]) too.
+    /// Planning jerk of X/Y on arcs: the reduced jerk, and at most `J − 3·A·k1 − v·k2`, so
+    /// that the interpolator's always-safe scale rates stay safe although an arc's
+    /// acceleration may reach the full `A` ([`Limits::arc`]).
+    fn arc_jerk(&self) -> f64 {
+        let (k1, k2) = self.scale_floor;
+        let full = self.jerk_full[0].min(self.jerk_full[1]);
+        let a_full = self.acc_full[0].min(self.acc_full[1]);
+        let vel = self.vel[0].min(self.vel[1]);
+        self.jerk[0]
+            .min(self.jerk[1])
+            .min(full - 3.0 * a_full * k1 - vel * k2)
+    }
+
+    /// Speed cap and tangential limits on an XY arc of curvature `kappa` at feed `feed`.
+    ///
+    /// The normal acceleration `v²·κ` may use [`NORMAL_SHARE`] of the *full* acceleration
+    /// (not of the reserve-reduced one): a hold or a lower override only shrinks it (`k ≤ 1`
+    /// scales it by `k²`) and adds tangential deceleration `v·k̇`, which is orthogonal to it.
+    /// So the tangential acceleration is the larger of two always-safe choices: within the
+    /// reduced acceleration as a vector with the normal one (then the override cap may
+    /// exceed 1 and the reserve covers `v·k̇`, as on a line), or, at scale at most 1, such
+    /// that `√((a_t + v·k1)² + a_n²) ≤ A` with the interpolator's always-safe scale rate
+    /// `k1` (the override cap is then 1). The jerk terms of the curvature (`κ²·v³` and
+    /// `3κ·v·s''`) and the share kept for curvature steps ([`STEP_SHARE`]) come out of the
+    /// planning jerk, lowered so that `j + 3·A·k1 + v·k2 ≤ J` (an arc's acceleration may
+    /// reach the full `A` in the jerk term `3·p''·k·k̇`).
     pub fn arc(&self, kappa: f64, feed_mm_s: f64) -> (f64, Tangential) {
-        let (a, j) = (self.acc[0].min(self.acc[1]), self.jerk[0].min(self.jerk[1]));
+        let a = self.acc[0].min(self.acc[1]);
+        let a_full = self.acc_full[0].min(self.acc_full[1]);
+        let vel = self.vel[0].min(self.vel[1]);
+        let (k1, j) = (self.scale_floor.0, self.arc_jerk());
         let k = kappa.abs();
-        let mut v = feed_mm_s
-            .min(self.vel[0].min(self.vel[1]))
-            .min((NORMAL_SHARE * a / k).sqrt());
+        let mut v = feed_mm_s.min(vel).min((NORMAL_SHARE * a_full / k).sqrt());
         let jt_free = (1.0 - STEP_SHARE) * j;
         let mut t = Tangential {
             acc_mm_s2: a,
@@ -71,13 +104,16 @@ impl Limits {
         };
         for _ in 0..60 {
             let an = k * v * v;
-            let at = (a * a - an * an).max(0.0).sqrt();
+            let at = (a * a - an * an)
+                .max(0.0)
+                .sqrt()
+                .max((a_full * a_full - an * an).max(0.0).sqrt() - v * k1);
             let jt = jt_free - k * k * v * v * v - 3.0 * k * v * at;
             t = Tangential {
                 acc_mm_s2: at,
                 jerk_mm_s3: jt,
             };
-            if jt >= 0.2 * jt_free {
+            if jt >= 0.2 * jt_free && at > 0.0 {
                 break;
             }
             v *= 0.9;
@@ -274,16 +310,36 @@ fn scale_rate(seg: &Segment, cap: f64, cfg: &MotionConfig, k1: f64, k2: f64) -> 
         return f64::INFINITY;
     }
     let mut r = f64::INFINITY;
+    let arc = arc_accelerations(seg);
     for (i, [v, a, j]) in seg.peaks().into_iter().enumerate() {
         let ax = &cfg.axes[i];
-        if v > 0.0 {
-            r = r.min((ax.max_acc_mm_s2 - a * cap * cap) / v);
+        match arc {
+            // Vector bound: `|p''k² + p'k̇|² = (a_t·k² + v·k̇)² + (a_n·k²)²`, the `k̇` term
+            // is tangential only.
+            Some((at, an)) if i < 2 && v > 0.0 => {
+                let c2 = cap * cap;
+                let room = (ax.max_acc_mm_s2.powi(2) - (an * c2).powi(2)).max(0.0);
+                r = r.min((room.sqrt() - at * c2) / v);
+            }
+            _ if v > 0.0 => r = r.min((ax.max_acc_mm_s2 - a * cap * cap) / v),
+            _ => {}
         }
         if a > 0.0 {
             r = r.min((ax.max_jerk_mm_s3 - j * cap.powi(3) - v * k2) / (3.0 * a * cap));
         }
     }
     r.max(k1)
+}
+
+/// Peak tangential and normal acceleration of an arc segment at scale 1 (`None` for a
+/// straight segment or a blend).
+fn arc_accelerations(seg: &Segment) -> Option<(f64, f64)> {
+    if seg.curvature_per_mm == 0.0 {
+        return None;
+    }
+    let (s0, s1) = (norm(&seg.v0_mm_s), norm(&seg.v1_mm_s));
+    let at = (s1 - s0).abs() * seg.shape().peak_rate();
+    Some((at, seg.curvature_per_mm.abs() * s0.max(s1).powi(2)))
 }
 
 /// Refuses a pose outside the soft limits, naming the line.

@@ -23,7 +23,10 @@
 //! planner plans with `(1 - override_reserve)` of each axis' acceleration and jerk and
 //! records per segment how far `k` may go ([`Segment::override_cap`]) and how fast it may
 //! change ([`Segment::scale_rate_max`]); the interpolator never leaves those bounds, so no
-//! override change, hold or abort exceeds a limit or leaves the path. Above 100%, only the
+//! override change, hold or abort exceeds a limit or leaves the path. Arcs are the exception
+//! to the reserve: their normal acceleration is planned against the full acceleration, with
+//! the vector bound `√((a_t + v·k̇)² + a_n²) ≤ A` (a hold only adds tangential deceleration,
+//! orthogonal to `a_n`, while `a_n` falls with `k²`; see [`limits::Limits::arc`]). Above 100%, only the
 //! parts of the path that are not already at a limit get faster (cruises below the axis
 //! velocity), as with any planner.
 //!

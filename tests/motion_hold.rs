@@ -1,0 +1,165 @@
+//! Feed hold from full feed against the fastest stop the limits allow (issue 14: "a hold
+//! still stops as fast as the limits allow"). Prints the figures (`--nocapture`); asserts
+//! that every stop stays within the limits, is not faster than physically possible, and is
+//! no slower than the bounds recorded here.
+#![allow(clippy::unwrap_used)]
+
+mod motion_util;
+
+use hytask::motion::{plan, Item, MotionConfig, Plan};
+use motion_util::*;
+
+/// Fastest jerk-limited stop from `v` (mm/s) with acceleration `a` and jerk `j` along one
+/// axis, closed form: `(time s, distance mm)` of the symmetric S-curve from `v` to rest.
+fn optimal_stop(v: f64, a: f64, j: f64) -> (f64, f64) {
+    let t = if v >= a * a / j {
+        v / a + a / j
+    } else {
+        2.0 * (v / j).sqrt()
+    };
+    (t, v * t / 2.0)
+}
+
+/// Worst stop of the holds requested in cruise (speed within 1 % of the largest speed of
+/// any request): `(speed, distance ÷ optimal, time ÷ optimal, distance, time)`; asserts the
+/// limits and that no stop beats the optimum.
+fn cruise_holds(name: &str, p: &Plan, cfg: &MotionConfig) -> (f64, f64, f64, f64, f64) {
+    let (a, j) = (cfg.axes[0].max_acc_mm_s2, cfg.axes[0].max_jerk_mm_s3);
+    let stops = hold_stops(p, cfg, |n| n % 7 == 0);
+    let vmax = stops.iter().map(|s| s.speed_mm_s).fold(0.0, f64::max);
+    let mut worst = (0.0, 0.0f64, 0.0f64, 0.0, 0.0);
+    let mut count = 0;
+    for s in &stops {
+        assert!(
+            s.peak_ratio <= 1.0 + LIMIT_TOL,
+            "{name}: hold at period {} exceeds a limit: {}",
+            s.period,
+            s.peak_ratio
+        );
+        if s.speed_mm_s < 0.99 * vmax {
+            continue;
+        }
+        count += 1;
+        let (t_opt, d_opt) = optimal_stop(s.speed_mm_s, a, j);
+        let (rd, rt) = (s.dist_mm / d_opt, s.time_s / t_opt);
+        if rd > worst.1 {
+            worst = (s.speed_mm_s, rd, rt, s.dist_mm, s.time_s);
+        }
+        worst.2 = worst.2.max(rt);
+    }
+    assert!(count > 20, "{name}: only {count} holds in cruise");
+    eprintln!(
+        "{name}: {count} holds from {:.2} mm/s: worst stop {:.3} mm, {:.3} s; \
+         ÷ the fastest stop from that speed: distance {:.3}×, time {:.3}×",
+        worst.0, worst.3, worst.4, worst.1, worst.2
+    );
+    worst
+}
+
+/// A long straight cut along X at the axis' velocity limit.
+fn line() -> Plan {
+    let mut g = Prog::new();
+    g.feed(3000.0).g1(200.0, 0.0, 0.0);
+    plan(&g.canon, &MotionConfig::default()).unwrap()
+}
+
+/// `chords` chords of loops of radius 5 mm, 40 to a loop (as the trochoidal benchmark
+/// program), at F3000 and G64 P0.05: fitted into arcs, run at the normal-acceleration cap.
+/// Also returns the programmed polyline.
+fn loops_of(chords: u32) -> (Plan, Vec<[f64; 9]>) {
+    let mut g = Prog::new();
+    g.feed(3000.0).g64(0.05);
+    let mut path = vec![pose(0.0, 0.0, 0.0)];
+    for i in 1..=chords {
+        let th = std::f64::consts::TAU * f64::from(i) / 40.0;
+        let (x, y) = (-5.0 + 5.0 * th.cos(), 5.0 * th.sin());
+        g.g1(x, y, 0.0);
+        path.push(pose(x, y, 0.0));
+    }
+    let p = plan(&g.canon, &MotionConfig::default()).unwrap();
+    let arcs = p
+        .items
+        .iter()
+        .filter(|it| matches!(it, Item::Segment(s) if s.curvature_per_mm != 0.0))
+        .count();
+    assert!(arcs > 5, "the loops were not fitted into arcs ({arcs})");
+    (p, path)
+}
+
+fn loops() -> Plan {
+    loops_of(400).0
+}
+
+#[test]
+fn hold_on_a_line_from_full_feed_is_near_the_fastest_stop() {
+    let cfg = MotionConfig::default();
+    let (v, rd, rt, _, _) = cruise_holds("line", &line(), &cfg);
+    assert!(v > 49.9, "cruise speed {v}");
+    assert!(rd >= 1.0 - 1e-3 && rt >= 1.0 - 1e-2, "faster than possible");
+    // Session 9, with the 20 % reserve: 2.660× / 4.064× (7.315 mm, 0.415 s).
+    assert!(rd < 2.8 && rt < 4.2, "distance {rd}×, time {rt}×");
+}
+
+#[test]
+fn hold_on_arcs_from_full_feed_is_bounded() {
+    let cfg = MotionConfig::default();
+    let (v, rd, rt, _, _) = cruise_holds("loops r5", &loops(), &cfg);
+    // The normal acceleration is planned against the full limit (0.9·A: √(0.9·500·5) =
+    // 47.4 mm/s); with the 20 % reserve on it the loops ran at 42.3 mm/s, and their worst
+    // stop was 4.541× / 4.526× the optimum (9.079 mm, 0.428 s). Now 3.156× / 3.566×
+    // (7.849 mm, 0.374 s from 47.4 mm/s).
+    assert!(v > 47.0, "loop speed {v}");
+    assert!(rd < 3.3 && rt < 3.7, "distance {rd}×, time {rt}×");
+}
+
+/// Overrides in [0, 2], hold, resume and abort at pseudo-random periods on arcs planned at
+/// the normal-acceleration cap (their acceleration is planned against the full limit, see
+/// `Limits::arc`): never beyond a limit, never off the path, exact end unless aborted.
+#[test]
+fn random_override_hold_abort_schedules_on_arcs_stay_within_limits() {
+    let cfg = MotionConfig::default();
+    let (p, path) = loops_of(120);
+    let total = (p.duration_s / cfg.servo_period_s) as u64;
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut next = |m: u64| {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed % m
+    };
+    for case in 0..60 {
+        // Five events: (period, action 0..=7).
+        let mut ev: Vec<(usize, u64)> = (0..5).map(|_| (next(total) as usize, next(8))).collect();
+        ev.sort_unstable();
+        let mut aborted = false;
+        let tr = hytask::motion::trace::run(&p, &cfg, max_periods(&p, &cfg), |n, it| {
+            for &(at, act) in ev.iter().filter(|e| e.0 == n) {
+                match act {
+                    0 => it.set_feed_override(2.0),
+                    1 => it.set_feed_override(0.0),
+                    2 => it.set_feed_override(0.3),
+                    3 => it.set_feed_override(1.0),
+                    4 => it.set_feed_override(1.6),
+                    5 => it.hold(),
+                    6 => it.resume(),
+                    _ if at % 3 == 0 => {
+                        aborted = true;
+                        it.abort();
+                    }
+                    _ => it.resume(),
+                }
+            }
+            // Never leave the job stuck: everything back to normal late in the run.
+            if n == 4 * total as usize {
+                it.set_feed_override(1.0);
+                it.resume();
+            }
+        });
+        assert_within_limits(&tr, &cfg);
+        let dev = max_deviation(&tr, &path);
+        assert!(dev <= 0.05 + 1e-9, "case {case} {ev:?}: deviation {dev}");
+        if !aborted {
+            assert_eq!(last(&tr), p.end_mm, "case {case} {ev:?}");
+        }
+    }
+}
