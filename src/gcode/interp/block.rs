@@ -211,6 +211,7 @@ impl Interp<'_> {
         }
         let g0 = b.gcode(0);
         let g1 = b.gcode(1);
+        self.check_polar(b, g0.is_some_and(g0_uses_axes) || b.gcode(8) == Some(431))?;
         let axis = b.has_axis();
         let col = |c: u8| b.col_of(c);
         let first_axis_col = b"xyzabc"

@@ -16,6 +16,7 @@ mod mcodes;
 mod motion;
 mod ocode;
 mod persistent;
+mod polar;
 mod roughing;
 mod roughing_geom;
 mod splines;
