@@ -391,7 +391,12 @@ impl Interp<'_> {
             let body = self.substitute(&text[skip + 6..]);
             return self.emit(CanonCmd::Print(body));
         }
-        self.emit(CanonCmd::Comment(text.to_string()))
+        // rs274 drops the spaces a comment starts with (`( a )` is COMMENT("a ")), and
+        // an empty `()` altogether (`( )` is COMMENT("")).
+        if text.is_empty() {
+            return Ok(());
+        }
+        self.emit(CanonCmd::Comment(text[skip..].to_string()))
     }
 
     /// `(DEBUG,…)`/`(PRINT,…)` text with `#n` and `#<name>` replaced by `%f` values, and
