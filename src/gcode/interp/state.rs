@@ -185,8 +185,9 @@ pub(crate) fn predefined(it: &Interp<'_>, name: &str) -> Option<f64> {
     let abs =
         |i: usize| s.pos[i] + s.g5x[i] + s.g92[i] + if i < 6 { s.tool_offset[i] } else { 0.0 };
     Some(match name {
-        "_vmajor" => 2.0,
-        "_vminor" => 9.0,
+        // LinuxCNC 2.9's interpreter reports its version as major 2.9, minor 0.
+        "_vmajor" => 2.9,
+        "_vminor" => 0.0,
         "_line" => f64::from(it.loc.line),
         "_motion_mode" => f64::from(s.motion),
         "_plane" => match s.plane {
