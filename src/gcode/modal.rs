@@ -71,10 +71,10 @@ pub struct Block {
     pub g: [Option<(u16, u32)>; G_GROUPS],
     /// M code per group and its column.
     pub m: [Option<(u16, u32)>; M_GROUPS],
-    /// Value of each non-G/M letter (index = letter - 'a').
-    pub val: [Option<f64>; 26],
+    /// Value of each non-G/M letter (index: [`li`]), then the polar words `@` and `^`.
+    pub val: [Option<f64>; WORD_SLOTS],
     /// Column of each letter.
-    pub col: [u32; 26],
+    pub col: [u32; WORD_SLOTS],
     /// Number of M words on the line.
     pub m_count: usize,
 }
@@ -84,16 +84,27 @@ impl Default for Block {
         Block {
             g: [None; G_GROUPS],
             m: [None; M_GROUPS],
-            val: [None; 26],
-            col: [1; 26],
+            val: [None; WORD_SLOTS],
+            col: [1; WORD_SLOTS],
             m_count: 0,
         }
     }
 }
 
-/// Letter index for `Block::val`.
+/// The polar distance word (`@`, LinuxCNC's polar coordinates in G17).
+pub const POLAR_R: u8 = b'@';
+/// The polar angle word (`^`, degrees counter-clockwise from +X).
+pub const POLAR_A: u8 = b'^';
+/// Letters a–z, then `@` and `^`.
+pub const WORD_SLOTS: usize = 28;
+
+/// Letter index for `Block::val`: a–z, then the polar words.
 pub const fn li(c: u8) -> usize {
-    (c - b'a') as usize
+    match c {
+        POLAR_R => 26,
+        POLAR_A => 27,
+        _ => (c - b'a') as usize,
+    }
 }
 
 impl Block {
@@ -124,7 +135,12 @@ impl Block {
 
     /// True if any of X Y Z A B C is present.
     pub fn has_axis(&self) -> bool {
-        b"xyzabc".iter().any(|&c| self.has(c))
+        b"xyzabc".iter().any(|&c| self.has(c)) || self.has_polar()
+    }
+
+    /// True if the block gives a polar coordinate (`@` distance or `^` angle).
+    pub fn has_polar(&self) -> bool {
+        self.has(POLAR_R) || self.has(POLAR_A)
     }
 
     /// Adds one evaluated word, enforcing LinuxCNC's one-per-group and one-per-letter rules.

@@ -241,7 +241,7 @@ impl Parser<'_> {
                     let value = self.value(0)?;
                     line.assigns.push(Assign { target, value, col });
                 }
-                b'a'..=b'm' | b'p'..=b't' | b'x'..=b'z' => {
+                b'a'..=b'm' | b'p'..=b't' | b'x'..=b'z' | b'@' | b'^' => {
                     self.c.bump();
                     let value = match self.c.signed_number_fast() {
                         Some(v) => Expr::Num(v),

@@ -91,8 +91,9 @@ impl Interp<'_> {
                 "K word given for arc in XY plane",
             ),
         };
-        // LinuxCNC 2.9 accepts an arc with only the helix axis (a full-circle helix).
-        if !b.has(words.0) && !b.has(words.1) && !b.has_axis() {
+        // Only the radius format needs an end point in the plane (a full circle cannot be
+        // given by R); a centre-format arc without one is a full circle, in LinuxCNC too.
+        if r.is_some() && !b.has(words.0) && !b.has(words.1) && !b.has_polar() {
             return Err(self.err(col, msg_missing));
         }
         if b.has(forbidden) {

@@ -211,6 +211,7 @@ impl Interp<'_> {
         }
         let g0 = b.gcode(0);
         let g1 = b.gcode(1);
+        self.check_polar(b, g0.is_some_and(g0_uses_axes) || b.gcode(8) == Some(431))?;
         let axis = b.has_axis();
         let col = |c: u8| b.col_of(c);
         let first_axis_col = b"xyzabc"
@@ -390,7 +391,12 @@ impl Interp<'_> {
             let body = self.substitute(&text[skip + 6..]);
             return self.emit(CanonCmd::Print(body));
         }
-        self.emit(CanonCmd::Comment(text.to_string()))
+        // rs274 drops the spaces a comment starts with (`( a )` is COMMENT("a ")), and
+        // an empty `()` altogether (`( )` is COMMENT("")).
+        if text.is_empty() {
+            return Ok(());
+        }
+        self.emit(CanonCmd::Comment(text[skip..].to_string()))
     }
 
     /// `(DEBUG,…)`/`(PRINT,…)` text with `#n` and `#<name>` replaced by `%f` values, and

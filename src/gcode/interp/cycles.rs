@@ -118,8 +118,9 @@ impl Interp<'_> {
         } else {
             // A sticky R (not on this block) is the R plane already computed, not added
             // to the current height again (observed rs274 2.9 behaviour).
+            // An R word counts from the height the series of cycles started at.
             let r = if b.has(b'r') {
-                r_word + old_z
+                r_word + start_z
             } else {
                 self.s.cycle_r_abs
             };
@@ -151,6 +152,8 @@ impl Interp<'_> {
         if pre {
             let (cx, cy) = (self.s.pos[ax.0], self.s.pos[ax.1]);
             self.cycle_move(false, cx, cy, r)?;
+            // the tool is now at the R plane, even when it came down to it (G91 series)
+            old_z = r;
         }
         let clear = if self.s.retract_old_z {
             start_z.max(r)
@@ -167,7 +170,15 @@ impl Interp<'_> {
         } else {
             0.254
         };
+        let polar = b.has_polar();
+        if polar && self.s.absolute {
+            (x, y) = super::polar::polar_point(b, true, x, y);
+        }
         for _ in 0..l {
+            if polar && !self.s.absolute {
+                // each repeat steps distance and angle about the origin
+                (x, y) = super::polar::polar_point(b, false, x, y);
+            }
             x += dx;
             y += dy;
             self.cycle_move(false, x, y, old_z)?;

@@ -16,6 +16,7 @@ mod mcodes;
 mod motion;
 mod ocode;
 mod persistent;
+mod polar;
 mod roughing;
 mod roughing_geom;
 mod splines;
@@ -359,6 +360,7 @@ impl<'a> Interp<'a> {
                 | CanonCmd::StraightProbe { .. }
         ) {
             self.s.tlo_at_motion = self.s.tool_offset;
+            self.s.comp_tool_left = None;
         }
         self.count += 1;
         match &mut self.out {
@@ -591,6 +593,9 @@ impl<'a> Interp<'a> {
     /// the position becomes the end of the last move as canon saw it, so a tool length
     /// offset applied since that move no longer shifts the program position.
     fn synch(&mut self) {
+        if let Some(tool) = self.s.comp_tool_left.take() {
+            self.s.pos[..3].copy_from_slice(&tool);
+        }
         for i in 0..6 {
             self.s.pos[i] += self.s.tool_offset[i] - self.s.tlo_at_motion[i];
         }

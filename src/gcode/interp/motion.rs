@@ -50,6 +50,9 @@ impl Interp<'_> {
                 };
             }
         }
+        if b.has_polar() {
+            (end[0], end[1]) = super::polar::polar_point(b, self.s.absolute, base[0], base[1]);
+        }
         end
     }
 

@@ -42,6 +42,10 @@ pub(crate) struct Settings {
     pub tlo_at_motion: Pose,
     /// A tool change happened: re-read the position before the next block.
     pub synch_pending: bool,
+    /// Where G40 left the tool (X Y Z) when no move has been sent since: the program
+    /// position is then the programmed point, but canon's (which a re-read after M6, M61
+    /// or a probe returns, as in LinuxCNC) is the compensated one.
+    pub comp_tool_left: Option<[f64; 3]>,
     /// P and Q of the last G5 (program units): a G5 without I and J starts in the
     /// direction the previous one ended (I, J = -P, -Q).
     pub last_g5_pq: [f64; 2],
@@ -130,6 +134,7 @@ impl Settings {
             tool_offset: [0.0; 9],
             tlo_at_motion: [0.0; 9],
             synch_pending: false,
+            comp_tool_left: None,
             last_g5_pq: [0.0; 2],
             nurbs: None,
             retract_old_z: false,
@@ -180,8 +185,9 @@ pub(crate) fn predefined(it: &Interp<'_>, name: &str) -> Option<f64> {
     let abs =
         |i: usize| s.pos[i] + s.g5x[i] + s.g92[i] + if i < 6 { s.tool_offset[i] } else { 0.0 };
     Some(match name {
-        "_vmajor" => 2.0,
-        "_vminor" => 9.0,
+        // LinuxCNC 2.9's interpreter reports its version as major 2.9, minor 0.
+        "_vmajor" => 2.9,
+        "_vminor" => 0.0,
         "_line" => f64::from(it.loc.line),
         "_motion_mode" => f64::from(s.motion),
         "_plane" => match s.plane {

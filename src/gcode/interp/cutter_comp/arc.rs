@@ -107,7 +107,7 @@ impl Interp<'_> {
         }
         let cutting_inside = (side == Side::Left && !spec.cw) || (side == Side::Right && spec.cw);
         let gamma = if cutting_inside {
-            if arc_radius <= radius {
+            if arc_radius < radius {
                 return Err(self.err(
                     col,
                     format!("{TOOL_TOO_BIG} (arc radius {arc_radius:.4}, tool radius {radius:.4})"),

@@ -360,7 +360,10 @@ impl Interp<'_> {
             let (a1, a2, _) = self.comp_plane()?;
             let (cx, cy) = (self.s.pos[a1], self.s.pos[a2]);
             self.move_endpoint_and_flush(cx, cy)?;
+            let mut tool = [0.0; 3];
+            tool.copy_from_slice(&self.s.pos[..3]);
             self.s.pos[..3].copy_from_slice(&self.comp.prog);
+            self.s.comp_tool_left = Some(tool);
             self.comp.arc_not_allowed = true;
         }
         self.comp.side = None;

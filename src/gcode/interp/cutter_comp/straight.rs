@@ -29,7 +29,7 @@ impl Interp<'_> {
         let (cx, cy, cz) = self.comp_current(ax);
         if self.comp.first {
             let distance = (px - cx).hypot(py - cy);
-            if distance <= radius {
+            if distance < radius {
                 return Err(self.err(
                     self.loc.col,
                     format!("Length of cutter compensation entry move ({distance:.4}) is not greater than the tool radius ({radius:.4})"),
