@@ -72,3 +72,118 @@ fn an_abort_ends_a_dwell_at_once() {
         "stopped where the dwell was"
     );
 }
+
+/// Found by mutating `tests/gcode/corpus/lathe_g72_pocket.ngc`: a G72.1 started at
+/// Z2147483647 roughs two billion passes, which the interpreter collected in memory (21 GB
+/// before the OOM killer) before checking `max_canon`. Now the cycle is refused by position.
+#[test]
+fn a_lathe_cycle_of_two_billion_passes_is_refused_by_position() {
+    let text = "o3 sub\nG1 X2 Z-8\nG1 X4\nG1 X5 Z-5\nG1 X6 Z-7\nG1 X9 Z-7\nG1 Z0\no3 endsub\n\
+                G18 G21 G90 G8\nS500 M3\nG0 X11 Z2\nG72.1 Q3 X11 Z2147483647 I1 R0.3\nM2\n";
+    let e = load_str("pocket.ngc", text, &InterpOptions::default()).unwrap_err();
+    assert_eq!(e.line, 12, "{e}");
+    assert!(e.to_string().contains("more than"), "{e}");
+    let text = text.replace(
+        "G72.1 Q3 X11 Z2147483647 I1 R0.3",
+        "G72 Q3 X11 Z2 I0.0000001",
+    );
+    let e = load_str("pocket.ngc", &text, &InterpOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("more than"), "{e}");
+    let g70 = "o1 sub\nG1 X4 Z0\nG1 X6 Z-5\nG1 X9 Z-8\no1 endsub\nG18 G21 G90 G8\n\
+               G0 X10 Z2\nG70 Q1 P2147483647 D1\nM2\n";
+    let e = load_str("g70.ngc", g70, &InterpOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("more than"), "{e}");
+}
+
+/// Tight interpreter limits, so that a mutated loop count ends fast (the bounds themselves are
+/// tested in `tests/gcode_fuzz.rs`).
+fn tight() -> InterpOptions {
+    InterpOptions {
+        limits: hytask::gcode::Limits {
+            max_call_depth: 16,
+            max_expr_depth: 32,
+            max_loop_iterations: 5_000,
+            max_blocks: 50_000,
+            max_file_bytes: 1 << 20,
+            max_line_len: 4096,
+            max_lines: 50_000,
+            max_canon: 50_000,
+        },
+        ..InterpOptions::default()
+    }
+}
+
+/// Numbers an abuser writes into a real program.
+const EXTREMES: &[&str] = &[
+    "0",
+    "-1",
+    "0.0000001",
+    "99999999",
+    "-99999999",
+    "2147483647",
+    "1000000000000",
+    "[1/3]",
+];
+
+/// Every corpus program, with seeded numbers of it replaced by extremes (P/L/Q words, loop
+/// counts, radii, feeds alike): the interpreter gives file:line:col or a program, the planner
+/// an error by line or a plan; never a panic, a hang or a request-sized allocation.
+#[test]
+fn mutated_corpus_programs_error_by_position_or_plan() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/gcode/corpus");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "ngc"))
+        .collect();
+    files.sort();
+    assert!(files.len() > 100, "corpus not found");
+    let cfg = MotionConfig::default();
+    let mut seed: u64 = 0xab05_e5eed;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    let mut panics = Vec::new();
+    for path in &files {
+        let text = std::fs::read_to_string(path).unwrap();
+        // Byte ranges of the numbers following a word letter.
+        let bytes = text.as_bytes();
+        let mut numbers = Vec::new();
+        let mut i = 1;
+        while i < bytes.len() {
+            if bytes[i].is_ascii_digit() && bytes[i - 1].is_ascii_alphabetic() {
+                let start = i;
+                while i < bytes.len() && (bytes[i].is_ascii_digit() || bytes[i] == b'.') {
+                    i += 1;
+                }
+                numbers.push((start, i));
+            }
+            i += 1;
+        }
+        if numbers.is_empty() {
+            continue;
+        }
+        for _ in 0..4 {
+            let (a, b) = numbers[(next() as usize) % numbers.len()];
+            let x = EXTREMES[(next() as usize) % EXTREMES.len()];
+            let mutated = format!("{}{x}{}", &text[..a], &text[b..]);
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            if std::env::var_os("ABUSE_TRACE").is_some() {
+                eprintln!("{name}: byte {a}: {x}");
+            }
+            let run = std::panic::catch_unwind(|| match load_str(&name, &mutated, &tight()) {
+                Ok(p) => {
+                    let _ = plan(&p.canon, &cfg);
+                }
+                Err(e) => assert!(e.line >= 1 && e.col >= 1, "{e:?}"),
+            });
+            if run.is_err() {
+                panics.push(format!("{name}: byte {a}: {x}"));
+            }
+        }
+    }
+    assert!(panics.is_empty(), "panics:\n{}", panics.join("\n"));
+}
