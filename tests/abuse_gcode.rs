@@ -95,6 +95,26 @@ fn a_lathe_cycle_of_two_billion_passes_is_refused_by_position() {
     assert!(e.to_string().contains("more than"), "{e}");
 }
 
+/// Found with `hytask plan`: a peck drilling cycle with a tiny Q (a billion pecks) or a drill
+/// cycle with L2147483647 filled memory in one block (5 GB before the allocation failed),
+/// and a daemon job is streamed only between blocks. Refused by position now, with the
+/// daemon's default limits.
+#[test]
+fn a_canned_cycle_of_a_billion_pecks_is_refused_by_position() {
+    for (block, line) in [
+        ("G90 G83 X10 Y10 Z-100 R0 Q0.0000001 F100", 3),
+        ("G91 G81 X0.001 Y0 Z-1 R1 L2147483647 F100", 3),
+    ] {
+        let text = format!("G21 G90\nG0 X10 Y10 Z0\n{block}\nM2\n");
+        let e = load_str("cycle.ngc", &text, &InterpOptions::default()).unwrap_err();
+        assert_eq!(e.line, line, "{e}");
+        assert!(
+            e.to_string().contains("One block produces more than"),
+            "{e}"
+        );
+    }
+}
+
 /// Tight interpreter limits, so that a mutated loop count ends fast (the bounds themselves are
 /// tested in `tests/gcode_fuzz.rs`).
 fn tight() -> InterpOptions {
