@@ -120,6 +120,18 @@ pub fn parse_request(line: &[u8]) -> Result<Request, (Value, ControlError)> {
             ControlError::new(ErrorCode::ParseError, format!("malformed JSON: {e}")),
         )
     })?;
+    // serde_json keeps the last of duplicate keys: `{"method":"status","method":"job.run"}`
+    // would run what a filter or a log reading the first key did not see.
+    if let Err(e) = serde_json::from_slice::<NoDuplicateKeys>(line) {
+        let id = match &value {
+            Value::Object(o) => o.get("id").cloned().unwrap_or(Value::Null),
+            _ => Value::Null,
+        };
+        return Err((
+            id,
+            ControlError::new(ErrorCode::InvalidRequest, format!("ambiguous request: {e}")),
+        ));
+    }
     let Value::Object(mut obj) = value else {
         return Err((
             Value::Null,
@@ -153,6 +165,55 @@ pub fn parse_request(line: &[u8]) -> Result<Request, (Value, ControlError)> {
         ));
     }
     Ok(Request { id, method, params })
+}
+
+/// Walks a JSON document and fails on an object with the same key twice, at any depth.
+struct NoDuplicateKeys;
+
+impl<'de> serde::Deserialize<'de> for NoDuplicateKeys {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(NoDuplicateKeys)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for NoDuplicateKeys {
+    type Value = NoDuplicateKeys;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("any JSON value")
+    }
+    fn visit_bool<E>(self, _: bool) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_i64<E>(self, _: i64) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_u64<E>(self, _: u64) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_f64<E>(self, _: f64) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_str<E>(self, _: &str) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_unit<E>(self) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Self, A::Error> {
+        while seq.next_element::<NoDuplicateKeys>()?.is_some() {}
+        Ok(self)
+    }
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self, A::Error> {
+        let mut seen = std::collections::HashSet::new();
+        while let Some(key) = map.next_key::<String>()? {
+            if !seen.insert(key.clone()) {
+                return Err(serde::de::Error::custom(format!("duplicate key '{key}'")));
+            }
+            map.next_value::<NoDuplicateKeys>()?;
+        }
+        Ok(self)
+    }
 }
 
 /// Serialises a reply line (with trailing newline).
@@ -198,6 +259,17 @@ mod tests {
         assert_eq!((id, e.code), (json!("x"), ErrorCode::InvalidRequest));
         let (_, e) = parse_request(br#"{"id":1,"method":"status","extra":1}"#).unwrap_err();
         assert!(e.message.contains("extra"));
+        let (id, e) = parse_request(br#"{"id":4,"method":"status","method":"estop"}"#).unwrap_err();
+        assert_eq!((id, e.code), (json!(4), ErrorCode::InvalidRequest));
+        assert!(
+            e.message.contains("duplicate key 'method'"),
+            "{}",
+            e.message
+        );
+        let (_, e) =
+            parse_request(br#"{"method":"override","params":{"feed":0.5,"feed":2}}"#).unwrap_err();
+        assert!(e.message.contains("duplicate key 'feed'"), "{}", e.message);
+        assert!(parse_request(br#"{"method":"x","params":[{"a":1},{"a":2}]}"#).is_ok());
     }
 
     #[test]

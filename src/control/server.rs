@@ -13,8 +13,11 @@
 //!   with a `lagged` event. A write that stalls past the write timeout closes that client
 //!   and frees its slot.
 //! - An e-stop always gets through: beyond [`ServerOptions::max_clients`] a connection is
-//!   still accepted, answers only `estop`, and is closed. Idle connections (no request, no
-//!   event for [`ServerOptions::idle_timeout`]) are closed.
+//!   still accepted, answers only `estop`, and is closed. Those over-limit connections are
+//!   bounded too (as many again); when they are all held, the oldest one still waiting for
+//!   its request is closed to make room, so a flood of silent connections cannot shut the
+//!   e-stop out ([`Overflow`]). Idle connections (no request, no event for
+//!   [`ServerOptions::idle_timeout`]) are closed.
 //!   Nothing a client does can block the daemon or another client.
 //! - Machine calls run on tokio's blocking pool, never on the reactor threads.
 //! - A client disconnecting mid-job does not stop the job: connections own no machine state.
@@ -107,8 +110,60 @@ struct Shared {
     opts: ServerOptions,
     machine: Arc<dyn MachineApi>,
     clients: AtomicUsize,
-    overflow: AtomicUsize,
+    overflow: Overflow,
     buffered: AtomicUsize,
+}
+
+/// The over-limit (e-stop only) connections still waiting for their request, oldest first.
+/// Why: dropping a connection when they are all held (as before) let anyone who holds
+/// 2 × `max_clients` silent connections shut every e-stop out; evicting the oldest instead
+/// means a flood must open `max_clients` more connections between a client's connect and its
+/// request (microseconds for `hytask estop`) to keep it out.
+#[derive(Default)]
+struct Overflow {
+    waiting: std::sync::Mutex<std::collections::VecDeque<(u64, Arc<tokio::sync::Notify>)>>,
+    next: AtomicU64,
+}
+
+impl Overflow {
+    /// Registers a new over-limit connection, evicting the oldest waiting one beyond `max`.
+    fn enter(&self, max: usize) -> OverflowEntry<'_> {
+        let id = self.next.fetch_add(1, Ordering::Relaxed);
+        let evict = Arc::new(tokio::sync::Notify::new());
+        let mut waiting = self
+            .waiting
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        while waiting.len() >= max.max(1) {
+            if let Some((_, oldest)) = waiting.pop_front() {
+                oldest.notify_one();
+            }
+        }
+        waiting.push_back((id, evict.clone()));
+        OverflowEntry {
+            overflow: self,
+            id,
+            evict,
+        }
+    }
+}
+
+/// One over-limit connection's place in [`Overflow`]; leaves it when dropped.
+struct OverflowEntry<'a> {
+    overflow: &'a Overflow,
+    id: u64,
+    evict: Arc<tokio::sync::Notify>,
+}
+
+impl Drop for OverflowEntry<'_> {
+    fn drop(&mut self) {
+        let mut waiting = self
+            .overflow
+            .waiting
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        waiting.retain(|(id, _)| *id != self.id);
+    }
 }
 
 /// Decrements a counter when dropped, so that an aborted connection task frees its slot.
@@ -140,7 +195,7 @@ pub async fn serve_with(
         opts,
         machine,
         clients: AtomicUsize::new(0),
-        overflow: AtomicUsize::new(0),
+        overflow: Overflow::default(),
         buffered: AtomicUsize::new(0),
     });
     tokio::pin!(shutdown);
@@ -158,14 +213,9 @@ pub async fn serve_with(
                             serve_client(stream, &shared).await;
                         } else {
                             shared.clients.fetch_sub(1, Ordering::AcqRel);
-                            // Over-limit connections are bounded too; each lives at most
-                            // OVERFLOW_READ_TIMEOUT.
-                            if shared.overflow.fetch_add(1, Ordering::AcqRel) < max {
-                                let _slot = Slot(&shared.overflow);
-                                serve_estop_only(stream, &shared).await;
-                            } else {
-                                shared.overflow.fetch_sub(1, Ordering::AcqRel);
-                            }
+                            // Over-limit connections are bounded too (the oldest waiting
+                            // one makes room); each lives at most OVERFLOW_READ_TIMEOUT.
+                            serve_estop_only(stream, &shared).await;
                         }
                     });
                 }
@@ -216,6 +266,7 @@ fn refused_line(peer: Option<(u32, u32)>) -> String {
 async fn serve_estop_only(mut stream: UnixStream, shared: &Arc<Shared>) {
     let peer = peer(&stream);
     let max = shared.opts.max_clients;
+    let entry = shared.overflow.enter(max);
     let mut buf = Vec::new();
     let read = async {
         let mut limited = (&mut stream).take(OVERFLOW_REQUEST_BYTES);
@@ -229,13 +280,28 @@ async fn serve_estop_only(mut stream: UnixStream, shared: &Arc<Shared>) {
         }
         Some(())
     };
-    let _ = tokio::time::timeout(OVERFLOW_READ_TIMEOUT, read).await;
+    let evicted = tokio::select! {
+        _ = tokio::time::timeout(OVERFLOW_READ_TIMEOUT, read) => false,
+        _ = entry.evict.notified() => true,
+    };
+    // Read or not, this connection no longer waits: it cannot be evicted any more.
+    drop(entry);
     let busy = || {
         ControlError::new(
             ErrorCode::Failed,
             format!("too many clients (limit {max}, control.max_clients); this connection serves only 'estop'"),
         )
     };
+    if evicted {
+        // No wait for a client that sent nothing in time: what the socket takes now, then
+        // the connection is closed.
+        let why = ControlError::new(
+            ErrorCode::Failed,
+            format!("too many clients (limit {max}, control.max_clients); closed to make room for a newer connection"),
+        );
+        let _ = stream.try_write(reply_line(&Value::Null, Err(why)).as_bytes());
+        return;
+    }
     let line = match parse_request(&buf) {
         Ok(req) if req.method == "estop" => {
             if role_of(shared, peer).await.is_none() {

@@ -35,6 +35,11 @@ pub struct Arc {
     pub plane: Plane,
 }
 
+/// Most chords one arc (one G2/G3 block) may be cut into: about 300 MB of planned moves. A
+/// thousand-turn helix of a 5 mm radius needs some 70,000; `G2 … P2000000000` would need
+/// billions, and is refused by line instead of exhausting memory.
+pub const MAX_ARC_CHORDS: usize = 1_000_000;
+
 impl Arc {
     /// Swept angle, rad (signed: + is CCW).
     pub fn sweep_rad(&self) -> f64 {
@@ -57,6 +62,22 @@ impl Arc {
         }
     }
 
+    /// How many chords [`chord_points`](Self::chord_points) cuts the arc into for `tol`, as a
+    /// float: callers check it against [`MAX_ARC_CHORDS`] before anything is allocated (a
+    /// turn count `P` is any positive integer, so the count is only bounded by the request).
+    pub fn chord_count(&self, tol: f64) -> f64 {
+        let (i1, i2, _) = plane_axes(self.plane);
+        let r0 = (self.start[i1] - self.center_first).hypot(self.start[i2] - self.center_second);
+        let r1 = (self.end[i1] - self.center_first).hypot(self.end[i2] - self.center_second);
+        let r = r0.max(r1);
+        let max_step = if tol >= r {
+            PI / 2.0
+        } else {
+            (2.0 * (1.0 - tol / r).acos()).min(PI / 2.0)
+        };
+        (self.sweep_rad().abs() / max_step).ceil().max(1.0)
+    }
+
     /// Points along the arc (excluding the start, including the exact end) such that each
     /// chord stays within `tol` of the arc (program units). Radius, normal axis and the other
     /// axes vary linearly with the angle (helix, spiral).
@@ -64,14 +85,8 @@ impl Arc {
         let (i1, i2, _) = plane_axes(self.plane);
         let r0 = (self.start[i1] - self.center_first).hypot(self.start[i2] - self.center_second);
         let r1 = (self.end[i1] - self.center_first).hypot(self.end[i2] - self.center_second);
-        let r = r0.max(r1);
         let sweep = self.sweep_rad();
-        let max_step = if tol >= r {
-            PI / 2.0
-        } else {
-            (2.0 * (1.0 - tol / r).acos()).min(PI / 2.0)
-        };
-        let n = ((sweep.abs() / max_step).ceil() as usize).max(1);
+        let n = (self.chord_count(tol) as usize).max(1);
         let a0 = (self.start[i2] - self.center_second).atan2(self.start[i1] - self.center_first);
         let mut pts = Vec::with_capacity(n);
         for k in 1..=n {

@@ -321,6 +321,18 @@ pub fn fold_from(
                     plane: *plane,
                 };
                 let tol_mm = cfg.arc_chord_tolerance_mm.min(st.blend_tolerance_mm(cfg));
+                let chords = arc.chord_count(tol_mm / st.scale());
+                if chords > super::arcs::MAX_ARC_CHORDS as f64 {
+                    return Err(PlanError::Invalid {
+                        line,
+                        what: format!(
+                            "arc of {} turns needs {chords:.0} chords, more than {} \
+                             (split it into several arcs)",
+                            rotation.unsigned_abs().max(1),
+                            super::arcs::MAX_ARC_CHORDS
+                        ),
+                    });
+                }
                 let pts = arc.chord_points(tol_mm / st.scale());
                 let machine: Vec<[f64; NUM_AXES]> = pts.iter().map(|p| st.to_machine(p)).collect();
                 // Total arc length for inverse time: the whole arc takes 60/F.

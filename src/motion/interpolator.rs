@@ -456,7 +456,10 @@ impl Interpolator {
                 self.out.distance_to_go_mm = 0.0;
             }
             let at_rest = self.k == 0.0 && self.kd.abs() <= self.k2 * dt;
-            if self.abort && at_rest {
+            // The tool stands still during a dwell whatever the scale: an abort ends it now
+            // (else a `G4 P100000` ran to its end after `job.abort`).
+            let dwelling = self.seg.is_some_and(|s| s.kind == SegmentKind::Dwell);
+            if self.abort && (at_rest || dwelling) {
                 self.kd = 0.0;
                 self.seg = None;
                 self.finish_abort(src, &mut budget);

@@ -35,6 +35,12 @@ use super::{GcodeError, InterpOptions};
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::PathBuf;
+
+/// Most canonical commands one block may produce. The streaming passes take the output
+/// between blocks, so this bounds what is held at once: a `G83 … Q0.0000001` drilling 100 mm
+/// made a billion pecks in one block and held up to `max_canon` (50 M, 5 GB) of them before
+/// any check. About 100 MB; far beyond any real block.
+pub(crate) const MAX_BLOCK_CANON: usize = 1_000_000;
 use std::sync::Arc;
 
 pub(crate) use state::Settings;
@@ -234,6 +240,8 @@ pub(crate) struct Interp<'a> {
     pub(crate) out: Sink<'a>,
     /// Commands emitted so far.
     count: usize,
+    /// `count` when the current block began (see [`MAX_BLOCK_CANON`]).
+    block_start: usize,
     pub(crate) loc: SourceLoc,
     pub(crate) p: Params,
     pub(crate) s: Settings,
@@ -306,6 +314,7 @@ impl<'a> Interp<'a> {
             opts,
             out: Sink::Canon(Vec::new()),
             count: 0,
+            block_start: 0,
             loc: SourceLoc {
                 file: Arc::from(""),
                 line: 0,
@@ -348,6 +357,15 @@ impl<'a> Interp<'a> {
                 format!(
                     "Program produces too many canonical commands (limit {})",
                     self.opts.limits.max_canon
+                ),
+            ));
+        }
+        if self.count.saturating_sub(self.block_start) >= MAX_BLOCK_CANON {
+            return Err(self.err(
+                1,
+                format!(
+                    "One block produces more than {MAX_BLOCK_CANON} canonical commands (a \
+                     canned cycle's L or Q, a lathe cycle's passes)"
                 ),
             ));
         }
@@ -459,6 +477,7 @@ impl<'a> Interp<'a> {
                     ),
                 ));
             }
+            self.block_start = self.count;
             self.step(f, l)?;
             if self.pending_probe.is_some() || self.pending_wait.is_some() {
                 return Ok(());

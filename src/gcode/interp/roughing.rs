@@ -139,9 +139,12 @@ impl Interp<'_> {
             v[2] = z;
             v
         };
+        let cap = MAX_CYCLE_MOVES.min(self.opts.limits.max_canon.saturating_sub(self.count));
         let mut cy = Cycle {
             out: Vec::new(),
             pose: &pose,
+            cap,
+            over: false,
         };
         cy.traverse(s0);
         // A start beyond the profile's first point along the feed is brought level with
@@ -162,6 +165,17 @@ impl Interp<'_> {
             let contour =
                 geom::offset(&els, w.d).map_err(|e| self.err(col, format!("{name}: {e}")))?;
             rough(&contour, s0, &w, m.is_multiple_of(10), &mut cy);
+        }
+        if cy.over {
+            return Err(self.err(
+                col,
+                format!(
+                    "{name}: more than {cap} moves (at most {MAX_CYCLE_MOVES} per cycle, and \
+                     {} canonical commands in all); use fewer passes, a larger I, or a start \
+                     nearer the profile",
+                    self.opts.limits.max_canon
+                ),
+            ));
         }
         let out = cy.out;
         for c in out {
@@ -199,6 +213,9 @@ impl Interp<'_> {
         let e = b.get(b'e').unwrap_or(0.0);
         let passes = b.get(b'p').unwrap_or(1.0).round().max(1.0) as u32;
         for k in 1..=passes {
+            if cy.over {
+                break;
+            }
             let allowance = e + f64::from(passes - k) * (d - e) / f64::from(passes);
             let contour = geom::offset(els, allowance)
                 .map_err(|m| self.err(self.loc.col, format!("G70: {m}")))?;
@@ -319,6 +336,10 @@ fn r_center(p0: [f64; 6], p: [f64; 6], r: f64, cw: bool) -> (f64, f64) {
     (cx, cz)
 }
 
+/// Most moves one G70–G72 cycle may make (about 70 MB while collected): far beyond any real
+/// part, and the cycle is held in memory before it is emitted.
+const MAX_CYCLE_MOVES: usize = 1_000_000;
+
 enum Move {
     Traverse([f64; 6]),
     Feed([f64; 6]),
@@ -329,18 +350,30 @@ enum Move {
     },
 }
 
-/// The moves of one cycle, in the cycle frame, collected before they are emitted.
+/// The moves of one cycle, in the cycle frame, collected before they are emitted. At most
+/// `cap` (what is left of `max_canon`): the pass count is the request's number (a start at
+/// Z2147483647 made two billion passes, collected here until memory ran out), so the cycle
+/// stops collecting, its loops stop, and the caller refuses it by position.
 struct Cycle<'f> {
     out: Vec<Move>,
     pose: &'f dyn Fn(Pt) -> [f64; 6],
+    cap: usize,
+    over: bool,
 }
 
 impl Cycle<'_> {
+    fn push(&mut self, m: Move) {
+        if self.out.len() < self.cap {
+            self.out.push(m);
+        } else {
+            self.over = true;
+        }
+    }
     fn traverse(&mut self, p: Pt) {
-        self.out.push(Move::Traverse((self.pose)(p)));
+        self.push(Move::Traverse((self.pose)(p)));
     }
     fn feed(&mut self, p: Pt) {
-        self.out.push(Move::Feed((self.pose)(p)));
+        self.push(Move::Feed((self.pose)(p)));
     }
     fn element(&mut self, e: &El) {
         match e.arc {
@@ -348,7 +381,7 @@ impl Cycle<'_> {
             Some((c, ccw)) => {
                 let end = (self.pose)(e.b);
                 let cp = (self.pose)(c);
-                self.out.push(Move::Arc {
+                self.push(Move::Arc {
                     end,
                     center: (cp[0], cp[2]),
                     ccw: self.zx_ccw(ccw),
@@ -390,7 +423,7 @@ fn rough(contour: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
     };
     let level = |k: u32| s0[0] - f64::from(k) * w.i;
     let mut k = 0;
-    while level(k) > ps[0] + 1e-7 {
+    while level(k) > ps[0] + 1e-7 && !cy.over {
         let u = level(k);
         let vk = entry_v(u);
         cy.traverse([u, vk]);
@@ -445,7 +478,7 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
         let (mut ci, mut cp) = (i + 1, e.b);
         loop {
             let u = s0[0] - f64::from(k) * w.i;
-            if u <= bottom + 1e-7 {
+            if u <= bottom + 1e-7 || cy.over {
                 break;
             }
             let Some((ai, a)) = geom::first_drop(els, ci, cp, u) else {
