@@ -2,7 +2,8 @@
 //! TLS (`[zenoh.tls] enable_mtls = true`) and Zenoh access control from its `zenoh_config`
 //! file. Certificates are made for the test with the `openssl` tool (tests/install-deps).
 //!
-//! - a client with a certificate of the machine's CA is served (task list, an operation);
+//! - a client with a certificate of the machine's CA is served (task list, an operation),
+//!   and so is a hytask session whose `[zenoh.tls]` names its client certificate;
 //! - a client whose certificate the access control denies (`viewer`) still reads the task
 //!   list but its operation call is dropped: no reply at all;
 //! - a client without a certificate, one with a certificate of another CA, and one in plain
@@ -223,6 +224,29 @@ fn tls_and_access_control_from_the_config_are_enforced() {
     assert!(query(&op, "hytask/sec/tasks", None, GUARD).is_ok());
     let r = query(&op, "hytask/sec/worker/op/work", Some(&work), GUARD).unwrap();
     assert_eq!(r["status"], "done", "{r}");
+
+    // Another hytask process (as `hytask peer` or `hytask serve` with `[[remote]]`) whose
+    // `[zenoh.tls]` names its client certificate reaches the machine and checks its tasks.
+    let remote: ZenohConfig = toml::from_str(&format!(
+        "listen = []\nconnect = [{endpoint:?}]\n\n[tls]\nroot_ca_certificate = {:?}\n\
+         connect_certificate = {:?}\nconnect_private_key = {:?}\nenable_mtls = true\n",
+        f("ca.pem"),
+        f("operator.pem"),
+        f("operator.key"),
+    ))
+    .unwrap();
+    let s = hytask::bridge::session::open(&remote).unwrap();
+    let rc = hytask::config::remote::RemoteConfig {
+        name: "sec".into(),
+        machine: None,
+        timeout_s: GUARD.as_secs_f64(),
+        critical: false,
+        check: true,
+    };
+    let link = hytask::bridge::remote::RemoteLink::connect(&s, &rc).unwrap();
+    link.require("worker", &["work"], &[], &[]).unwrap();
+    drop(link);
+    let _ = s.close().wait();
 
     // No certificate, another CA's certificate, plain TCP: no session, or one that never
     // reaches the bridge.
