@@ -88,6 +88,42 @@ fn losing_a_critical_remote_stops_the_job_under_control_and_names_it() {
     );
 }
 
+/// The topology check covers remote peers: `hytask serve` refuses to start when a
+/// `[[remote]]` does not answer within its `timeout_s`, naming it (nobody serves `vision`).
+#[test]
+fn a_missing_remote_refuses_the_start_naming_it_after_its_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = support::sim_clock_config(dir.path(), support::SIM_SPEED, None);
+    let mut text = std::fs::read_to_string(base).unwrap();
+    text.push_str(&format!(
+        "\n[zenoh]\nkey = \"mill\"\nlisten = [\"tcp/127.0.0.1:{}\"]\n\n\
+         [[remote]]\nname = \"vision\"\ntimeout_s = 2.0\n",
+        free_port()
+    ));
+    let config = dir.path().join("mill.toml");
+    std::fs::write(&config, text).unwrap();
+    let socket = dir.path().join("mill.sock");
+    let mut mill = Proc::spawn(
+        &["serve", "--socket", socket.to_str().unwrap(), "--config"],
+        &config,
+        dir.path().join("mill.log"),
+    );
+    let t0 = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = mill.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(t0.elapsed() < GUARD, "still running:\n{}", mill.log());
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let log = mill.log();
+    assert!(!status.success(), "started without its remote:\n{log}");
+    assert!(
+        log.contains("remote peer 'vision'") && log.contains("no answer within 2 s"),
+        "the refusal does not name the remote and its timeout:\n{log}"
+    );
+}
+
 /// A machine file's `[[remote]]` tables are checked like the rest, each problem named by key.
 #[test]
 fn remotes_of_a_machine_file_are_checked_by_key() {

@@ -3,7 +3,9 @@
 //! Ordinary threads, never a realtime one (plus the call workers of [`super::calls`]):
 //! - `zenoh-pub` publishes, every `1 / port_rate_hz`: each exported data-object port whose
 //!   value changed (through a lock-free [`crate::rt::json::JsonPortReader`]), every realtime
-//!   event queued since (a deferred subscription: the emitter never waits), the control
+//!   event queued since (a deferred subscription: the emitter never waits), every item of
+//!   an exported buffer port, in order and none dropped (the bridge is the consumer of a
+//!   buffer no task consumes, `hytask/<machine>/<task>/port/<buffer>`), the control
 //!   socket's event stream, and the status every `1 / status_rate_hz`;
 //! - `zenoh-query` answers queries under `hytask/<machine>/`: the task list, the status and
 //!   port values (from the publisher's cache), and control methods and task operations. A
@@ -81,7 +83,11 @@ impl Bridge {
     ) -> Result<Bridge, BridgeError> {
         let m = cfg.key.clone().unwrap_or_else(|| name.to_owned());
         let prefix = keys::machine(&m);
-        let (ports, events) = discover(&*machine, &m, cfg)?;
+        let Exports {
+            ports,
+            events,
+            streams,
+        } = discover(&*machine, &m, cfg)?;
         let port_keys = ports.iter().map(|p| p.key.clone()).collect();
         let cache: Cache = Arc::default();
         let stop = Arc::new(AtomicBool::new(false));
@@ -95,6 +101,7 @@ impl Bridge {
             m: m.clone(),
             ports,
             events,
+            streams,
             cache: cache.clone(),
             period: Duration::from_secs_f64(1.0 / cfg.port_rate_hz),
             status_period: Duration::from_secs_f64(1.0 / cfg.status_rate_hz),
@@ -204,23 +211,17 @@ impl Drop for Bridge {
 }
 
 /// The exported ports (outputs of every task, or those `cfg.ports` names) and events.
-#[allow(clippy::type_complexity)]
-fn discover(
-    machine: &dyn MachineApi,
-    m: &str,
-    cfg: &ZenohConfig,
-) -> Result<
-    (
-        Vec<Exported<Box<dyn JsonPortReader>>>,
-        Vec<Exported<Box<dyn JsonEventReceiver>>>,
-    ),
-    BridgeError,
-> {
+fn discover(machine: &dyn MachineApi, m: &str, cfg: &ZenohConfig) -> Result<Exports, BridgeError> {
     let tasks = machine.tasks();
     let mut ports = Vec::new();
     let mut events = Vec::new();
+    let mut streams = Vec::new();
     for t in &tasks {
         for p in &t.ports {
+            if let Some(name) = p.strip_prefix("out (buffer) ") {
+                export_buffer(machine, m, &t.name, name, &mut streams);
+                continue;
+            }
             let Some(object) = p.strip_prefix("out ") else {
                 continue;
             };
@@ -266,7 +267,41 @@ fn discover(
             }
         }
     }
-    Ok((ports, events))
+    Ok(Exports {
+        ports,
+        events,
+        streams,
+    })
+}
+
+/// Buffer `name` (produced by `task`) as an ordered stream, unless a task consumes it or
+/// another of its producers already had it exported.
+fn export_buffer(
+    machine: &dyn MachineApi,
+    m: &str,
+    task: &str,
+    name: &str,
+    streams: &mut Vec<Exported<Box<dyn JsonEventReceiver>>>,
+) {
+    let seg = format!("/port/{}", keys::segment(name));
+    if streams.iter().any(|s| s.key.ends_with(&seg)) {
+        return;
+    }
+    match machine.buffer_json(name) {
+        Ok(source) => streams.push(Exported {
+            key: keys::port(m, task, name),
+            source,
+        }),
+        Err(e) => tracing::debug!("zenoh: buffer '{name}' not exported: {e}"),
+    }
+}
+
+/// What [`discover`] found to export.
+struct Exports {
+    ports: Vec<Exported<Box<dyn JsonPortReader>>>,
+    events: Vec<Exported<Box<dyn JsonEventReceiver>>>,
+    /// Buffers, published item by item in order.
+    streams: Vec<Exported<Box<dyn JsonEventReceiver>>>,
 }
 
 struct Publisher {
@@ -275,6 +310,7 @@ struct Publisher {
     m: String,
     ports: Vec<Exported<Box<dyn JsonPortReader>>>,
     events: Vec<Exported<Box<dyn JsonEventReceiver>>>,
+    streams: Vec<Exported<Box<dyn JsonEventReceiver>>>,
     cache: Cache,
     period: Duration,
     status_period: Duration,
@@ -296,6 +332,10 @@ impl Publisher {
             for e in &mut self.events {
                 let (session, key) = (&self.session, &e.key);
                 e.source.drain(&mut |v| put(session, key, &v));
+            }
+            for b in &mut self.streams {
+                let (session, key) = (&self.session, &b.key);
+                b.source.drain(&mut |v| put_in_order(session, key, &v));
             }
             loop {
                 match news.try_recv() {
@@ -333,6 +373,20 @@ fn put(session: &zenoh::Session, key: &str, v: &Value) {
     if let Err(e) = session
         .put(key, codec::encode(v))
         .encoding(Encoding::APPLICATION_JSON)
+        .wait()
+    {
+        tracing::warn!("zenoh: cannot publish {key}: {e}");
+    }
+}
+
+/// A buffer's item: a stream loses nothing, so when Zenoh's queue towards a subscriber is
+/// full the publisher thread waits (`Block`) rather than drop the item (the default). The
+/// buffer itself keeps its own full policy towards its producers meanwhile.
+fn put_in_order(session: &zenoh::Session, key: &str, v: &Value) {
+    if let Err(e) = session
+        .put(key, codec::encode(v))
+        .encoding(Encoding::APPLICATION_JSON)
+        .congestion_control(zenoh::qos::CongestionControl::Block)
         .wait()
     {
         tracing::warn!("zenoh: cannot publish {key}: {e}");

@@ -11,8 +11,9 @@
 //! deployment under the name local peers use (`peer_commands::<C>("camera")` works as for
 //! a local camera). The realtime side only meets lock-free primitives:
 //! - a command accepted by the proxy goes through a lock-free buffer to the proxy's worker
-//!   thread, which calls `hytask/<machine>/<task>/op/<name>` and stores the final status in
-//!   atomics; the proxy's completion condition reads them. Accept means "forwarded": a
+//!   thread (parked while idle, unparked by the accept), which calls
+//!   `hytask/<machine>/<task>/op/<name>` and stores the final status in atomics; the
+//!   proxy's completion condition reads them. Accept means "forwarded": a
 //!   remote rejection, failure, timeout or loss makes the command *fail* with a fixed
 //!   text (the remote's own message is logged and kept in [`RemoteLink::last_error`]);
 //! - remote events arrive through a Zenoh subscriber into a lock-free buffer, and the proxy
@@ -517,6 +518,10 @@ pub struct RemoteProxy<C: RemoteCommand> {
     losses_seen: u64,
     lost_event: Option<EventSource<u32>>,
     stop: Arc<AtomicBool>,
+    /// The worker, parked while it has no call: [`Task::accept`] unparks it (an atomic swap
+    /// and, if it sleeps, one futex wake: no allocation, lock or blocking on the realtime
+    /// thread).
+    worker: Option<std::thread::Thread>,
     _c: PhantomData<fn() -> C>,
 }
 
@@ -547,6 +552,7 @@ impl<C: RemoteCommand> RemoteProxy<C> {
             losses_seen: 0,
             lost_event: None,
             stop: Arc::new(AtomicBool::new(false)),
+            worker: None,
             _c: PhantomData,
         })
     }
@@ -612,12 +618,15 @@ impl<C: RemoteCommand> RemoteProxy<C> {
         let stop = self.stop.clone();
         let task = self.remote_task.clone();
         let mut forwards = forwards;
-        std::thread::Builder::new()
+        let worker = std::thread::Builder::new()
             .name(format!("zenoh-remote-{}", link.name()))
             .spawn(move || {
                 while !stop.load(Ordering::Acquire) {
                     let Some(c) = rx.pop() else {
-                        std::thread::sleep(Duration::from_millis(1));
+                        // Until `accept` (or drop) unparks it. A call pushed between the
+                        // `pop` and here left the unpark token set, so `park` returns at
+                        // once: no call waits for a later one. A spurious return loops.
+                        std::thread::park();
                         continue;
                     };
                     let outcome = match reach(&link, &task, &c, &stop) {
@@ -633,14 +642,18 @@ impl<C: RemoteCommand> RemoteProxy<C> {
                     results.seq.store(c.seq, Ordering::Release);
                 }
             })
-            .map(|_| ())
-            .map_err(|_| TaskError::Fatal("cannot start the remote proxy's worker thread"))
+            .map_err(|_| TaskError::Fatal("cannot start the remote proxy's worker thread"))?;
+        self.worker = Some(worker.thread().clone());
+        Ok(())
     }
 }
 
 impl<C: RemoteCommand> Drop for RemoteProxy<C> {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Release);
+        if let Some(w) = &self.worker {
+            w.unpark();
+        }
     }
 }
 
@@ -808,6 +821,9 @@ impl<C: RemoteCommand> Task for RemoteProxy<C> {
         };
         match self.calls.try_push(call) {
             Ok(()) => {
+                if let Some(w) = &self.worker {
+                    w.unpark();
+                }
                 self.waiting = Some((seq, seen));
                 Ok(())
             }

@@ -164,4 +164,12 @@ impl MachineApi for PeerHost {
                 .map_err(|e| ApiError::NotSupported(e.to_string()))
         })
     }
+    fn buffer_json(&self, name: &str) -> Result<Box<dyn JsonEventReceiver>, ApiError> {
+        match lock(&self.runtime).as_mut() {
+            Some(rt) => rt
+                .json_buffer(name)
+                .map_err(|e| ApiError::NotSupported(e.to_string())),
+            None => Err(ApiError::Rejected("the peer is stopped".into())),
+        }
+    }
 }

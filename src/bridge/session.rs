@@ -41,6 +41,12 @@ pub fn zenoh_config(cfg: &ZenohConfig) -> Result<zenoh::Config, BridgeError> {
         if let Some(p) = &tls.listen_private_key {
             set("transport/link/tls/listen_private_key", path(p))?;
         }
+        if let Some(p) = &tls.connect_certificate {
+            set("transport/link/tls/connect_certificate", path(p))?;
+        }
+        if let Some(p) = &tls.connect_private_key {
+            set("transport/link/tls/connect_private_key", path(p))?;
+        }
         set(
             "transport/link/tls/enable_mtls",
             tls.enable_mtls.to_string(),

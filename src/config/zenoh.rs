@@ -42,9 +42,16 @@ pub struct ZenohTls {
     /// This host's private key (PEM), for listening.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub listen_private_key: Option<PathBuf>,
-    /// Require and check client certificates (mutual TLS).
+    /// Require and check client certificates (mutual TLS); when connecting, present
+    /// `connect_certificate`.
     #[serde(default)]
     pub enable_mtls: bool,
+    /// This host's certificate (PEM) when it connects to a peer requiring mutual TLS.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub connect_certificate: Option<PathBuf>,
+    /// Its private key (PEM).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub connect_private_key: Option<PathBuf>,
 }
 
 /// `[zenoh]`.
@@ -176,6 +183,19 @@ impl ZenohConfig {
                 }
             }
         }
+        if let Some(tls) = &self.tls {
+            match (&tls.connect_certificate, &tls.connect_private_key) {
+                (Some(_), None) => issues.push(
+                    "zenoh.tls.connect_private_key",
+                    "needed with zenoh.tls.connect_certificate",
+                ),
+                (None, Some(_)) => issues.push(
+                    "zenoh.tls.connect_certificate",
+                    "needed with zenoh.tls.connect_private_key",
+                ),
+                _ => {}
+            }
+        }
         if self.listen.is_empty() && self.connect.is_empty() {
             issues.push("zenoh.listen", "no endpoint: listen or connect somewhere");
         }
@@ -272,6 +292,17 @@ mod tests {
         assert!(i
             .iter()
             .any(|m| m.starts_with("zenoh.connect[1]: 'quic/x:1': expected")));
+    }
+
+    #[test]
+    fn a_connect_certificate_needs_its_key() {
+        let c = cfg("[tls]\nroot_ca_certificate = \"ca.pem\"\nconnect_certificate = \"c.pem\"");
+        let i = issues(&c);
+        assert!(
+            i.iter()
+                .any(|m| m.starts_with("zenoh.tls.connect_private_key")),
+            "{i:?}"
+        );
     }
 
     #[test]

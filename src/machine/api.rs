@@ -486,6 +486,16 @@ pub trait MachineApi: Send + Sync + 'static {
             "no exportable event '{name}'"
         )))
     }
+    /// Buffer `name`'s items as an ordered JSON stream; the caller becomes the buffer's single
+    /// consumer, so only a buffer no task consumes can be had (and only once).
+    fn buffer_json(
+        &self,
+        name: &str,
+    ) -> Result<Box<dyn crate::rt::json::JsonEventReceiver>, ApiError> {
+        Err(ApiError::NotSupported(format!(
+            "no exportable buffer '{name}'"
+        )))
+    }
     /// The machine's script hosts (programs and state machines), if it deploys any.
     fn scripts(&self) -> Option<&crate::script::ScriptHosts> {
         None

@@ -4,7 +4,9 @@
 //! them as `Box<dyn Any>`; a bridge that exports "every port" by name cannot name `T`. A
 //! value type is made exportable once with [`register_data`] / [`register_event`] (the
 //! primitives and fixed arrays of `f64` are registered already); the deployment then hands
-//! out [`JsonPortReader`]s and [`JsonEventReceiver`]s by name.
+//! out [`JsonPortReader`]s and [`JsonEventReceiver`]s by name. A buffer no task consumes
+//! can be handed out too, as an ordered stream ([`register_buffer`]; the exporter becomes
+//! its single consumer, draining on its own thread as any consumer does).
 //!
 //! Realtime side: nothing changes. A JSON reader is an ordinary [`DataReader`] (lock-free;
 //! registering it takes the object's registration mutex, never touched by `set`), and a JSON
@@ -12,7 +14,9 @@
 //! `try_lock`). Serialisation happens on the exporter's thread. The registry below is
 //! consulted only when a reader is made, never in a step.
 
+use super::buffer::BufferReader;
 use super::data_object::{DataObject, DataReader, FlowStatus};
+use super::deploy::{buffer_ports_type, take_buffer_reader};
 use super::event::{Event, EventReceiver};
 use serde::Serialize;
 use serde_json::Value;
@@ -46,6 +50,8 @@ pub trait JsonEventReceiver: Send {
 type AnyRef<'a> = &'a (dyn Any + Send + Sync);
 type PortFactory = fn(AnyRef<'_>) -> Option<Box<dyn JsonPortReader>>;
 type EventFactory = fn(AnyRef<'_>, usize) -> Option<Box<dyn JsonEventReceiver>>;
+/// `None`: not a buffer of this type; `Some(None)`: its consumer handle is taken.
+type BufferFactory = fn(&mut (dyn Any + Send + Sync)) -> Option<Option<Box<dyn JsonEventReceiver>>>;
 
 #[derive(Default)]
 struct Factories {
@@ -53,6 +59,8 @@ struct Factories {
     ports: HashMap<TypeId, PortFactory>,
     /// By `TypeId` of `Event<T>`.
     events: HashMap<TypeId, EventFactory>,
+    /// By `TypeId` of the registry's buffer handle (`deploy::buffer_ports_type`).
+    buffers: HashMap<TypeId, BufferFactory>,
 }
 
 fn factories() -> &'static Mutex<Factories> {
@@ -63,6 +71,7 @@ fn factories() -> &'static Mutex<Factories> {
             ($($t:ty),*) => {$(
                 f.ports.insert(TypeId::of::<DataObject<$t>>(), port_factory::<$t>);
                 f.events.insert(TypeId::of::<Event<$t>>(), event_factory::<$t>);
+                f.buffers.insert(buffer_ports_type::<$t>(), buffer_factory::<$t>);
             )*};
         }
         both!(
@@ -105,6 +114,41 @@ pub fn register_event<T: Serialize + Clone + Send + 'static>() {
     lock()
         .events
         .insert(TypeId::of::<Event<T>>(), event_factory::<T>);
+}
+
+/// Makes buffers of items `T` exportable as JSON streams.
+pub fn register_buffer<T: Serialize + Send + 'static>() {
+    lock()
+        .buffers
+        .insert(buffer_ports_type::<T>(), buffer_factory::<T>);
+}
+
+/// The consumer handle of the buffer behind `handle` (the registry's), as a JSON stream:
+/// `None` if its item type is not registered, `Some(None)` if a consumer took it.
+pub(crate) fn buffer_reader(
+    handle: &mut (dyn Any + Send + Sync),
+) -> Option<Option<Box<dyn JsonEventReceiver>>> {
+    let f = *lock().buffers.get(&(*handle).type_id())?;
+    f(handle)
+}
+
+fn buffer_factory<T: Serialize + Send + 'static>(
+    h: &mut (dyn Any + Send + Sync),
+) -> Option<Option<Box<dyn JsonEventReceiver>>> {
+    if (*h).type_id() != buffer_ports_type::<T>() {
+        return None;
+    }
+    Some(take_buffer_reader::<T>(h).map(|r| Box::new(BufferJson(r)) as Box<dyn JsonEventReceiver>))
+}
+
+/// A buffer's consumer handle, draining in order as JSON.
+struct BufferJson<T>(BufferReader<T>);
+
+impl<T: Serialize + Send> JsonEventReceiver for BufferJson<T> {
+    fn drain(&mut self, f: &mut dyn FnMut(Value)) -> usize {
+        self.0
+            .drain(|v| f(serde_json::to_value(&v).unwrap_or(Value::Null)))
+    }
 }
 
 /// A JSON reader of the data object behind `handle` (a `DataObject<T>` as the deployment

@@ -217,6 +217,14 @@ pub enum DeployError {
         /// Its value type.
         type_name: &'static str,
     },
+    /// A buffer an exporter wanted whose single consumer is a task (or another exporter).
+    #[error("buffer '{name}' cannot be exported: it is consumed by {consumer} (one consumer per buffer)")]
+    BufferConsumed {
+        /// Buffer name.
+        name: String,
+        /// Who consumes it.
+        consumer: String,
+    },
 }
 
 /// Result of the topology check that did not prevent starting.
@@ -230,6 +238,7 @@ pub struct CheckReport {
 mod configure;
 mod deployment;
 mod registry;
+pub(crate) use registry::{buffer_ports_type, take_buffer_reader};
 mod runtime;
 #[cfg(all(test, not(loom)))]
 mod tests;

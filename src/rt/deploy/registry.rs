@@ -25,6 +25,18 @@ pub(super) struct BufferPorts<T> {
     pub(super) reader: Option<BufferReader<T>>,
 }
 
+/// The `TypeId` of the registry's handle of a buffer of `T` (for [`crate::rt::json`]).
+pub(crate) fn buffer_ports_type<T: Send + 'static>() -> std::any::TypeId {
+    std::any::TypeId::of::<BufferPorts<T>>()
+}
+
+/// Takes the consumer handle of the buffer of `T` behind `handle`, if no consumer took it.
+pub(crate) fn take_buffer_reader<T: Send + 'static>(
+    handle: &mut (dyn Any + Send + Sync),
+) -> Option<BufferReader<T>> {
+    handle.downcast_mut::<BufferPorts<T>>()?.reader.take()
+}
+
 pub(super) struct BufferEntry {
     /// A `BufferPorts<T>`.
     pub(super) handle: Box<dyn Any + Send + Sync>,
@@ -273,6 +285,40 @@ impl Registry {
             name: name.to_owned(),
             type_name: o.type_name,
         })
+    }
+
+    /// Buffer `name`'s items as JSON, in order, for an exporter that becomes its consumer
+    /// (its item type registered in [`crate::rt::json`]); refused when a task consumes it.
+    pub(super) fn json_buffer(
+        &mut self,
+        name: &str,
+    ) -> Result<Box<dyn JsonEventReceiver>, DeployError> {
+        let b = self
+            .buffers
+            .get_mut(name)
+            .ok_or_else(|| DeployError::NotFound {
+                kind: "buffer",
+                name: name.to_owned(),
+                type_name: "any",
+            })?;
+        if let Some(task) = b.consumers.first() {
+            return Err(DeployError::BufferConsumed {
+                name: name.to_owned(),
+                consumer: format!("task '{task}'"),
+            });
+        }
+        let type_name = b.type_name;
+        match crate::rt::json::buffer_reader(b.handle.as_mut()) {
+            Some(Some(r)) => Ok(r),
+            Some(None) => Err(DeployError::BufferConsumed {
+                name: name.to_owned(),
+                consumer: "an exporter".to_owned(),
+            }),
+            None => Err(DeployError::NotExportable {
+                name: name.to_owned(),
+                type_name,
+            }),
+        }
     }
 
     /// A JSON subscription to event `name` (its payload type registered in [`crate::rt::json`]).

@@ -153,6 +153,11 @@ impl Runtime {
     pub fn json_reader(&self, name: &str) -> Result<Box<dyn JsonPortReader>, DeployError> {
         self.core.reg.json_reader(name)
     }
+    /// Buffer `name` as an ordered JSON stream: the exporter becomes the buffer's single
+    /// consumer, so only a buffer no task consumes can be exported (see [`crate::rt::json`]).
+    pub fn json_buffer(&mut self, name: &str) -> Result<Box<dyn JsonEventReceiver>, DeployError> {
+        self.core.reg.json_buffer(name)
+    }
     /// A JSON subscription to event `name` queueing up to `capacity` events, for exporters.
     pub fn json_events(
         &self,
