@@ -32,6 +32,12 @@ if [[ ${1:-} == --no-linuxcnc ]] || ! command -v linuxcnc >/dev/null; then
 fi
 
 if ((use_lcnc)); then
+    # HAL's shared memory left by an earlier run under another user (root, mode 600) makes
+    # this run, as nobody, fail with "could not open shared memory": drop it when no
+    # LinuxCNC is running.
+    if ! pgrep -x rtapi_app >/dev/null; then
+        for key in 0x48414c32 0x48484c34; do ipcrm -M "$key" 2>/dev/null || true; done
+    fi
     # rtapi_app refuses to run as root: run LinuxCNC as nobody in a directory of its own.
     cfg=$(mktemp -d /tmp/planner-vs-linuxcnc.XXXXXX)
     trap 'rm -rf "$cfg"' EXIT
