@@ -20,10 +20,26 @@ use support::*;
 
 const GUARD: Duration = Duration::from_secs(120);
 
-/// Nested loops: runs to the interpreter's block limit (200 M blocks), several minutes
-/// even optimised, far past [`GUARD`], so a load that is not cancelled fails the test.
-const RUNAWAY: &str = "o1 repeat [99999999]\no2 repeat [99999999]\n#1=[#1+1]\n\
-                       o2 endrepeat\no1 endrepeat\nM2\n";
+/// Ten million iterations of a block that adds 200 terms: far longer than [`GUARD`] to the
+/// loop limit, so a load that is not cancelled fails the test (the budget is set out of
+/// the way, [`daemon`]).
+fn runaway() -> String {
+    format!(
+        "o1 repeat [99999999]\n#1=[#1{}]\no1 endrepeat\nM2\n",
+        "+1".repeat(200)
+    )
+}
+
+/// The simulated mill with `[job] prepare_timeout_s` = `budget_s` (and the directory of its
+/// configuration, kept while it runs).
+fn daemon(budget_s: f64) -> (Daemon, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    let config = sim_clock_config(dir.path(), SIM_SPEED, None);
+    let mut text = std::fs::read_to_string(&config).unwrap();
+    text.push_str(&format!("\n[job]\nprepare_timeout_s = {budget_s:?}\n"));
+    std::fs::write(&config, text).unwrap();
+    (Daemon::start(&config), dir)
+}
 const SHORT: &str = "G21 G90\nG0 X20\nM2\n";
 
 fn load_line(text: &str) -> Vec<u8> {
@@ -75,9 +91,9 @@ fn error_message(v: &Value) -> &str {
 
 #[test]
 fn a_runaway_job_load_is_cancelled_by_job_abort_and_by_estop_and_the_next_load_succeeds() {
-    let d = Daemon::start_sim();
+    let (d, _dir) = daemon(3600.0);
     let mut c = d.client();
-    let reply = load_in_background(&d.socket, RUNAWAY);
+    let reply = load_in_background(&d.socket, &runaway());
     let v = repeat_until_answered(&mut c, "job.abort", &reply);
     assert_eq!(v["error"]["code"], json!(2), "{v}");
     assert_eq!(
@@ -91,7 +107,7 @@ fn a_runaway_job_load_is_cancelled_by_job_abort_and_by_estop_and_the_next_load_s
     );
     assert_eq!(info["name"], json!("short.ngc"), "{info}");
 
-    let reply = load_in_background(&d.socket, RUNAWAY);
+    let reply = load_in_background(&d.socket, &runaway());
     let v = repeat_until_answered(&mut c, "estop", &reply);
     assert_eq!(
         error_message(&v),
@@ -102,13 +118,13 @@ fn a_runaway_job_load_is_cancelled_by_job_abort_and_by_estop_and_the_next_load_s
 
 #[test]
 fn a_client_hanging_up_cancels_its_job_load_and_a_waiting_load_then_runs() {
-    let d = Daemon::start_sim();
-    let mut runaway = UnixStream::connect(&d.socket).unwrap();
-    runaway.write_all(&load_line(RUNAWAY)).unwrap();
+    let (d, _dir) = daemon(3600.0);
+    let mut hung = UnixStream::connect(&d.socket).unwrap();
+    hung.write_all(&load_line(&runaway())).unwrap();
     // Makes it likely (not required) that the runaway holds the lock before the next load.
     std::thread::sleep(Duration::from_millis(300));
     let waiting = load_in_background(&d.socket, SHORT);
-    drop(runaway);
+    drop(hung);
     let v = waiting
         .recv_timeout(GUARD)
         .expect("the load behind a hung-up runaway was answered");
@@ -117,13 +133,8 @@ fn a_client_hanging_up_cancels_its_job_load_and_a_waiting_load_then_runs() {
 
 #[test]
 fn a_job_load_past_the_prepare_timeout_is_refused_naming_the_key() {
-    let dir = tempfile::tempdir().unwrap();
-    let config = sim_clock_config(dir.path(), SIM_SPEED, None);
-    let mut text = std::fs::read_to_string(&config).unwrap();
-    text.push_str("\n[job]\nprepare_timeout_s = 0.2\n");
-    std::fs::write(&config, text).unwrap();
-    let d = Daemon::start(&config);
-    let v = load_in_background(&d.socket, RUNAWAY)
+    let (d, _dir) = daemon(0.2);
+    let v = load_in_background(&d.socket, &runaway())
         .recv_timeout(GUARD)
         .expect("answered");
     assert_eq!(v["error"]["code"], json!(4), "{v}");
