@@ -14,6 +14,7 @@
 //! [gcode]         var_file, ini.<section>.<name> (`#<_ini[section]name>`)
 //! [control]       socket_path, mode, group, jobs_dir, max_job_bytes, idle_timeout_s,
 //!                 max_clients, max_buffered_bytes, operators, observers, unlisted
+//! [job]           prepare_timeout_s
 //! [logging]       level
 //! [motion]        servo_thread, lookahead, g64_tolerance, rapid_override, max_feed_override
 //! [safety]        estop_input, overrun storm policy
@@ -41,6 +42,7 @@ mod drive;
 mod error;
 mod gcode;
 mod io;
+mod job;
 mod machine;
 pub mod modbus;
 mod plc;
@@ -59,6 +61,7 @@ pub use drive::{
 pub use error::{ConfigError, Issue, Issues};
 pub use gcode::GcodeConfig;
 pub use io::{AnalogPoint, DigitalPoint, IoBackend, IoConfig, IoKind, IoRef, TouchPlate};
+pub use job::{JobConfig, DEFAULT_PREPARE_TIMEOUT_S};
 pub use machine::{Kinematics, KinematicsKind, MachineSection, ScaraConfig};
 pub use plc::PlcConfig;
 pub use root::MachineConfig;

@@ -47,6 +47,9 @@ pub struct MachineConfig {
     /// `[control]`: the control socket.
     #[serde(default)]
     pub control: ControlConfig,
+    /// `[job]`: job preparation.
+    #[serde(default, skip_serializing_if = "super::JobConfig::is_default")]
+    pub job: super::JobConfig,
     /// `[logging]`.
     #[serde(default)]
     pub logging: LoggingConfig,
@@ -131,6 +134,7 @@ impl MachineConfig {
         }
         self.gcode.validate(&mut issues);
         self.control.validate(&mut issues);
+        self.job.validate(&mut issues);
         self.motion.validate(&mut issues);
         if !self.threads.is_empty() && self.thread(&self.motion.servo_thread).is_none() {
             issues.push(

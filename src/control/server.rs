@@ -21,6 +21,8 @@
 //!   Nothing a client does can block the daemon or another client.
 //! - Machine calls run on tokio's blocking pool, never on the reactor threads.
 //! - A client disconnecting mid-job does not stop the job: connections own no machine state.
+//!   A client that hangs up while its `job.load` is being prepared cancels that preparation
+//!   ([`until_hangup`]): the preparations run one at a time, and nobody waits for the answer.
 //! - The peer's credentials (SO_PEERCRED) decide its role ([`super::access`]).
 
 use super::access::{permits, AccessPolicy, Role};
@@ -30,6 +32,7 @@ use super::protocol::{
     event_line, parse_request, reply_line, ControlError, ErrorCode, MAX_REQUEST_BYTES,
 };
 use crate::machine::api::MachineApi;
+use crate::machine::job_cancel::{self, Cancel, Why};
 use crate::machine::job_file::JobFilePolicy;
 use serde_json::{json, Value};
 use std::collections::HashSet;
@@ -308,7 +311,8 @@ async fn serve_estop_only(mut stream: UnixStream, shared: &Arc<Shared>) {
                 refused_line(peer)
             } else {
                 tracing::warn!("e-stop over an over-limit control connection");
-                let result = dispatch(shared, Role::Observer, req.method, req.params).await;
+                let token = Cancel::new();
+                let result = dispatch(shared, Role::Observer, req.method, req.params, &token).await;
                 reply_line(&req.id, result)
             }
         }
@@ -319,12 +323,14 @@ async fn serve_estop_only(mut stream: UnixStream, shared: &Arc<Shared>) {
         tokio::time::timeout(shared.opts.write_timeout, stream.write_all(line.as_bytes())).await;
 }
 
-/// Runs one method on the blocking pool, under the job-file policy.
+/// Runs one method on the blocking pool, under the job-file policy; `token` cancels a job
+/// preparation the method starts.
 async fn dispatch(
     shared: &Arc<Shared>,
     role: Role,
     method: String,
     params: Value,
+    token: &Cancel,
 ) -> Result<Value, ControlError> {
     if !permits(role, &method) {
         return Err(ControlError::new(
@@ -336,9 +342,12 @@ async fn dispatch(
         ));
     }
     let s = shared.clone();
+    let token = token.clone();
     tokio::task::spawn_blocking(move || {
-        crate::machine::job_file::with_policy(&s.opts.jobs, || {
-            methods::dispatch(&*s.machine, &method, params)
+        job_cancel::with_request_token(&token, || {
+            crate::machine::job_file::with_policy(&s.opts.jobs, || {
+                methods::dispatch(&*s.machine, &method, params)
+            })
         })
     })
     .await
@@ -555,7 +564,7 @@ async fn read_requests(read_half: OwnedReadHalf, conn: &mut Conn<'_>) {
             } else if line.line.iter().all(u8::is_ascii_whitespace) {
                 None
             } else {
-                Some(handle_line(&line.line, conn).await)
+                Some(handle_line(&line.line, conn, reader.get_ref()).await)
             };
             line.reset();
             if let Some(reply) = reply {
@@ -577,7 +586,7 @@ async fn sleep_until(at: Option<Instant>) {
     }
 }
 
-async fn handle_line(line: &[u8], conn: &mut Conn<'_>) -> String {
+async fn handle_line(line: &[u8], conn: &mut Conn<'_>, socket: &OwnedReadHalf) -> String {
     let req = match parse_request(line) {
         Ok(r) => r,
         Err((id, e)) => return reply_line(&id, Err(e)),
@@ -596,9 +605,53 @@ async fn handle_line(line: &[u8], conn: &mut Conn<'_>) -> String {
             }
             Ok(json!({"ok": true}))
         }
-        _ => dispatch(conn.shared, conn.role, req.method, req.params).await,
+        _ => {
+            let token = Cancel::new();
+            let call = dispatch(conn.shared, conn.role, req.method, req.params, &token);
+            until_hangup(call, socket, &token).await
+        }
     };
     reply_line(&req.id, result)
+}
+
+/// How often a running request checks whether its client hung up.
+const HANGUP_POLL: Duration = Duration::from_millis(100);
+
+/// Awaits `call`; if the client hangs up meanwhile (closes its socket: it can no longer read
+/// the answer), cancels `token`, so that a `job.load` it asked for stops instead of holding
+/// the one-at-a-time preparation lock, and then still awaits `call`, which ends soon. A
+/// client that only shuts down its sending side (`printf … | socat`) still waits for its
+/// answer and is not a hang-up.
+async fn until_hangup<T>(
+    call: impl Future<Output = T>,
+    socket: &OwnedReadHalf,
+    token: &Cancel,
+) -> T {
+    tokio::pin!(call);
+    loop {
+        tokio::select! {
+            out = &mut call => return out,
+            _ = tokio::time::sleep(HANGUP_POLL) => {
+                if hung_up(socket) {
+                    token.cancel(Why::Disconnected);
+                    return call.await;
+                }
+            }
+        }
+    }
+}
+
+/// Whether the peer has closed the connection both ways (POLLHUP; a half-close sets only
+/// POLLRDHUP).
+fn hung_up(socket: &OwnedReadHalf) -> bool {
+    use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+    use std::os::fd::AsFd;
+    let stream: &UnixStream = socket.as_ref();
+    let mut fds = [PollFd::new(stream.as_fd(), PollFlags::empty())];
+    matches!(poll(&mut fds, PollTimeout::ZERO), Ok(n) if n > 0)
+        && fds[0]
+            .revents()
+            .is_some_and(|r| r.contains(PollFlags::POLLHUP))
 }
 
 /// Topics a client may subscribe to (`io`: health changes of Modbus links, naming link, unit

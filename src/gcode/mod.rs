@@ -119,7 +119,13 @@ pub struct InterpOptions {
     pub ini: Arc<IniValues>,
     /// Resource limits.
     pub limits: Limits,
+    /// Set from another thread to stop the run (job preparation cancelled or out of time):
+    /// polled every [`CANCEL_POLL_BLOCKS`] blocks, then the run ends with an error.
+    pub cancel: Option<Arc<std::sync::atomic::AtomicBool>>,
 }
+
+/// Blocks executed between two polls of [`InterpOptions::cancel`].
+pub const CANCEL_POLL_BLOCKS: u64 = 4096;
 
 impl Default for InterpOptions {
     fn default() -> Self {
@@ -136,6 +142,7 @@ impl Default for InterpOptions {
             parameters: None,
             ini: Arc::default(),
             limits: Limits::default(),
+            cancel: None,
         }
     }
 }

@@ -36,6 +36,7 @@
 //! prepared whole as before and runs piece by piece ([`super::probing`]): what follows the
 //! probe or the M66 may depend on what the machine measures or reads (#5061–#5070, #5399).
 
+use super::job_cancel::{self, Cancel};
 use super::probing::ProbingSource;
 use crate::config::MachineConfig;
 use crate::gcode::{self, Canon, CanonCmd, InterpOptions, NUM_AXES};
@@ -45,6 +46,7 @@ use crate::motion::{self, AxisLimits, Item, KinematicsConfig, MotionConfig, Plan
 use std::hash::Hasher;
 use std::path::Path;
 use std::sync::Mutex;
+use std::time::Duration;
 
 /// Items a prepared job keeps in memory (~25 MB); a job with more keeps its text and is
 /// planned again while it runs (see the module doc).
@@ -230,6 +232,13 @@ fn stream_pass(
         }
         commands += chunk.len();
         planner.push(&chunk, &mut sink).map_err(refuse)?;
+        if opts
+            .cancel
+            .as_ref()
+            .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed))
+        {
+            return Err(ApiError::Failed(format!("{name}: preparation cancelled")));
+        }
         if stopped.get() {
             return Ok(Streamed::Stopped);
         }
@@ -426,26 +435,64 @@ fn starting_at(opts: &InterpOptions, start_mm: [f64; NUM_AXES]) -> InterpOptions
 }
 
 /// Interprets and plans a job from a file or inline text, starting at machine pose
-/// `start_mm`. Waits while another job is being prepared.
+/// `start_mm`, within the default budget ([`crate::config::DEFAULT_PREPARE_TIMEOUT_S`]).
+/// Waits while another job is being prepared.
 pub fn prepare(
     src: &JobSource,
     opts: &InterpOptions,
     motion: &MotionConfig,
     start_mm: [f64; NUM_AXES],
 ) -> Result<PreparedJob, ApiError> {
-    prepare_keeping(src, opts, motion, start_mm, KEEP_ITEMS_MAX)
+    let budget = Duration::from_secs_f64(crate::config::DEFAULT_PREPARE_TIMEOUT_S);
+    prepare_keeping(src, opts, motion, start_mm, KEEP_ITEMS_MAX, budget)
 }
 
-/// [`prepare`], keeping the items of a plan of at most `keep_items` (tests use 0 to plan
-/// every job again when it runs).
+/// [`prepare`] within `budget` of wall-clock time (`[job] prepare_timeout_s`).
+pub fn prepare_within(
+    src: &JobSource,
+    opts: &InterpOptions,
+    motion: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    budget: Duration,
+) -> Result<PreparedJob, ApiError> {
+    prepare_keeping(src, opts, motion, start_mm, KEEP_ITEMS_MAX, budget)
+}
+
+/// [`prepare_within`], keeping the items of a plan of at most `keep_items` (tests use 0 to
+/// plan every job again when it runs). Once it holds the one-at-a-time lock the preparation
+/// can be cancelled ([`job_cancel`]): by `job.abort` or `estop`, by its client disconnecting,
+/// or when `budget` has passed.
 pub fn prepare_keeping(
     src: &JobSource,
     opts: &InterpOptions,
     motion: &MotionConfig,
     start_mm: [f64; NUM_AXES],
     keep_items: usize,
+    budget: Duration,
 ) -> Result<PreparedJob, ApiError> {
+    let token = job_cancel::request_token();
     let _one_at_a_time = PREPARING.lock().unwrap_or_else(|p| p.into_inner());
+    let _current = job_cancel::Current::enter(&token);
+    if let Some(why) = token.why() {
+        return Err(Cancel::error(why, budget));
+    }
+    let _budget = job_cancel::Budget::start(&token, budget);
+    let out = prepare_locked(src, opts, motion, start_mm, keep_items, &token);
+    match (out, token.why()) {
+        (Err(_), Some(why)) => Err(Cancel::error(why, budget)),
+        (out, _) => out,
+    }
+}
+
+/// [`prepare_keeping`] once it holds the lock; `token` stops the interpreter and the planner.
+fn prepare_locked(
+    src: &JobSource,
+    opts: &InterpOptions,
+    motion: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    keep_items: usize,
+    token: &Cancel,
+) -> Result<PreparedJob, ApiError> {
     let (name, text) = match (&src.path, &src.text) {
         (Some(path), None) => {
             let text = super::job_file::read(path)?;
@@ -466,6 +513,10 @@ pub fn prepare_keeping(
         // Subroutine files are also searched next to the program.
         opts.program_dir = Path::new(p).parent().map(Path::to_path_buf);
     }
+    // The options kept for running (replay, probing pieces) carry no cancel flag: the
+    // token belongs to this preparation only.
+    let mut cancellable = opts.clone();
+    cancellable.cancel = Some(token.flag());
     let display = Path::new(&name)
         .file_name()
         .map(|f| f.to_string_lossy().into_owned())
@@ -473,24 +524,31 @@ pub fn prepare_keeping(
     let total_lines = text.lines().count() as u32;
     let mut kept = Some(Vec::new());
     let mut digests = Vec::new();
-    let streamed = stream_pass(&name, text.clone(), &opts, motion, start_mm, &mut |items| {
-        digests.push(digest(items));
-        if kept
-            .as_ref()
-            .is_some_and(|k| k.len() + items.len() > keep_items)
-        {
-            kept = None;
-        }
-        if let Some(k) = &mut kept {
-            k.extend_from_slice(items);
-        }
-        true
-    })?;
+    let streamed = stream_pass(
+        &name,
+        text.clone(),
+        &cancellable,
+        motion,
+        start_mm,
+        &mut |items| {
+            digests.push(digest(items));
+            if kept
+                .as_ref()
+                .is_some_and(|k| k.len() + items.len() > keep_items)
+            {
+                kept = None;
+            }
+            if let Some(k) = &mut kept {
+                k.extend_from_slice(items);
+            }
+            true
+        },
+    )?;
     let (finished, commands, parameters) = match streamed {
         Streamed::Planned(f, c, v) => (*f, c, *v),
         Streamed::Probes | Streamed::Stopped => {
             // A probing job: validated whole with simulated probes, run piece by piece.
-            let (program, parameters) = gcode::load_str_persistent(&name, &text, &opts)
+            let (program, parameters) = gcode::load_str_persistent(&name, &text, &cancellable)
                 .map_err(|e| ApiError::Gcode(e.to_string()))?;
             let plan = plan_job(&program.canon, motion, start_mm, &name)?;
             let probing = probing_source(&program.canon, &name, &text, &opts);
@@ -567,6 +625,8 @@ mod tests {
     }
 
     const START: [f64; NUM_AXES] = [10.0, 10.0, -5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    /// A budget no test job comes near.
+    const LONG: Duration = Duration::from_secs(3600);
 
     /// Prepares inline `text` named `name` on the built-in mill, starting at [`START`].
     fn prepare_text(name: Option<&str>, text: &str) -> Result<PreparedJob, ApiError> {
@@ -719,6 +779,7 @@ mod tests {
             &motion_config(&cfg),
             START,
             keep,
+            LONG,
         )
         .expect("plans")
     }
@@ -829,7 +890,7 @@ mod tests {
             name: Some("long.ngc".into()),
         };
         let (o, m) = (interp_options(&cfg), motion_config(&cfg));
-        let mut job = prepare_keeping(&src, &o, &m, START, 0).expect("plans");
+        let mut job = prepare_keeping(&src, &o, &m, START, 0, LONG).expect("plans");
         let replay = job.replay.as_mut().expect("replayed");
         assert!(replay.digests.len() >= 2, "{}", replay.digests.len());
         replay.text = format!("{text}G1 X10 G0\nM2\n");
@@ -845,5 +906,77 @@ mod tests {
             false
         });
         assert_eq!((out, batches), (Ok(false), 1));
+    }
+
+    /// `o1 repeat [99999999]`: ten million iterations, a minute or more to the loop limit.
+    const RUNAWAY: &str = "o1 repeat [99999999]\n#1=[#1+1]\no1 endrepeat\nM2\n";
+
+    fn inline(text: &str) -> JobSource {
+        JobSource {
+            path: None,
+            text: Some(text.into()),
+            name: Some("runaway.ngc".into()),
+        }
+    }
+
+    #[test]
+    fn a_preparation_past_its_budget_is_refused_naming_the_key_and_the_next_one_runs() {
+        let cfg = sim();
+        let (o, m) = (interp_options(&cfg), motion_config(&cfg));
+        let budget = Duration::from_millis(50);
+        let t0 = std::time::Instant::now();
+        let e = prepare_within(&inline(RUNAWAY), &o, &m, START, budget).unwrap_err();
+        let ApiError::Timeout(msg) = &e else {
+            panic!("{e:?}")
+        };
+        assert_eq!(
+            msg,
+            "job preparation took longer than 0.05 s (job.prepare_timeout_s)"
+        );
+        // Hang guard only: without the budget this ran to the loop limit.
+        assert!(t0.elapsed() < Duration::from_secs(60), "{:?}", t0.elapsed());
+        // The lock is free again.
+        let j = prepare_within(&inline("G0 X20\nM2\n"), &o, &m, START, LONG).expect("plans");
+        assert!((j.plan.end_mm[0] - 20.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_cancelled_request_token_stops_its_preparation_and_no_other() {
+        let cfg = sim();
+        let (o, m) = (interp_options(&cfg), motion_config(&cfg));
+        let token = Cancel::new();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let t = {
+            let (token, o, m) = (token.clone(), o.clone(), m.clone());
+            std::thread::spawn(move || {
+                let r = job_cancel::with_request_token(&token, || {
+                    prepare_within(&inline(RUNAWAY), &o, &m, START, LONG)
+                });
+                let _ = tx.send(r.map(|_| ()));
+            })
+        };
+        // Before the preparation began or while it runs: either way it ends cancelled.
+        token.cancel(job_cancel::Why::Disconnected);
+        let r = rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("cancelled preparation ended");
+        t.join().expect("joins");
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("client disconnected"), "{e}");
+        // A job prepared under a token keeps running when the token is cancelled later: what
+        // it stores to plan again carries no cancel flag.
+        let token = Cancel::new();
+        let mut text = String::from("G21 G90 G64 P0.01\nG0 X10 Y10 Z-5\nF1500\n");
+        for i in 0..3000 {
+            text.push_str(&format!("G1 X{} Y{}\n", 10 + i % 100, 10 + i / 100));
+        }
+        text.push_str("M2\n");
+        let job = job_cancel::with_request_token(&token, || {
+            prepare_keeping(&inline(&text), &o, &m, START, 0, LONG)
+        })
+        .expect("plans");
+        token.cancel(job_cancel::Why::Disconnected);
+        let replay = job.replay.as_ref().expect("replayed");
+        assert_eq!(replay.run(&mut |_| true), Ok(true));
     }
 }

@@ -6,6 +6,7 @@ pub mod devices;
 mod feeder;
 pub mod io_devices;
 pub mod job;
+pub mod job_cancel;
 pub mod job_file;
 pub mod mode;
 pub mod probing;

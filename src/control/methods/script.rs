@@ -12,15 +12,32 @@
 
 use super::{ControlError, ErrorCode};
 use crate::machine::api::MachineApi;
+use crate::script::HostsError;
 use serde_json::Value;
 
 pub(super) fn handle(m: &dyn MachineApi, verb: &str, params: Value) -> Result<Value, ControlError> {
+    let method = format!("script.{verb}");
+    if !super::METHODS.contains(&method.as_str()) {
+        return Err(ControlError::new(
+            ErrorCode::MethodNotFound,
+            format!("unknown method '{method}'"),
+        ));
+    }
     let hosts = m.scripts().ok_or_else(|| {
         ControlError::new(ErrorCode::Failed, "this machine has no script host task")
     })?;
-    hosts
-        .handle(verb, params)
-        .map_err(|e| ControlError::new(ErrorCode::Failed, e.to_string()))
+    hosts.handle(verb, params).map_err(to_control)
+}
+
+/// Bad or unknown parameters (an unknown field, a task or slot that names nothing) are
+/// invalid params (-32602) as for every other method; what fails while running is `Failed`.
+fn to_control(e: HostsError) -> ControlError {
+    match e {
+        HostsError::Params(_) | HostsError::NoHost(..) => ControlError::params(e.to_string()),
+        HostsError::Read(..) | HostsError::Control(_) => {
+            ControlError::new(ErrorCode::Failed, e.to_string())
+        }
+    }
 }
 
 /// Script status per task, for `tasks`.

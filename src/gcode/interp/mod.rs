@@ -41,6 +41,7 @@ use std::path::PathBuf;
 /// made a billion pecks in one block and held up to `max_canon` (50 M, 5 GB) of them before
 /// any check. About 100 MB; far beyond any real block.
 pub(crate) const MAX_BLOCK_CANON: usize = 1_000_000;
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 pub(crate) use state::Settings;
@@ -476,6 +477,11 @@ impl<'a> Interp<'a> {
                         self.opts.limits.max_blocks
                     ),
                 ));
+            }
+            if self.steps.is_multiple_of(super::CANCEL_POLL_BLOCKS)
+                && (self.opts.cancel.as_ref()).is_some_and(|c| c.load(Ordering::Relaxed))
+            {
+                return Err(self.err(1, "Interpretation cancelled"));
             }
             self.block_start = self.count;
             self.step(f, l)?;

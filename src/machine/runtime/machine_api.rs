@@ -126,6 +126,7 @@ impl MachineApi for Machine {
     /// e-stop is taken in the next cycle even when its command slots are all busy.
     fn estop(&self) -> Result<(), ApiError> {
         self.estop_request.fetch_add(1, Ordering::AcqRel);
+        crate::machine::job_cancel::cancel_current(crate::machine::job_cancel::Why::Estop);
         let t0 = Instant::now();
         loop {
             self.wait_for_cycle_end();
@@ -229,7 +230,8 @@ impl MachineApi for Machine {
 
     fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError> {
         let opts = self.interp_opts_now();
-        let job = job::prepare(src, &opts, &self.motion_cfg, self.actual_pose())?;
+        let budget = self.config.job.prepare_timeout();
+        let job = job::prepare_within(src, &opts, &self.motion_cfg, self.actual_pose(), budget)?;
         let info = JobInfo {
             name: job.name.clone(),
             lines: job.total_lines,
@@ -271,6 +273,7 @@ impl MachineApi for Machine {
     }
 
     fn job_abort(&self) -> Result<(), ApiError> {
+        crate::machine::job_cancel::cancel_current(crate::machine::job_cancel::Why::Abort);
         self.command(MachineCmd::Abort).map(|_| ())
     }
 
