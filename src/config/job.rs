@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use std::time::Duration;
 
 /// Default of `[job] prepare_timeout_s`.
-pub const DEFAULT_PREPARE_TIMEOUT_S: f64 = 30.0;
+pub const DEFAULT_PREPARE_TIMEOUT_S: f64 = 300.0;
 
 /// `[job]`.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
