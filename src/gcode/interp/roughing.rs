@@ -461,12 +461,13 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
     let mut cur = els[0].a;
     while i < els.len() {
         let e = els[i];
-        if !pockets && e.whole && geom::same(cur, e.a) {
+        let fed_to_start = !pockets && e.whole && geom::same(cur, e.a);
+        if fed_to_start {
             cy.feed(e.a);
         }
         cy.element(&e.piece(cur, e.b));
         cur = e.b;
-        let lip = i + 1 < els.len() && els[i + 1].tangent(e.b)[0] < -geom::EPS;
+        let lip = els.get(i + 1).is_some_and(|n| geom::dips(n, e.b));
         if !lip {
             i += 1;
             continue;
@@ -477,7 +478,12 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
             continue;
         };
         if !pockets {
-            // G7x.1: straight across the pocket at the lip's level.
+            // G7x.1: straight across the pocket at the lip's level. A line fed to from its
+            // start also feeds to the start of the (corner) arc that dips after it, as
+            // rs274 does.
+            if fed_to_start && e.arc.is_none() && els[i + 1].whole && els[i + 1].arc.is_some() {
+                cy.feed(e.b);
+            }
             cy.feed(back);
             (i, cur) = next_from(els, j, back);
             continue;

@@ -210,6 +210,14 @@ pub(super) fn split_at_top(e: &El) -> Vec<El> {
     }
 }
 
+/// The element goes down from `p` (its start): its tangent points to lower `u`, or it is an
+/// arc that starts level at its top (a corner arc, the second half of an arc split at its
+/// top), where rs274 already bridges a pocket.
+pub(super) fn dips(e: &El, p: Pt) -> bool {
+    let t = e.tangent(p)[0];
+    t < -EPS || (t.abs() <= 1e-7 && e.arc.is_some_and(|(c, _)| c[0] < p[0] - 1e-7))
+}
+
 /// The element never moves toward higher `v` (against the feed direction).
 pub(super) fn monotonic(e: &El) -> bool {
     if e.tangent(e.a)[1] > 1e-7 || e.tangent(e.b)[1] > 1e-7 {
@@ -487,6 +495,28 @@ mod tests {
         assert!(m.iter().all(|p| same(*p, [1.0002, 0.0])), "{m:?}");
         let far = El::line([1.01, -2.0], [1.01, 2.0]);
         assert!(meet(&far, &circle).is_empty());
+    }
+
+    #[test]
+    fn an_arc_starting_level_at_its_top_dips() {
+        // Corner arc about (3, -4) from its top (4, -4), clockwise in (u, v): goes down.
+        let corner = El {
+            a: [4.0, -4.0],
+            b: [3.866, -4.5],
+            arc: Some(([3.0, -4.0], false)),
+            whole: true,
+        };
+        assert!(dips(&corner, corner.a));
+        // Level along -v, and an arc leaving its bottom: neither dips.
+        assert!(!dips(&El::line([4.0, 0.0], [4.0, -4.0]), [4.0, 0.0]));
+        let up = El {
+            a: [2.0, -4.0],
+            b: [3.0, -5.0],
+            arc: Some(([3.0, -4.0], true)),
+            whole: true,
+        };
+        assert!(!dips(&up, up.a));
+        assert!(dips(&El::line([4.0, 0.0], [3.0, -1.0]), [4.0, 0.0]));
     }
 
     #[test]
