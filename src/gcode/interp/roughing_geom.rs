@@ -355,7 +355,10 @@ pub(super) fn offset(els: &[El], d: f64) -> Result<Vec<El>, String> {
             let q = e.a;
             if !same(prev.b, o.a) {
                 let turn = cross(els[i - 1].tangent(q), e.tangent(q));
-                if turn > 0.0 {
+                // A corner that turns outward by less than this (about 0.06°) is a tangent
+                // join written with rounded numbers: the offsets are joined where they meet
+                // (or nearly do), as rs274 does, rather than by a sliver of corner arc.
+                if turn > -1e-3 {
                     let x = meet(prev, &o)
                         .into_iter()
                         .min_by(|p1, p2| norm(sub(*p1, q)).total_cmp(&norm(sub(*p2, q))));
