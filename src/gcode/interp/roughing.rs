@@ -1,7 +1,9 @@
 //! LinuxCNC's lathe profile cycles: G71/G71.1 (roughing along Z), G72/G72.1 (roughing
 //! along X, facing) and G70 (finishing). The profile is the motion of the O-subroutine
 //! named by Q (G0/G1/G2/G3; G0 counts as G1, everything else in it is ignored), starting
-//! from the cycle's start point (the current position, or the X/Z of the block).
+//! from the cycle's start point (the current position, or the X/Z of the block). An A word
+//! on a line of it rounds the corner at the line's end with that radius, as rs274 does
+//! (LinuxCNC's lathe_g70_71_demo.ngc); the A axis does not move.
 //!
 //! Roughing: D is the finishing allowance left along the profile, I the depth of each
 //! pass (default 1), R the retract (default 0.5). Passes step down from the start point by
@@ -47,9 +49,10 @@ impl Frame {
     }
 }
 
-/// One move of the profile: end X, end Z and, for an arc, its centre (X, Z) and whether it
-/// turns counter-clockwise in the Z/X plane.
-type ProfileMove = (f64, f64, Option<((f64, f64), bool)>);
+/// One move of the profile: end X, end Z, for an arc its centre (X, Z) and whether it
+/// turns counter-clockwise in the Z/X plane, and the radius of the round its A word asks
+/// for at its end (0: a sharp corner).
+type ProfileMove = (f64, f64, Option<((f64, f64), bool)>, f64);
 
 /// The words of a G7x block.
 struct Words {
@@ -103,6 +106,7 @@ impl Interp<'_> {
             sv: if trv(last) > trv(pstart) { -1.0 } else { 1.0 },
         };
         let mut els = Vec::with_capacity(profile.len());
+        let mut rounds = Vec::with_capacity(profile.len());
         // The first move only brings the tool to the profile: it is not part of it.
         let mut prev = fr.to(pstart.0, pstart.1);
         for p in profile.iter().skip(2) {
@@ -113,8 +117,11 @@ impl Interp<'_> {
                 arc: p.2.map(|((cx, cz), ccw)| (fr.to(cx, cz), fr.ccw(ccw))),
                 whole: true,
             });
+            rounds.push(p.3);
             prev = e;
         }
+        let els = geom::round_corners(&els, &rounds)
+            .map_err(|m| self.err(col, format!("{name}: {m}")))?;
         if let Some(e) = els.iter().find(|e| !geom::monotonic(e)) {
             let (x, z) = fr.from(e.a);
             return Err(self.err(
@@ -268,7 +275,7 @@ impl Interp<'_> {
             ));
         };
         let saved = (self.s.pos, self.s.absolute, self.loc.clone());
-        let mut out = vec![(start[0], start[2], None)];
+        let mut out = vec![(start[0], start[2], None, 0.0)];
         self.s.pos = start;
         let mut motion = 10;
         let r = (|| {
@@ -308,7 +315,9 @@ impl Interp<'_> {
                     }
                     _ => None,
                 };
-                out.push((p[0], p[2], arc));
+                // An A word rounds the corner at the end of the move (rs274 does so in a
+                // profile; the A axis does not move).
+                out.push((p[0], p[2], arc, b.get(b'a').unwrap_or(0.0)));
                 self.s.pos = p;
             }
             Ok(())
@@ -452,12 +461,13 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
     let mut cur = els[0].a;
     while i < els.len() {
         let e = els[i];
-        if !pockets && e.whole && geom::same(cur, e.a) {
+        let fed_to_start = !pockets && e.whole && geom::same(cur, e.a);
+        if fed_to_start {
             cy.feed(e.a);
         }
         cy.element(&e.piece(cur, e.b));
         cur = e.b;
-        let lip = i + 1 < els.len() && els[i + 1].tangent(e.b)[0] < -geom::EPS;
+        let lip = els.get(i + 1).is_some_and(|n| geom::dips(n, e.b));
         if !lip {
             i += 1;
             continue;
@@ -468,7 +478,12 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
             continue;
         };
         if !pockets {
-            // G7x.1: straight across the pocket at the lip's level.
+            // G7x.1: straight across the pocket at the lip's level. A line fed to from its
+            // start also feeds to the start of the (corner) arc that dips after it, as
+            // rs274 does.
+            if fed_to_start && e.arc.is_none() && els[i + 1].whole && els[i + 1].arc.is_some() {
+                cy.feed(e.b);
+            }
             cy.feed(back);
             (i, cur) = next_from(els, j, back);
             continue;

@@ -10,6 +10,12 @@ pub(super) type Pt = [f64; 2];
 /// Coordinates closer than this are the same point.
 pub(super) const EPS: f64 = 1e-9;
 
+/// A line or circle this close to a circle touches it (at the point nearest to it, as
+/// rs274 joins them): a profile written with rounded numbers (`I1.73205` for √3, an arc end
+/// 3e-4 off its circle, as LinuxCNC's arc tolerance allows) makes elements meant to be
+/// tangent miss each other slightly, and their offsets must still join.
+const TANGENT_TOL: f64 = 1e-3;
+
 /// One element of a profile: a line, or an arc about `c` (counter-clockwise in the (u, v)
 /// plane when `ccw`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -204,6 +210,14 @@ pub(super) fn split_at_top(e: &El) -> Vec<El> {
     }
 }
 
+/// The element goes down from `p` (its start): its tangent points to lower `u`, or it is an
+/// arc that starts level at its top (a corner arc, the second half of an arc split at its
+/// top), where rs274 already bridges a pocket.
+pub(super) fn dips(e: &El, p: Pt) -> bool {
+    let t = e.tangent(p)[0];
+    t < -EPS || (t.abs() <= 1e-7 && e.arc.is_some_and(|(c, _)| c[0] < p[0] - 1e-7))
+}
+
 /// The element never moves toward higher `v` (against the feed direction).
 pub(super) fn monotonic(e: &El) -> bool {
     if e.tangent(e.a)[1] > 1e-7 || e.tangent(e.b)[1] > 1e-7 {
@@ -218,6 +232,61 @@ pub(super) fn monotonic(e: &El) -> bool {
         let s = e.sweep(e.a, p);
         s <= 1e-9 || s >= total - 1e-9
     })
+}
+
+/// The profile with each corner whose `rounds` entry (that of the element ending there) is
+/// positive replaced by an arc of that radius tangent to both lines. Only corners between
+/// two lines can be rounded.
+pub(super) fn round_corners(els: &[El], rounds: &[f64]) -> Result<Vec<El>, String> {
+    let mut out: Vec<El> = Vec::with_capacity(els.len() * 2);
+    // Where the element after a round starts (the round's end).
+    let mut from: Option<Pt> = None;
+    for (i, e) in els.iter().enumerate() {
+        let mut e = *e;
+        if let Some(p) = from.take() {
+            e.a = p;
+        }
+        out.push(e);
+        let rho = rounds.get(i).copied().unwrap_or(0.0);
+        if rho <= 0.0 {
+            continue;
+        }
+        let Some(next) = els.get(i + 1) else {
+            continue;
+        };
+        if e.arc.is_some() || next.arc.is_some() {
+            return Err(format!(
+                "a corner round (A{rho}) needs lines on both sides of its corner"
+            ));
+        }
+        let q = e.b;
+        let (t1, t2) = (e.tangent(q), next.tangent(q));
+        let turn = cross(t1, t2);
+        let cos = (t1[0] * t2[0] + t1[1] * t2[1]).clamp(-1.0, 1.0);
+        if turn.abs() < EPS && cos > 0.0 {
+            continue;
+        }
+        let reach = rho * (cos.acos() / 2.0).tan();
+        let (p1, p2) = (sub(q, mul(t1, reach)), add(q, mul(t2, reach)));
+        if reach > norm(sub(q, e.a)) + EPS || reach > norm(sub(next.b, q)) + EPS {
+            return Err(format!(
+                "the corner round A{rho} is longer than a line beside it"
+            ));
+        }
+        let side = if turn > 0.0 { 1.0 } else { -1.0 };
+        let c = add(p1, mul(left(t1), rho * side));
+        if let Some(last) = out.last_mut() {
+            last.b = p1;
+        }
+        out.push(El {
+            a: p1,
+            b: p2,
+            arc: Some((c, turn > 0.0)),
+            whole: true,
+        });
+        from = Some(p2);
+    }
+    Ok(out)
 }
 
 /// Intersections of the full line or circle carrying `e` with the one carrying `f`.
@@ -239,7 +308,9 @@ fn meet(e: &El, f: &El) -> Vec<Pt> {
             let w = sub(l.a, c);
             let bq = w[0] * d[0] + w[1] * d[1];
             let disc = bq * bq - (w[0] * w[0] + w[1] * w[1] - r * r);
-            if disc < -EPS {
+            // Distance from the circle to the line when they miss.
+            let gap = (w[0] * w[0] + w[1] * w[1] - bq * bq).max(0.0).sqrt() - r;
+            if disc < -EPS && gap > TANGENT_TOL {
                 return Vec::new();
             }
             let s = disc.max(0.0).sqrt();
@@ -254,7 +325,8 @@ fn meet(e: &El, f: &El) -> Vec<Pt> {
             }
             let a = (r1 * r1 - r2 * r2 + dist * dist) / (2.0 * dist);
             let h2 = r1 * r1 - a * a;
-            if h2 < -EPS {
+            let gap = (dist - (r1 + r2)).max((r1 - r2).abs() - dist);
+            if h2 < -EPS && gap > TANGENT_TOL {
                 return Vec::new();
             }
             let h = h2.max(0.0).sqrt();
@@ -283,7 +355,10 @@ pub(super) fn offset(els: &[El], d: f64) -> Result<Vec<El>, String> {
             let q = e.a;
             if !same(prev.b, o.a) {
                 let turn = cross(els[i - 1].tangent(q), e.tangent(q));
-                if turn > 0.0 {
+                // A corner that turns outward by less than this (about 0.06°) is a tangent
+                // join written with rounded numbers: the offsets are joined where they meet
+                // (or nearly do), as rs274 does, rather than by a sliver of corner arc.
+                if turn > -1e-3 {
                     let x = meet(prev, &o)
                         .into_iter()
                         .min_by(|p1, p2| norm(sub(*p1, q)).total_cmp(&norm(sub(*p2, q))));
@@ -379,6 +454,72 @@ mod tests {
         assert!(same(o[1].b, [8.0, -4.0]));
         assert_eq!(o[2].arc, Some(([8.0, -5.0], false)));
         assert!(same(o[2].b, [9.0, -5.0]) && same(o[3].b, [9.0, -10.0]));
+    }
+
+    #[test]
+    fn a_round_is_tangent_to_both_lines_and_refused_next_to_an_arc() {
+        // Along -v, then a right angle out to higher u: a round of 1 at (5, -5).
+        let els = [
+            El::line([5.0, 0.0], [5.0, -5.0]),
+            El::line([5.0, -5.0], [8.0, -5.0]),
+        ];
+        let r = round_corners(&els, &[1.0, 0.0]).unwrap();
+        assert_eq!(r.len(), 3);
+        assert!(same(r[0].b, [5.0, -4.0]) && same(r[1].a, [5.0, -4.0]));
+        assert!(same(r[1].b, [6.0, -5.0]) && same(r[2].a, [6.0, -5.0]));
+        assert_eq!(r[1].arc, Some(([6.0, -4.0], true)));
+        assert!(same(r[2].b, [8.0, -5.0]));
+        // No round asked: the profile is unchanged.
+        assert_eq!(round_corners(&els, &[0.0, 0.0]).unwrap(), els.to_vec());
+        // Longer than the line beside it.
+        assert!(round_corners(&els, &[4.0, 0.0]).is_err());
+        let arc = [
+            els[0],
+            El {
+                a: [5.0, -5.0],
+                b: [7.0, -7.0],
+                arc: Some(([7.0, -5.0], true)),
+                whole: true,
+            },
+        ];
+        assert!(round_corners(&arc, &[0.5, 0.0]).is_err());
+    }
+
+    #[test]
+    fn a_line_that_just_misses_a_circle_meets_it_at_the_nearest_point() {
+        let circle = El {
+            a: [1.0, 0.0],
+            b: [0.0, 1.0],
+            arc: Some(([0.0, 0.0], true)),
+            whole: true,
+        };
+        let line = El::line([1.0002, -2.0], [1.0002, 2.0]);
+        let m = meet(&line, &circle);
+        assert!(m.iter().all(|p| same(*p, [1.0002, 0.0])), "{m:?}");
+        let far = El::line([1.01, -2.0], [1.01, 2.0]);
+        assert!(meet(&far, &circle).is_empty());
+    }
+
+    #[test]
+    fn an_arc_starting_level_at_its_top_dips() {
+        // Corner arc about (3, -4) from its top (4, -4), clockwise in (u, v): goes down.
+        let corner = El {
+            a: [4.0, -4.0],
+            b: [3.866, -4.5],
+            arc: Some(([3.0, -4.0], false)),
+            whole: true,
+        };
+        assert!(dips(&corner, corner.a));
+        // Level along -v, and an arc leaving its bottom: neither dips.
+        assert!(!dips(&El::line([4.0, 0.0], [4.0, -4.0]), [4.0, 0.0]));
+        let up = El {
+            a: [2.0, -4.0],
+            b: [3.0, -5.0],
+            arc: Some(([3.0, -4.0], true)),
+            whole: true,
+        };
+        assert!(!dips(&up, up.a));
+        assert!(dips(&El::line([4.0, 0.0], [3.0, -1.0]), [4.0, 0.0]));
     }
 
     #[test]
