@@ -26,7 +26,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 use zenoh::Wait;
-use zenoh_support::{free_port, query};
+use zenoh_support::{client_config, free_port, query};
 
 const GUARD: Duration = Duration::from_secs(60);
 /// How long a refused query is given to (wrongly) get a reply.
@@ -45,27 +45,40 @@ fn openssl(dir: &Path, args: &[&str]) {
     );
 }
 
+/// `openssl req` with a new P-256 key in `key`, common name `cn`, written to `out`, plus
+/// `extra` arguments (`-x509 …` for a self-signed certificate, none for a signing request).
+fn ec_request(dir: &Path, key: &str, out: &str, cn: &str, extra: &[&str]) {
+    let subj = format!("/CN={cn}");
+    let mut args = vec![
+        "req",
+        "-newkey",
+        "ec",
+        "-pkeyopt",
+        "ec_paramgen_curve:prime256v1",
+        "-nodes",
+        "-keyout",
+        key,
+        "-out",
+        out,
+        "-subj",
+        &subj,
+    ];
+    args.extend_from_slice(extra);
+    openssl(dir, &args);
+}
+
 /// `<ca>.pem` / `<ca>.key`: a CA.
 fn make_ca(dir: &Path, ca: &str) {
     let (pem, key) = (format!("{ca}.pem"), format!("{ca}.key"));
-    openssl(
+    ec_request(
         dir,
+        &key,
+        &pem,
+        ca,
         &[
-            "req",
             "-x509",
-            "-newkey",
-            "ec",
-            "-pkeyopt",
-            "ec_paramgen_curve:prime256v1",
-            "-nodes",
-            "-keyout",
-            &key,
-            "-out",
-            &pem,
             "-days",
             "2",
-            "-subj",
-            &format!("/CN={ca}"),
             "-addext",
             "basicConstraints=critical,CA:TRUE",
             "-addext",
@@ -89,23 +102,7 @@ fn make_cert(dir: &Path, ca: &str, name: &str) {
         format!("{name}.csr"),
         format!("{name}.pem"),
     );
-    openssl(
-        dir,
-        &[
-            "req",
-            "-newkey",
-            "ec",
-            "-pkeyopt",
-            "ec_paramgen_curve:prime256v1",
-            "-nodes",
-            "-keyout",
-            &key,
-            "-out",
-            &csr,
-            "-subj",
-            &format!("/CN={name}"),
-        ],
-    );
+    ec_request(dir, &key, &csr, name, &[]);
     openssl(
         dir,
         &[
@@ -150,12 +147,7 @@ const ACL: &str = r#"{
 /// Zenoh refuses to open it (the link could not be made).
 fn tls_client(dir: &Path, endpoint: &str, ca: &str, cert: Option<&str>) -> Option<zenoh::Session> {
     let p = |f: String| json!(dir.join(f).display().to_string()).to_string();
-    let mut c = zenoh::Config::default();
-    c.insert_json5("mode", "\"client\"").unwrap();
-    c.insert_json5("connect/endpoints", &json!([endpoint]).to_string())
-        .unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
+    let mut c = client_config(endpoint);
     c.insert_json5(
         "transport/link/tls/root_ca_certificate",
         &p(format!("{ca}.pem")),

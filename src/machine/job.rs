@@ -444,7 +444,7 @@ pub fn prepare(
     start_mm: [f64; NUM_AXES],
 ) -> Result<PreparedJob, ApiError> {
     let budget = Duration::from_secs_f64(crate::config::DEFAULT_PREPARE_TIMEOUT_S);
-    prepare_keeping(src, opts, motion, start_mm, KEEP_ITEMS_MAX, budget)
+    prepare_within(src, opts, motion, start_mm, budget)
 }
 
 /// [`prepare`] within `budget` of wall-clock time (`[job] prepare_timeout_s`).

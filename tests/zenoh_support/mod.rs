@@ -33,15 +33,21 @@ pub fn bridge_config(key: &str, extra: &str) -> (ZenohConfig, String) {
     (cfg, endpoint)
 }
 
-/// A client session connected to `endpoint` only (no multicast scouting).
-pub fn client(endpoint: &str) -> zenoh::Session {
+/// The configuration of a client session connected to `endpoint` only (no multicast
+/// scouting), for tests that add to it (TLS).
+pub fn client_config(endpoint: &str) -> zenoh::Config {
     let mut c = zenoh::Config::default();
     c.insert_json5("mode", "\"client\"").unwrap();
     c.insert_json5("connect/endpoints", &json!([endpoint]).to_string())
         .unwrap();
     c.insert_json5("scouting/multicast/enabled", "false")
         .unwrap();
-    zenoh::open(c).wait().unwrap()
+    c
+}
+
+/// A client session connected to `endpoint` only (no multicast scouting).
+pub fn client(endpoint: &str) -> zenoh::Session {
+    zenoh::open(client_config(endpoint)).wait().unwrap()
 }
 
 /// A peer session (as `hytask serve` and `hytask peer` open) connecting to `endpoint`:
