@@ -135,6 +135,8 @@ pub struct PieceRunner {
     /// interpreted (before it is queued, so before the job can end "done"): the var file is
     /// saved from these, not from the dry run's simulated probes (issue 13).
     pub parameters: Arc<Mutex<Option<crate::gcode::VarFile>>>,
+    /// Tells the job's starter when the first piece is queued.
+    pub(crate) primer: super::feeder::Primer,
 }
 
 /// Appends a piece's message texts to the job's and renumbers the piece's message items.
@@ -279,7 +281,14 @@ impl PieceRunner {
 
     /// Pushes every item, waiting while the queue is full; false if cancelled.
     fn feed(&self, items: &[Item]) -> bool {
-        super::feeder::feed(&self.queue, items, self.job, &self.cancel, &self.servo)
+        super::feeder::feed(
+            &self.queue,
+            items,
+            self.job,
+            &self.cancel,
+            &self.servo,
+            &self.primer,
+        )
     }
 }
 

@@ -5,7 +5,7 @@
 use super::{axis_letter, lock, ActiveJob, Machine, Measured, ACCEPT_TIMEOUT};
 use crate::gcode::NUM_AXES;
 use crate::machine::api::*;
-use crate::machine::feeder::feed;
+use crate::machine::feeder::{feed, PrimeNews, Primer};
 use crate::machine::job;
 use crate::machine::job::PreparedJob;
 use crate::machine::mode::{ModeMachine, Request};
@@ -16,8 +16,14 @@ use crate::machine::servo::{ports, MachineSnapshot};
 use crate::rt::prelude::{CommandHandle, CommandStatus};
 use serde_json::Value;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+
+/// Longest wait for a job's feeder to prime the queue before the job starts anyway (the
+/// interpolator then waits at rest for its first items; only a move cut short is harmful).
+/// A guard for a stalled host: priming takes microseconds, or one batch of planning.
+const PRIME_TIMEOUT: Duration = Duration::from_secs(10);
 
 impl Machine {
     /// Sends a command and waits until the machine task accepted or rejected it.
@@ -123,6 +129,7 @@ impl Machine {
         let cancel = Arc::new(AtomicBool::new(false));
         let messages = Arc::new(Mutex::new(Vec::new()));
         let measured = Arc::new(Mutex::new(None));
+        let (primer, primed) = Primer::new();
         let (feeder, items) = match &job.probing {
             None => {
                 lock(&messages).clone_from(&job.plan.messages);
@@ -135,13 +142,17 @@ impl Machine {
                     .name(format!("feeder-{id}"))
                     .spawn(move || match &items.replay {
                         None => {
-                            feed(&queue, &items.plan.items, id, &cancel, &servo);
+                            feed(&queue, &items.plan.items, id, &cancel, &servo, &primer);
                         }
                         // A large job is planned again as it runs (see `job`).
                         Some(replay) => {
-                            let run = replay
-                                .run_ahead(&mut |batch| feed(&queue, batch, id, &cancel, &servo));
+                            let run = replay.run_ahead(&mut |batch| {
+                                feed(&queue, batch, id, &cancel, &servo, &primer)
+                            });
                             if let Err(msg) = run {
+                                if primer.failed(&msg) {
+                                    return; // the starter reports it
+                                }
                                 tracing::error!("job {id}: {msg}");
                                 if let Some(a) = lock(&book).active.as_mut().filter(|a| a.id == id)
                                 {
@@ -156,7 +167,9 @@ impl Machine {
                     .map_err(|e| ApiError::Failed(format!("cannot start the feeder: {e}")))?;
                 (feeder, job.item_count())
             }
-            Some(src) => self.start_piece_runner(src, &job, id, &cancel, (&messages, &measured))?,
+            Some(src) => {
+                self.start_piece_runner(src, &job, id, &cancel, (&messages, &measured), primer)?
+            }
         };
         let mut book = lock(&self.book);
         book.status = JobStatus {
@@ -189,11 +202,15 @@ impl Machine {
                 let _ = f.join();
             }
         }
-        match self.command(MachineCmd::Run {
-            job: id,
-            items,
-            manual,
-        }) {
+        let started = match wait_primed(&primed) {
+            Ok(()) => self.command(MachineCmd::Run {
+                job: id,
+                items,
+                manual,
+            }),
+            Err(why) => Err(ApiError::Rejected(why)),
+        };
+        match started {
             // `Failed` means accepted and already ended (a job that fails in its first cycles,
             // before this thread looked: easy on the unpaced simulated clock). It ran: its end
             // event reports why, like any job's, so it stays the active job.
@@ -224,6 +241,7 @@ impl Machine {
         id: u32,
         cancel: &Arc<AtomicBool>,
         (messages, measured): (&Arc<Mutex<Vec<String>>>, &Measured),
+        primer: Primer,
     ) -> Result<(std::thread::JoinHandle<()>, u64), ApiError> {
         // A job that only waits for inputs (M66) runs piece by piece without a probe.
         if let (None, Some(line)) = (
@@ -256,13 +274,18 @@ impl Machine {
             servo: self.servo.clone(),
             messages: messages.clone(),
             parameters: measured.clone(),
+            primer,
         };
         let book = self.book.clone();
         let machine = self.machine.clone();
         let thread = std::thread::Builder::new()
             .name(format!("pieces-{id}"))
             .spawn(move || {
+                let primer = runner.primer.clone();
                 if let probing::RunnerEnd::Failed(msg) = runner.run(first) {
+                    if primer.failed(&msg) {
+                        return; // the starter reports it
+                    }
                     tracing::error!("job {id}: {msg}");
                     if let Some(a) = lock(&book).active.as_mut().filter(|a| a.id == id) {
                         a.error = Some(msg);
@@ -289,5 +312,23 @@ impl Machine {
             topic: topic.into(),
             data,
         });
+    }
+}
+
+/// Waits until a starting job's feeder has primed the queue (see
+/// [`feeder`](crate::machine::feeder)); the job's planning error if it failed first. A
+/// feeder that ended without a word (cancelled, or its thread gone) and one slower than
+/// [`PRIME_TIMEOUT`] let the job start: it then ends, or waits at rest, as before.
+fn wait_primed(primed: &Receiver<PrimeNews>) -> Result<(), String> {
+    match primed.recv_timeout(PRIME_TIMEOUT) {
+        Ok(news) => news,
+        Err(RecvTimeoutError::Disconnected) => Ok(()),
+        Err(RecvTimeoutError::Timeout) => {
+            tracing::warn!(
+                "the job's feeder did not prime the queue within {} s; starting anyway",
+                PRIME_TIMEOUT.as_secs()
+            );
+            Ok(())
+        }
     }
 }

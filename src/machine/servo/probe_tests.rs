@@ -61,6 +61,7 @@ pub(super) fn start_live(r: &mut Rig, name: &str, text: &str) -> Live {
         servo: r.rt.threads()[0].clone(),
         messages: Arc::default(),
         parameters: Arc::default(),
+        primer: crate::machine::feeder::Primer::none(),
     };
     let thread = std::thread::spawn(move || runner.run(first));
     let h = r
