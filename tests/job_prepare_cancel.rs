@@ -31,29 +31,55 @@ fn runaway() -> String {
 }
 
 /// The simulated mill with `[job] prepare_timeout_s` = `budget_s` (and the directory of its
-/// configuration, kept while it runs).
+/// configuration, kept while it runs). Its `[gcode] subroutine_path` holds `spin.ngc`, a
+/// subroutine running the loop of [`runaway`]: `o<spin> call` is a one-line runaway MDI.
 fn daemon(budget_s: f64) -> (Daemon, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     let config = sim_clock_config(dir.path(), SIM_SPEED, None);
+    let subs = dir.path().join("subs");
+    std::fs::create_dir(&subs).unwrap();
+    let body = runaway().replace("M2\n", "");
+    std::fs::write(
+        subs.join("spin.ngc"),
+        format!("o<spin> sub\n{body}o<spin> endsub\n"),
+    )
+    .unwrap();
     let mut text = std::fs::read_to_string(&config).unwrap();
-    text.push_str(&format!("\n[job]\nprepare_timeout_s = {budget_s:?}\n"));
+    text.push_str(&format!(
+        "\n[job]\nprepare_timeout_s = {budget_s:?}\n\n[gcode]\nsubroutine_path = [\"subs\"]\n"
+    ));
     std::fs::write(&config, text).unwrap();
     (Daemon::start(&config), dir)
 }
+const SPIN: &str = "o<spin> call";
 const SHORT: &str = "G21 G90\nG0 X20\nM2\n";
 
-fn load_line(text: &str) -> Vec<u8> {
-    let mut line = json!({"id": 1, "method": "job.load", "params": {"text": text}}).to_string();
+fn request_line(method: &str, params: Value) -> Vec<u8> {
+    let mut line = json!({"id": 1, "method": method, "params": params}).to_string();
     line.push('\n');
     line.into_bytes()
+}
+
+fn load_line(text: &str) -> Vec<u8> {
+    request_line("job.load", json!({ "text": text }))
+}
+
+fn mdi_line(line: &str) -> Vec<u8> {
+    request_line("mdi", json!({ "line": line }))
 }
 
 /// Sends `job.load` of `text` on a connection of its own and waits (at most [`GUARD`]) for
 /// the reply, on a thread; the reply arrives on the returned channel.
 fn load_in_background(socket: &Path, text: &str) -> mpsc::Receiver<Value> {
+    in_background(socket, load_line(text))
+}
+
+/// Sends the request `line` on a connection of its own; the reply arrives on the returned
+/// channel (waited for at most [`GUARD`], on a thread).
+fn in_background(socket: &Path, line: Vec<u8>) -> mpsc::Receiver<Value> {
     let mut s = UnixStream::connect(socket).unwrap();
     s.set_read_timeout(Some(GUARD)).unwrap();
-    s.write_all(&load_line(text)).unwrap();
+    s.write_all(&line).unwrap();
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
         let mut line = String::new();
@@ -70,15 +96,26 @@ fn repeat_until_answered(
     method: &str,
     reply: &mpsc::Receiver<Value>,
 ) -> Value {
+    repeat_until_answered_with(c, method, reply, |_| ())
+}
+
+/// [`repeat_until_answered`], calling `between` before each call.
+fn repeat_until_answered_with(
+    c: &mut hytask::control::client::Client,
+    method: &str,
+    reply: &mpsc::Receiver<Value>,
+    mut between: impl FnMut(&mut hytask::control::client::Client),
+) -> Value {
     let t0 = Instant::now();
     loop {
+        between(c);
         let _ = c.call(method, Value::Null);
         if let Ok(v) = reply.recv_timeout(Duration::from_millis(100)) {
             return v;
         }
         assert!(
             t0.elapsed() < GUARD,
-            "the runaway job.load was not cancelled by {method}"
+            "the runaway preparation was not cancelled by {method}"
         );
     }
 }
@@ -142,6 +179,80 @@ fn a_job_load_past_the_prepare_timeout_is_refused_naming_the_key() {
         error_message(&v),
         "timed out: job preparation took longer than 0.2 s (job.prepare_timeout_s)"
     );
+}
+
+/// Found in session 10: `mdi` had neither cancel nor budget; one line calling a runaway
+/// subroutine held the preparation lock (every `job.load` behind it) to the loop limit.
+#[test]
+fn a_runaway_mdi_line_is_cancelled_by_job_abort_by_estop_and_by_its_client_hanging_up() {
+    let (d, _dir) = daemon(3600.0);
+    let mut c = d.client();
+    ready(&mut c);
+    let reply = in_background(&d.socket, mdi_line(SPIN));
+    let v = repeat_until_answered(&mut c, "job.abort", &reply);
+    assert_eq!(
+        error_message(&v),
+        "failed: MDI preparation cancelled by job.abort"
+    );
+
+    let reply = in_background(&d.socket, mdi_line(SPIN));
+    let v = repeat_until_answered(&mut c, "estop", &reply);
+    assert_eq!(
+        error_message(&v),
+        "failed: MDI preparation cancelled by an e-stop"
+    );
+
+    ready(&mut c);
+    let mut hung = UnixStream::connect(&d.socket).unwrap();
+    hung.write_all(&mdi_line(SPIN)).unwrap();
+    // Makes it likely (not required) that the runaway holds the lock before the load.
+    std::thread::sleep(Duration::from_millis(300));
+    let waiting = load_in_background(&d.socket, SHORT);
+    drop(hung);
+    let v = waiting
+        .recv_timeout(GUARD)
+        .expect("the load behind a hung-up runaway MDI was answered");
+    assert_eq!(v["result"]["lines"], json!(3), "{v}");
+}
+
+#[test]
+fn an_mdi_line_past_the_prepare_timeout_is_refused_naming_the_key() {
+    let (d, _dir) = daemon(0.2);
+    let mut c = d.client();
+    ready(&mut c);
+    let v = in_background(&d.socket, mdi_line(SPIN))
+        .recv_timeout(GUARD)
+        .expect("answered");
+    assert_eq!(v["error"]["code"], json!(4), "{v}");
+    assert_eq!(
+        error_message(&v),
+        "timed out: MDI preparation took longer than 0.2 s (job.prepare_timeout_s)"
+    );
+    // An ordinary line still runs.
+    ok(&mut c, "mdi", json!({"line": "G0 X20"}));
+}
+
+/// Found in session 10: the machine's own e-stop input (here the simulated one) stopped the
+/// machine but not a preparation in progress; only the socket's `estop` did.
+#[test]
+fn the_estop_input_cancels_a_runaway_job_load() {
+    let (d, _dir) = daemon(3600.0);
+    let mut c = d.client();
+    let reply = load_in_background(&d.socket, &runaway());
+    // Released, reset, pressed again until the load answers: a press that lands before the
+    // preparation began (or in e-stop already) cancels nothing, a later one does. A reset
+    // refused because the release was not seen yet is as good.
+    let input = |v: u8| json!({"name": "estop", "value": v});
+    let v = repeat_until_answered_with(&mut c, "status", &reply, |c| {
+        let _ = c.call("sim.input", input(0));
+        let _ = c.call("estop.reset", Value::Null);
+        let _ = c.call("sim.input", input(1));
+    });
+    assert_eq!(
+        error_message(&v),
+        "failed: job preparation cancelled by an e-stop"
+    );
+    wait_status(&mut c, "e-stop", GUARD, |s| s["mode"] == json!("estop"));
 }
 
 #[test]

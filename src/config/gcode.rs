@@ -1,6 +1,6 @@
 //! `[gcode]`: what the G-code interpreter takes from the machine configuration besides the
-//! tool table: the var file (LinuxCNC's `PARAMETER_FILE`) and the values of
-//! `#<_ini[section]name>`.
+//! tool table: the var file (LinuxCNC's `PARAMETER_FILE`), the subroutine search path
+//! (`SUBROUTINE_PATH`) and the values of `#<_ini[section]name>`.
 //!
 //! LinuxCNC programs read their machine's ini file through `#<_ini[section]name>`. hytask
 //! has a TOML configuration instead, so the names are mapped ([`GcodeConfig::ini_values`]):
@@ -36,6 +36,12 @@ pub struct GcodeConfig {
     /// Absent: offsets start at zero in G54 and are not kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub var_file: Option<PathBuf>,
+    /// Directories searched for `o<name> call` subroutine files (`name.ngc`), in order, before
+    /// the program's own directory (LinuxCNC's `[RS274NGC] SUBROUTINE_PATH`); the only place
+    /// an MDI line finds subroutines. Relative paths are relative to the configuration file's
+    /// directory.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub subroutine_path: Vec<PathBuf>,
     /// Free values for programs: `[gcode.ini.<section>] <name> = <number>`, read as
     /// `#<_ini[<section>]<name>>`.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -72,6 +78,11 @@ impl GcodeConfig {
             .is_some_and(|p| p.as_os_str().is_empty())
         {
             issues.push("gcode.var_file", "must not be empty");
+        }
+        for (i, p) in self.subroutine_path.iter().enumerate() {
+            if p.as_os_str().is_empty() {
+                issues.push(format!("gcode.subroutine_path[{i}]"), "must not be empty");
+            }
         }
     }
 

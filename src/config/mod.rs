@@ -11,7 +11,7 @@
 //! [spindle]       max/min rpm, enable/direction/speed/at-speed channels
 //! [coolant]       flood/mist outputs
 //! [tool_table]    path
-//! [gcode]         var_file, ini.<section>.<name> (`#<_ini[section]name>`)
+//! [gcode]         var_file, subroutine_path, ini.<section>.<name> (`#<_ini[section]name>`)
 //! [control]       socket_path, mode, group, jobs_dir, max_job_bytes, idle_timeout_s,
 //!                 max_clients, max_buffered_bytes, operators, observers, unlisted
 //! [job]           prepare_timeout_s
@@ -121,8 +121,8 @@ pub fn parse(text: &str, origin: &str) -> Result<MachineConfig, ConfigError> {
     Ok(config)
 }
 
-/// Reads, parses and validates a machine file. A relative `tool_table.path` or
-/// `gcode.var_file` is made relative to the file's directory (and `[plc]` paths are resolved against it).
+/// Reads, parses and validates a machine file. A relative `tool_table.path`,
+/// `gcode.var_file` or `gcode.subroutine_path` entry is made relative to the file's directory (and `[plc]` paths are resolved against it).
 pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
     let text = read(path)?;
     let mut config = parse(&text, &path.display().to_string())?;
@@ -134,6 +134,16 @@ pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
     if let (Some(v), Some(dir)) = (&mut config.gcode.var_file, path.parent()) {
         if v.is_relative() {
             *v = dir.join(&*v);
+        }
+    }
+    if let Some(dir) = path.parent() {
+        for p in config
+            .gcode
+            .subroutine_path
+            .iter_mut()
+            .filter(|p| p.is_relative())
+        {
+            *p = dir.join(&*p);
         }
     }
     if let Some(p) = &mut config.plc {

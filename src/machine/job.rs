@@ -414,6 +414,7 @@ pub fn interp_options(cfg: &MachineConfig) -> InterpOptions {
         tool_table: cfg.tool_table.as_ref().map(|t| t.path.clone()),
         // `#<_ini[section]name>` (issue 13; mapping in config::gcode).
         ini: std::sync::Arc::new(cfg.gcode.ini_values(&cfg.axes)),
+        subroutine_path: cfg.gcode.subroutine_path.clone(),
         // The user M codes the PLC handles (issue 11).
         user_mcodes: cfg
             .plc
@@ -470,18 +471,9 @@ pub fn prepare_keeping(
     keep_items: usize,
     budget: Duration,
 ) -> Result<PreparedJob, ApiError> {
-    let token = job_cancel::request_token();
-    let _one_at_a_time = PREPARING.lock().unwrap_or_else(|p| p.into_inner());
-    let _current = job_cancel::Current::enter(&token);
-    if let Some(why) = token.why() {
-        return Err(Cancel::error(why, budget));
-    }
-    let _budget = job_cancel::Budget::start(&token, budget);
-    let out = prepare_locked(src, opts, motion, start_mm, keep_items, &token);
-    match (out, token.why()) {
-        (Err(_), Some(why)) => Err(Cancel::error(why, budget)),
-        (out, _) => out,
-    }
+    job_cancel::guarded(&PREPARING, "job", budget, |token| {
+        prepare_locked(src, opts, motion, start_mm, keep_items, token)
+    })
 }
 
 /// [`prepare_keeping`] once it holds the lock; `token` stops the interpreter and the planner.
@@ -591,28 +583,47 @@ fn prepare_locked(
 }
 
 /// Interprets and plans one MDI line (the interpreter's MDI mode: no program end needed, none
-/// of M2's resets); errors name `mdi:1:col`.
+/// of M2's resets); errors name `mdi:1:col`. Within the default budget, as [`prepare`].
 pub fn prepare_mdi(
     line: &str,
     opts: &InterpOptions,
     motion: &MotionConfig,
     start_mm: [f64; NUM_AXES],
 ) -> Result<PreparedJob, ApiError> {
+    let budget = Duration::from_secs_f64(crate::config::DEFAULT_PREPARE_TIMEOUT_S);
+    prepare_mdi_within(line, opts, motion, start_mm, budget)
+}
+
+/// [`prepare_mdi`] within `budget`. One line may call a subroutine or start a runaway loop,
+/// so it is prepared as a job is ([`job_cancel::guarded`]): one at a time, cancelled by
+/// `job.abort`, an e-stop, its client hanging up, or the budget running out.
+pub fn prepare_mdi_within(
+    line: &str,
+    opts: &InterpOptions,
+    motion: &MotionConfig,
+    start_mm: [f64; NUM_AXES],
+    budget: Duration,
+) -> Result<PreparedJob, ApiError> {
     let mut opts = starting_at(opts, start_mm);
     opts.mdi = true;
     let text = format!("{line}\n");
-    let (program, parameters) = gcode::load_str_persistent("mdi", &text, &opts)
-        .map_err(|e| ApiError::Gcode(e.to_string()))?;
-    let plan = plan_job(&program.canon, motion, start_mm, "mdi")?;
-    let probing = probing_source(&program.canon, "mdi", &text, &opts);
-    Ok(PreparedJob {
-        name: "mdi".into(),
-        total_lines: 1,
-        commands: program.canon.len(),
-        plan,
-        probing,
-        replay: None,
-        parameters: Some(parameters),
+    job_cancel::guarded(&PREPARING, "MDI", budget, |token| {
+        // As for a job: the options kept for probing pieces carry no cancel flag.
+        let mut cancellable = opts.clone();
+        cancellable.cancel = Some(token.flag());
+        let (program, parameters) = gcode::load_str_persistent("mdi", &text, &cancellable)
+            .map_err(|e| ApiError::Gcode(e.to_string()))?;
+        let plan = plan_job(&program.canon, motion, start_mm, "mdi")?;
+        let probing = probing_source(&program.canon, "mdi", &text, &opts);
+        Ok(PreparedJob {
+            name: "mdi".into(),
+            total_lines: 1,
+            commands: program.canon.len(),
+            plan,
+            probing,
+            replay: None,
+            parameters: Some(parameters),
+        })
     })
 }
 
@@ -978,5 +989,83 @@ mod tests {
         token.cancel(job_cancel::Why::Disconnected);
         let replay = job.replay.as_ref().expect("replayed");
         assert_eq!(replay.run(&mut |_| true), Ok(true));
+    }
+
+    /// Interpreter options whose subroutine path holds `spin.ngc`, a sub running [`RUNAWAY`]'s
+    /// loop: `o<spin> call` is a one-line runaway MDI.
+    fn with_spin_sub(o: &InterpOptions) -> (InterpOptions, tempfile::TempDir) {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let sub = "o<spin> sub\no1 repeat [99999999]\n#1=[#1+1]\no1 endrepeat\no<spin> endsub\n";
+        std::fs::write(dir.path().join("spin.ngc"), sub).expect("writes");
+        let mut o = o.clone();
+        o.subroutine_path = vec![dir.path().to_path_buf()];
+        (o, dir)
+    }
+
+    #[test]
+    fn a_runaway_mdi_line_is_bounded_by_the_budget_and_cancelled_by_its_token() {
+        let cfg = sim();
+        let (o, m) = (interp_options(&cfg), motion_config(&cfg));
+        let (o, _dir) = with_spin_sub(&o);
+        let t0 = std::time::Instant::now();
+        let e = prepare_mdi_within("o<spin> call", &o, &m, START, Duration::from_millis(50))
+            .unwrap_err();
+        assert_eq!(
+            e,
+            ApiError::Timeout(
+                "MDI preparation took longer than 0.05 s (job.prepare_timeout_s)".into()
+            )
+        );
+        // Hang guard only: without the budget this ran to the loop limit.
+        assert!(t0.elapsed() < Duration::from_secs(60), "{:?}", t0.elapsed());
+        // Cancelled before or while it runs: it ends cancelled. (Its own token: the global
+        // `cancel_current` would also cancel other tests' preparations.)
+        let token = Cancel::new();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let t = std::thread::spawn({
+            let (o, m, token) = (o.clone(), m.clone(), token.clone());
+            move || {
+                let r = job_cancel::with_request_token(&token, || {
+                    prepare_mdi_within("o<spin> call", &o, &m, START, LONG)
+                });
+                let _ = tx.send(r);
+            }
+        });
+        token.cancel(job_cancel::Why::Abort);
+        let r = rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("cancelled preparation ended");
+        t.join().expect("joins");
+        assert_eq!(
+            r.map(|_| ()),
+            Err(ApiError::Failed(
+                "MDI preparation cancelled by job.abort".into()
+            ))
+        );
+        // The lock is free again and an ordinary line plans.
+        let j = prepare_mdi_within("G0 X20", &o, &m, START, LONG).expect("plans");
+        assert!((j.plan.end_mm[0] - 20.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_preparation_cancelled_after_its_last_poll_is_refused_all_the_same() {
+        let cfg = sim();
+        let (o, m) = (interp_options(&cfg), motion_config(&cfg));
+        let token = Cancel::new();
+        // Cancelled inside the preparation, after the interpreter's last poll: the plan
+        // succeeds, the answer is the cancel (an MDI line must not move after job.abort).
+        let r = job_cancel::with_request_token(&token, || {
+            job_cancel::guarded(&PREPARING, "MDI", LONG, |t| {
+                let j = prepare_locked(&inline("G0 X20\nM2\n"), &o, &m, START, 10, t);
+                t.cancel(job_cancel::Why::Abort);
+                j
+            })
+        });
+        assert_eq!(
+            r.map(|_| ()),
+            Err(ApiError::Failed(
+                "MDI preparation cancelled by job.abort".into()
+            ))
+        );
     }
 }

@@ -4,10 +4,14 @@
 //! [99999999]`, a ten-million-iteration loop) used to hold every other `job.load` for minutes.
 //! A preparation now carries a [`Cancel`] token whose flag the interpreter polls every few
 //! thousand blocks and the streaming planner after every chunk. Four things set it:
-//! - `job.abort` and `estop` ([`cancel_current`]): the preparation in progress stops;
+//! - `job.abort`, `estop` and the machine entering e-stop for any other reason (its e-stop
+//!   input, the PLC) ([`cancel_current`]): the preparation in progress stops;
 //! - the requesting client disconnecting (the control server hands its token to the request
 //!   with [`with_request_token`]);
 //! - the wall-clock budget `[job] prepare_timeout_s` ([`Budget`]).
+//!
+//! Job loads and MDI lines share it: [`guarded`] runs either under the one-at-a-time lock
+//! with its token registered and its budget running.
 
 use crate::machine::api::ApiError;
 use std::cell::RefCell;
@@ -70,18 +74,19 @@ impl Cancel {
         self.flag.clone()
     }
 
-    /// The error a preparation cancelled for `why` answers; `budget` names the timeout.
-    pub fn error(why: Why, budget: Duration) -> ApiError {
+    /// The error a preparation (`what`: "job", "MDI") cancelled for `why` answers; `budget`
+    /// names the timeout.
+    pub fn error(what: &str, why: Why, budget: Duration) -> ApiError {
         match why {
             Why::Timeout => ApiError::Timeout(format!(
-                "job preparation took longer than {} s (job.prepare_timeout_s)",
+                "{what} preparation took longer than {} s (job.prepare_timeout_s)",
                 budget.as_secs_f64()
             )),
-            Why::Abort => ApiError::Failed("job preparation cancelled by job.abort".into()),
-            Why::Estop => ApiError::Failed("job preparation cancelled by an e-stop".into()),
-            Why::Disconnected => ApiError::Failed(
-                "job preparation cancelled: the requesting client disconnected".into(),
-            ),
+            Why::Abort => ApiError::Failed(format!("{what} preparation cancelled by job.abort")),
+            Why::Estop => ApiError::Failed(format!("{what} preparation cancelled by an e-stop")),
+            Why::Disconnected => ApiError::Failed(format!(
+                "{what} preparation cancelled: the requesting client disconnected"
+            )),
         }
     }
 }
@@ -162,6 +167,32 @@ impl Drop for Budget {
     }
 }
 
+/// Runs the preparation `f` (`what`: "job", "MDI") one at a time under `lock`, with this
+/// thread's request token ([`request_token`]) registered as the current one and `budget`
+/// running. `f` polls the token it is given; a failure after a cancel answers the cancel's
+/// reason, not the interpreter's "cancelled". A preparation that ends after its cancel
+/// (a block or a plan is not cut in the middle) is refused too: an MDI line planned while
+/// `job.abort` came must not start moving afterwards.
+pub(crate) fn guarded<T>(
+    lock: &Mutex<()>,
+    what: &str,
+    budget: Duration,
+    f: impl FnOnce(&Cancel) -> Result<T, ApiError>,
+) -> Result<T, ApiError> {
+    let token = request_token();
+    let _one_at_a_time = lock.lock().unwrap_or_else(PoisonError::into_inner);
+    let _current = Current::enter(&token);
+    if let Some(why) = token.why() {
+        return Err(Cancel::error(what, why, budget));
+    }
+    let _budget = Budget::start(&token, budget);
+    let out = f(&token);
+    match token.why() {
+        Some(why) => Err(Cancel::error(what, why, budget)),
+        None => out,
+    }
+}
+
 thread_local! {
     static REQUEST: RefCell<Option<Cancel>> = const { RefCell::new(None) };
 }
@@ -204,7 +235,7 @@ mod tests {
             std::thread::sleep(Duration::from_millis(5));
         }
         assert_eq!(c.why(), Some(Why::Timeout));
-        let msg = Cancel::error(Why::Timeout, Duration::from_secs(30)).to_string();
+        let msg = Cancel::error("job", Why::Timeout, Duration::from_secs(30)).to_string();
         assert!(
             msg.contains("longer than 30 s (job.prepare_timeout_s)"),
             "{msg}"

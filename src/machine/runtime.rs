@@ -13,6 +13,7 @@
 use super::api::*;
 use super::devices;
 use super::job::PreparedJob;
+use super::job_cancel;
 use super::safety::Trip;
 use super::servo::can_setup::CanSdo;
 use super::servo::machine_task::MachineCmd;

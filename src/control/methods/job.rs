@@ -21,7 +21,7 @@
 //! A job is interpreted and planned in full (soft limits included) by `job.load`, before any
 //! motion. Progress arrives as `progress` events and in `status.job`. A client that
 //! disconnects mid-job does not stop the job.
-//! Preparing takes at most `[job] prepare_timeout_s` (code 4 past it); `job.abort`, `estop`,
+//! Preparing takes at most `[job] prepare_timeout_s` (code 4 past it); `job.abort`, any e-stop,
 //! or the requesting client hanging up cancels a preparation in progress (code 2, naming why).
 
 use super::{no_params, ok, parse, ControlError};

@@ -6,7 +6,9 @@
 //! ← {"id":1,"error":{"code":3,"message":"mdi:1:4: ..."}}     (G-code error, nothing moves)
 //! ```
 //! The line is interpreted and planned in full first; modal state persists between MDI
-//! lines. Rejected unless the machine is idle and homed.
+//! lines. Rejected unless the machine is idle and homed. Subroutines come from `[gcode]
+//! subroutine_path`. Prepared as a job is: one at a time, within `[job] prepare_timeout_s`
+//! (code 4 past it), cancelled (code 2) by `job.abort`, any e-stop or the client hanging up.
 
 use super::{ok, parse, ControlError};
 use crate::machine::api::MachineApi;

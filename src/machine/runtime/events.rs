@@ -90,6 +90,11 @@ impl Machine {
             return;
         };
         while let Some(e) = rx.mode.pop() {
+            if e.mode == Mode::Estop {
+                // Whatever put the machine in e-stop (its e-stop input, the PLC, the socket):
+                // a preparation in progress stops as for the `estop` method.
+                job_cancel::cancel_current(job_cancel::Why::Estop);
+            }
             let mode = serde_json::to_value(e.mode).unwrap_or(Value::Null);
             tracing::info!("mode: {mode}");
             self.publish("mode", json!({ "mode": mode }));

@@ -219,11 +219,12 @@ impl MachineApi for Machine {
 
     fn mdi(&self, line: &str) -> Result<(), ApiError> {
         self.check_can_run(false)?;
-        let job = job::prepare_mdi(
+        let job = job::prepare_mdi_within(
             line,
             &self.interp_opts_now(),
             &self.motion_cfg,
             self.actual_pose(),
+            self.config.job.prepare_timeout(),
         )?;
         self.start_job(Arc::new(job), false)
     }
