@@ -38,6 +38,11 @@ pub struct MotionArgs {
     /// merge_fraction, override_reserve, min_mm, max_mm).
     #[arg(long = "motion")]
     pub motion_file: Option<PathBuf>,
+    /// Most canonical commands to interpret (default 2,000,000, see
+    /// [`PLAN_MAX_COMMANDS`]): plan and plot hold the whole program and its plan in memory,
+    /// where a job streams; the interpreter's own cap (50 M) let one small file take GBs.
+    #[arg(long)]
+    pub max_commands: Option<usize>,
     /// Velocity limit of X Y Z, mm/s.
     #[arg(long)]
     pub max_vel: Option<f64>,
@@ -164,10 +169,26 @@ pub fn tool_table(
         .or_else(|| machine.and_then(|m| m.tool_table.as_ref().map(|t| t.path.clone())))
 }
 
-/// Interprets `file` into canonical commands with the options of `motion`'s machine.
+/// Default of `--max-commands`: about 0.5 GB of commands and plan held at once.
+pub const PLAN_MAX_COMMANDS: usize = 2_000_000;
+
+/// Interprets `file` into canonical commands with the options of `motion`'s machine, at most
+/// `--max-commands` of them.
 pub fn load(file: &Path, motion: &MotionArgs) -> anyhow::Result<Vec<crate::gcode::Canon>> {
-    let prog = crate::gcode::load_file(file, &motion.interp_options()?)?;
-    Ok(prog.canon)
+    let mut opts = motion.interp_options()?;
+    let max = motion.max_commands.unwrap_or(PLAN_MAX_COMMANDS);
+    opts.limits.max_canon = opts.limits.max_canon.min(max);
+    match crate::gcode::load_file(file, &opts) {
+        Ok(prog) => Ok(prog.canon),
+        Err(e) if e.to_string().contains("too many canonical commands") => {
+            Err(anyhow::Error::new(e).context(format!(
+                "{}: plan and plot hold every command in memory, at most {max} \
+                 (--max-commands)",
+                file.display()
+            )))
+        }
+        Err(e) => Err(e.into()),
+    }
 }
 
 /// Runs the subcommand.

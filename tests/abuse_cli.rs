@@ -1,0 +1,55 @@
+//! The command line's whole-program paths abused (session 10): `hytask plan` and `hytask
+//! plot` hold every canonical command and the plan in memory, where a job streams. A 90-byte
+//! program could make them hold the interpreter's 50 M commands (GBs). Now a documented
+//! limit (`--max-commands`, default `PLAN_MAX_COMMANDS`) refuses it with an error naming it.
+#![allow(clippy::unwrap_used)]
+
+mod support;
+
+use support::*;
+
+/// A loop of `n` iterations of two moves: `2 n` commands from a few lines.
+fn moves(dir: &std::path::Path, n: u64) -> std::path::PathBuf {
+    let p = dir.join("many.ngc");
+    let text = format!("G21 G90\no1 repeat [{n}]\nG1 X1 F600\nG1 X0\no1 endrepeat\nM2\n");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn stderr(out: &std::process::Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn plan_and_plot_refuse_a_program_beyond_max_commands_naming_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let prog = moves(dir.path(), 1_000);
+    let file = prog.to_str().unwrap();
+    let svg = dir.path().join("p.svg");
+    let svg = svg.to_str().unwrap();
+    for args in [
+        vec!["plan", file, "--max-commands", "500"],
+        vec!["plot", file, "-o", svg, "--max-commands", "500"],
+    ] {
+        let out = hytask(&args);
+        assert!(!out.status.success(), "{args:?}");
+        let e = stderr(&out);
+        assert!(
+            e.contains("at most 500 (--max-commands)") && e.contains("limit 500"),
+            "{args:?}: {e}"
+        );
+    }
+    // Within the limit it plans.
+    hytask_ok(&["plan", file, "--max-commands", "5000"]);
+}
+
+#[test]
+fn plan_has_a_default_limit_far_below_the_interpreters() {
+    let dir = tempfile::tempdir().unwrap();
+    // 2.2 M commands: over the default 2 M (before, planned whole after GBs of commands).
+    let prog = moves(dir.path(), 1_100_000);
+    let out = hytask(&["plan", prog.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let e = stderr(&out);
+    assert!(e.contains("at most 2000000 (--max-commands)"), "{e}");
+}
