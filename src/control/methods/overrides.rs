@@ -4,17 +4,25 @@
 //! → {"id":1,"method":"override","params":{"feed":1.5}}
 //! ← {"id":1,"result":{"feed":1.5,"rapid":1.0,"spindle":1.0}}
 //! ```
-//! Absent fields keep their value. Changes apply smoothly, within the axis limits.
+//! Absent fields keep their value. Changes apply smoothly, within the axis limits. A value
+//! between 0 and [`MIN_OVERRIDE`] (a subnormal, say) is refused naming the field.
 
 use super::{parse, ControlError};
 use crate::machine::api::{MachineApi, OverrideRequest};
 use serde_json::Value;
+
+/// Smallest override other than 0 (0.1 %): a subnormal such as `1e-320` was accepted and
+/// ran the servo thread's time scaling on subnormal arithmetic.
+pub const MIN_OVERRIDE: f64 = 1e-3;
 
 fn check(name: &str, v: Option<f64>, max: f64) -> Result<(), ControlError> {
     match v {
         Some(x) if !(0.0..=max).contains(&x) || !x.is_finite() => Err(ControlError::params(
             format!("{name} must be within 0..={max}, got {x:?}"),
         )),
+        Some(x) if x != 0.0 && x < MIN_OVERRIDE => Err(ControlError::params(format!(
+            "{name} must be 0 or at least {MIN_OVERRIDE}, got {x:e}"
+        ))),
         _ => Ok(()),
     }
 }

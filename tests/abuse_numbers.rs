@@ -1,0 +1,77 @@
+//! Numbers of every class in the socket's numeric fields (session 10): subnormals, values
+//! below any machine's resolution, values far above its limits. Expected: an invalid-params
+//! reply (-32602) naming the field, and nothing moves. The real daemon on the simulated
+//! clock; waits are hang guards (60 s and more).
+#![allow(clippy::unwrap_used)]
+
+mod support;
+
+use serde_json::{json, Value};
+use support::*;
+
+/// Calls `method` with `params`, expects -32602 naming `field`; returns the message.
+fn refused(c: &mut hytask::control::client::Client, method: &str, params: Value, field: &str) {
+    let (code, msg) = err(c, method, params.clone());
+    assert_eq!(code, -32602, "{method} {params}: {msg}");
+    assert!(msg.contains(field), "{method} {params}: {msg}");
+}
+
+/// Found in session 10: `jog` at velocity 1e-320 (a subnormal) was accepted and planned a
+/// move of ~1e320 s; distances had the same hole.
+#[test]
+fn absurd_jog_numbers_and_overrides_are_refused_naming_the_field() {
+    let d = Daemon::start_sim();
+    let mut c = d.client();
+    ready(&mut c);
+    let before = ok(&mut c, "status", Value::Null);
+    for v in [1e-320, -5e-324, 1e-9, -1e-4] {
+        refused(
+            &mut c,
+            "jog",
+            json!({"axis": "X", "velocity": v}),
+            "velocity",
+        );
+        let p = json!({"axis": "X", "velocity": v, "distance": 1.0});
+        refused(&mut c, "jog", p, "velocity");
+    }
+    for dist in [1e-320, 1e-9, 1e300, -1.0] {
+        let p = json!({"axis": "X", "velocity": 5.0, "distance": dist});
+        refused(&mut c, "jog", p, "distance");
+    }
+    let (_, msg) = err(&mut c, "jog", json!({"axis": "X", "velocity": 1e-320}));
+    assert!(msg.contains("1e-320") && msg.contains("1e-3"), "{msg}");
+    for field in ["feed", "rapid", "spindle"] {
+        for v in [1e-320, 5e-324, 1e-6] {
+            refused(&mut c, "override", json!({ field: v }), field);
+        }
+    }
+    // Nothing moved, nothing changed.
+    let s = ok(&mut c, "status", Value::Null);
+    assert_eq!(s["mode"], json!("idle"), "{s}");
+    for a in ["X", "Y", "Z"] {
+        assert_eq!(
+            axis(&s, a)["commanded"],
+            axis(&before, a)["commanded"],
+            "{a}"
+        );
+    }
+    assert_eq!(s["overrides"], before["overrides"], "{s}");
+    // The legal edges still work: 0 (a hold) and the smallest override, a slow short jog,
+    // a speed above the axis limit (clamped).
+    let o = ok(&mut c, "override", json!({"feed": 0.0, "rapid": 0.001}));
+    assert_eq!(
+        (o["feed"].as_f64(), o["rapid"].as_f64()),
+        (Some(0.0), Some(0.001))
+    );
+    ok(&mut c, "override", json!({"feed": 1.0, "rapid": 1.0}));
+    ok(
+        &mut c,
+        "jog",
+        json!({"axis": "X", "velocity": -1e300, "distance": 0.5}),
+    );
+    wait_status(&mut c, "the jog ended", GUARD, |s| {
+        s["mode"] == json!("idle")
+    });
+}
+
+const GUARD: std::time::Duration = std::time::Duration::from_secs(120);
