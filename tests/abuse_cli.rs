@@ -53,3 +53,22 @@ fn plan_has_a_default_limit_far_below_the_interpreters() {
     let e = stderr(&out);
     assert!(e.contains("at most 2000000 (--max-commands)"), "{e}");
 }
+
+/// Found in session 10: `hytask plan` of `G1 X10 F0.000…1` (a subnormal feed) overflowed
+/// (a panic in a debug build) sizing its trace; now refused by position as a job is.
+#[test]
+fn plan_refuses_a_subnormal_feed_by_position() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("sub.ngc");
+    let tiny = format!("0.{}1", "0".repeat(318));
+    std::fs::write(&p, format!("G21 G90\nG1 X10 F{tiny}\nM2\n")).unwrap();
+    let out = hytask(&["plan", p.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let e = stderr(&out);
+    assert!(
+        e.contains("sub.ngc:2:")
+            && e.contains("below the slowest accepted")
+            && !e.contains("panicked"),
+        "{e}"
+    );
+}

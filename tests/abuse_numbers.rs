@@ -75,3 +75,33 @@ fn absurd_jog_numbers_and_overrides_are_refused_naming_the_field() {
 }
 
 const GUARD: std::time::Duration = std::time::Duration::from_secs(120);
+
+/// Found in session 10: a feed written with 320 zeros (`F0.000…1`, a subnormal) was planned
+/// as a move of ~1e321 s (and made `hytask plan` overflow). Refused by position, as a
+/// G-code error (code 3), by MDI and by `job.load`.
+#[test]
+fn a_feed_below_any_resolution_is_refused_by_position() {
+    let d = Daemon::start_sim();
+    let mut c = d.client();
+    ready(&mut c);
+    let tiny = format!("0.{}1", "0".repeat(318));
+    let (code, msg) = err(&mut c, "mdi", json!({"line": format!("G1 X10 F{tiny}")}));
+    assert_eq!(code, 3, "{msg}");
+    assert!(
+        msg.contains("mdi:1:") && msg.contains("below the slowest accepted 1e-6"),
+        "{msg}"
+    );
+    let text = "G21 G90\nG0 X20 Y20 Z-5\nG1 X30 F0.0000001\nM2\n";
+    let (code, msg) = err(
+        &mut c,
+        "job.load",
+        json!({"text": text, "name": "slow.ngc"}),
+    );
+    assert_eq!(code, 3, "{msg}");
+    assert!(
+        msg.contains("slow.ngc:3:") && msg.contains("F1e-7"),
+        "{msg}"
+    );
+    let s = ok(&mut c, "status", Value::Null);
+    assert_eq!(s["mode"], json!("idle"), "{s}");
+}
