@@ -9,9 +9,12 @@
 # rest after it. Prints one table: program, LinuxCNC time, hytask planned time, ratio, lower
 # bound (motion::bounds, time-optimal on hytask's planned path).
 #
-#   bash benches/planner_vs_linuxcnc.sh [--no-linuxcnc]
+#   bash benches/planner_vs_linuxcnc.sh [--no-linuxcnc] [--no-cam]
 #
-# Without linuxcnc (or with --no-linuxcnc) the LinuxCNC column shows "n/a". The uspace
+# Besides the generated programs: two dxf2gcode outputs of the corpus and three opencamlib
+# 3D surfacing programs made at run time (PyPI opencamlib 2023.1.11 in target/planner-cam-venv,
+# installed on first use; --no-cam leaves them out). Without linuxcnc (or with --no-linuxcnc)
+# the LinuxCNC column shows "n/a". The uspace
 # servo thread runs without realtime privileges here; the measured time counts servo
 # periods, not wall time, so a loaded machine makes the run slower but not the result
 # different (lost samples are counted and reported).
@@ -22,14 +25,36 @@ work=${PLANNER_VS_LINUXCNC_DIR:-$root/target/planner-vs-linuxcnc}
 rm -rf "$work"
 mkdir -p "$work/programs" "$work/lcnc" "$work/out"
 
-cargo build -q --bin hytask --example planner_programs
+cargo build -q --workspace --bin hytask --example planner_programs
 "$root/target/debug/examples/planner_programs" "$work/programs" >/dev/null
 programs=(square spiral sine trochoidal)
 
-use_lcnc=1
-if [[ ${1:-} == --no-linuxcnc ]] || ! command -v linuxcnc >/dev/null; then
-    use_lcnc=0
+# Real CAM output (issue 14's "larger set of real CAM files"). dxf2gcode's contour cuts of
+# two drawings of tests/gcode/cam (committed in the corpus; the plate, 212 s of mostly
+# F150/F400 cutting, is left out to keep the run short; the _comp variants differ only by
+# G41/G42). Then dense 3D surfacing from opencamlib, generated here in a venv under target/
+# with a pinned version (benches/programs/ocl_programs.py; --no-cam skips it).
+for n in bracket cam; do
+    cp "$root/tests/gcode/corpus/cam_dxf2gcode_$n.ngc" "$work/programs/"
+    programs+=("cam_dxf2gcode_$n")
+done
+cam=1
+for a in "$@"; do [[ $a == --no-cam ]] && cam=0; done
+if ((cam)); then
+    venv=$root/target/planner-cam-venv
+    if ! "$venv/bin/python" -c 'import opencamlib' 2>/dev/null; then
+        python3 -m venv "$venv"
+        "$venv/bin/python" -m pip install -q opencamlib==2023.1.11
+    fi
+    # opencamlib's Python bindings print a line per destroyed Waterline object.
+    "$venv/bin/python" "$root/benches/programs/ocl_programs.py" "$work/programs" >/dev/null
+    programs+=(ocl_dome_zigzag ocl_wave_zigzag ocl_dome_waterline)
 fi
+tool_table=$root/tests/gcode/corpus/tool.tbl
+
+use_lcnc=1
+for a in "$@"; do [[ $a == --no-linuxcnc ]] && use_lcnc=0; done
+command -v linuxcnc >/dev/null || use_lcnc=0
 
 if ((use_lcnc)); then
     # HAL's shared memory left by an earlier run under another user (root, mode 600) makes
@@ -48,6 +73,7 @@ if ((use_lcnc)); then
     mkdir -p "$cfg/programs" "$cfg/out"
     cp "$work"/programs/*.ngc "$cfg/programs/"
     cp "$root/benches/planner_vs_linuxcnc/driver.py" "$cfg/driver.py"
+    cp "$tool_table" "$cfg/tool.tbl"
     chmod +x "$cfg/driver.py"
     : >"$cfg/sim.var"
     axis() { # name joint
@@ -98,6 +124,7 @@ SERVO_PERIOD = 1000000
 [EMCIO]
 EMCIO = io
 CYCLE_TIME = 0.100
+TOOL_TABLE = tool.tbl
 
 [HAL]
 HALFILE = bench.hal
@@ -157,9 +184,9 @@ lcnc_time() {
          END { if (first) printf "%.3f", (last - first) / 1000.0; else print "n/a" }' "$1"
 }
 
-printf '%-12s %12s %12s %8s %12s %10s\n' program "LinuxCNC s" "hytask s" ratio "bound s" "lost"
+printf '%-20s %12s %12s %8s %12s %10s\n' program "LinuxCNC s" "hytask s" ratio "bound s" "lost"
 for p in "${programs[@]}"; do
-    out=$("$root/target/debug/hytask" plan "$work/programs/$p.ngc")
+    out=$("$root/target/debug/hytask" plan --tool-table "$tool_table" "$work/programs/$p.ngc")
     hy=$(awk '/^job time:/ { print $3 }' <<<"$out")
     lb=$(awk '/^optimal bound:/ { print $3 }' <<<"$out")
     lc=n/a lost=n/a ratio=n/a
@@ -168,5 +195,5 @@ for p in "${programs[@]}"; do
         lost=$(cat "$work/out/$p.overruns")
         ratio=$(awk -v a="$hy" -v b="$lc" 'BEGIN { printf "%.3f", a / b }')
     fi
-    printf '%-12s %12s %12s %8s %12s %10s\n' "$p" "$lc" "$hy" "$ratio" "${lb:-n/a}" "$lost"
+    printf '%-20s %12s %12s %8s %12s %10s\n' "$p" "$lc" "$hy" "$ratio" "${lb:-n/a}" "$lost"
 done

@@ -224,6 +224,12 @@ pub struct MotionConfig {
     /// machine without one refuses programs that probe when they reach the probe.
     #[serde(default)]
     pub probe_input: Option<String>,
+    /// Fit runs of short, gently turning XY feed chords into tangent-continuous arcs within
+    /// the G64 tolerance (`motion::arcfit`; Cartesian machines only). Off plans every chord
+    /// with its own corner blend: for comparing plans, or for a machine whose programs must
+    /// run chord by chord.
+    #[serde(default = "default_fit_arcs")]
+    pub fit_arcs: bool,
 }
 
 fn default_servo_thread() -> String {
@@ -241,6 +247,9 @@ fn default_rapid_override() -> f64 {
 fn default_max_feed_override() -> f64 {
     2.0
 }
+fn default_fit_arcs() -> bool {
+    true
+}
 
 impl Default for MotionConfig {
     fn default() -> Self {
@@ -251,6 +260,7 @@ impl Default for MotionConfig {
             rapid_override: default_rapid_override(),
             max_feed_override: default_max_feed_override(),
             probe_input: None,
+            fit_arcs: default_fit_arcs(),
         }
     }
 }

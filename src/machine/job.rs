@@ -406,6 +406,7 @@ pub fn motion_config(cfg: &MachineConfig) -> MotionConfig {
     m.lookahead_moves = cfg.motion.lookahead as usize;
     m.default_tolerance_mm = cfg.motion.g64_tolerance;
     m.max_feed_override = cfg.motion.max_feed_override;
+    m.fit_arcs = cfg.motion.fit_arcs;
     m.kinematics = match cfg.machine.kinematics() {
         crate::config::Kinematics::Identity => KinematicsConfig::Identity,
         crate::config::Kinematics::Scara { link1_mm, link2_mm } => {

@@ -339,9 +339,141 @@ pub fn fit_chain(
     Some(out)
 }
 
+/// An arc of a fitted chain with the chord vertices it passes (issue 14: the reported line
+/// advances at each, see [`super::line_marks`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Marked {
+    /// The arc.
+    pub fitted: Fitted,
+    /// Chord the arc starts on (1-based: chord `k` runs from `pts[k - 1]` to `pts[k]`).
+    pub chord: usize,
+    /// Arc lengths (ascending, within the arc) at which it passes the next vertices: after
+    /// the `n`-th the tool is on chord `chord + n`.
+    pub marks: Vec<f64>,
+}
+
+/// Arc length of the foot of `p` on the circle (or line) of `arc`, measured from its start
+/// (negative before it, beyond `length_mm` after it).
+pub fn project(arc: &ArcPiece, p: V2) -> f64 {
+    let t0 = arc.tangent_at(0.0);
+    let d = sub(p, arc.start);
+    let k = arc.curvature_per_mm;
+    if (k * arc.length_mm.max(norm(d))).abs() < 1e-9 {
+        return dot(d, t0);
+    }
+    let c = [arc.start[0] - t0[1] / k, arc.start[1] + t0[0] / k];
+    let (a, b) = (sub(arc.start, c), sub(p, c));
+    cross(a, b).atan2(dot(a, b)) / k
+}
+
+/// The chain `fitted` (from [`fit_chain`] over `pts`) with the vertices each arc passes,
+/// every arc split (within its circle) so that none passes more than `max_marks` vertices.
+pub fn mark_vertices(fitted: &[Fitted], pts: &[V2], max_marks: usize) -> Vec<Marked> {
+    let mut out = Vec::with_capacity(fitted.len());
+    // Next vertex to pass; the tool is on chord `v`.
+    let mut v = 1;
+    for f in fitted {
+        let len = f.arc.length_mm;
+        let (chord, mut marks) = (v, Vec::new());
+        while v < f.vertex {
+            let s = project(&f.arc, pts[v]);
+            if !f.ends_at_vertex && s >= len {
+                break; // on the other arc of the biarc
+            }
+            let prev = marks.last().copied().unwrap_or(0.0);
+            marks.push(s.clamp(prev, len));
+            v += 1;
+        }
+        if f.ends_at_vertex {
+            v = f.vertex + 1;
+        }
+        split_marked(
+            Marked {
+                fitted: *f,
+                chord,
+                marks,
+            },
+            max_marks,
+            &mut out,
+        );
+    }
+    out
+}
+
+/// Splits `m` at its marks until no piece has more than `max_marks` (the piece after a split
+/// starts on the vertex where it was cut), appending the pieces to `out`.
+pub fn split_marked(mut m: Marked, max_marks: usize, out: &mut Vec<Marked>) {
+    while m.marks.len() > max_marks {
+        let cut = m.marks[max_marks];
+        let arc = m.fitted.arc;
+        let rest = ArcPiece {
+            start: arc.point_at(cut),
+            heading_rad: arc.heading_rad + arc.curvature_per_mm * cut,
+            curvature_per_mm: arc.curvature_per_mm,
+            length_mm: arc.length_mm - cut,
+        };
+        let tail = Marked {
+            fitted: Fitted {
+                arc: rest,
+                ..m.fitted
+            },
+            chord: m.chord + max_marks + 1,
+            marks: m.marks[max_marks + 1..].iter().map(|x| x - cut).collect(),
+        };
+        m.marks.truncate(max_marks);
+        m.fitted.arc.length_mm = cut;
+        m.fitted.ends_at_vertex = false;
+        out.push(m);
+        m = tail;
+    }
+    out.push(m);
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn marks_follow_the_vertices_and_split_long_arcs() {
+        // 31 chords of 0.1 mm on a circle of radius 5, fitted as one arc.
+        let pts: Vec<V2> = (0..=31)
+            .map(|k| {
+                let a = k as f64 * 0.02;
+                [5.0 * a.sin(), 5.0 - 5.0 * a.cos()]
+            })
+            .collect();
+        let arc = ArcPiece {
+            start: pts[0],
+            heading_rad: 0.0,
+            curvature_per_mm: 0.2,
+            length_mm: 31.0 * 0.1,
+        };
+        let fitted = [Fitted {
+            arc,
+            vertex: 31,
+            ends_at_vertex: true,
+        }];
+        let m = mark_vertices(&fitted, &pts, 10);
+        // 30 inner vertices: pieces of 10 marks, each cut at the 11th.
+        assert_eq!(
+            m.iter().map(|x| x.marks.len()).collect::<Vec<_>>(),
+            [10, 10, 8]
+        );
+        assert_eq!(m.iter().map(|x| x.chord).collect::<Vec<_>>(), [1, 12, 23]);
+        let total: f64 = m.iter().map(|x| x.fitted.arc.length_mm).sum();
+        assert!((total - 3.1).abs() < 1e-12);
+        // Each mark is at its vertex: k·0.1 mm along the whole arc.
+        let mut offset = 0.0;
+        for piece in &m {
+            for (n, s) in piece.marks.iter().enumerate() {
+                let vertex = piece.chord + n;
+                assert!((offset + s - vertex as f64 * 0.1).abs() < 1e-9, "{vertex}");
+            }
+            offset += piece.fitted.arc.length_mm;
+        }
+        assert!(m[..2].iter().all(|x| !x.fitted.ends_at_vertex));
+        assert!(m[2].fitted.ends_at_vertex);
+    }
 
     #[test]
     fn arc_to_and_offset_agree() {

@@ -151,6 +151,7 @@ mod tests {
                 curvature_per_mm: 0.0,
                 heading_rad: 0.0,
                 step_jerk_mm_s3: 0.0,
+                line_marks: Default::default(),
             };
             let end = seg.integrated_end_mm();
             assert!(

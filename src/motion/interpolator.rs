@@ -449,9 +449,9 @@ impl Interpolator {
             }
             if let Some(s) = self.seg {
                 self.out.pose_mm = s.pose_at(self.t_s);
-                self.out.line = s.line;
-                self.out.distance_to_go_mm =
-                    (s.length_mm - s.travelled_mm(self.t_s)).max(0.0) + s.move_rest_mm;
+                let travelled = s.travelled_mm(self.t_s);
+                self.out.line = s.line_at(travelled);
+                self.out.distance_to_go_mm = (s.length_mm - travelled).max(0.0) + s.move_rest_mm;
             } else {
                 self.out.distance_to_go_mm = 0.0;
             }

@@ -10,6 +10,7 @@
 use super::arcfit::{self, V2};
 use super::blend::Corner;
 use super::limits::Limits;
+use super::line_marks::{LineMarks, MAX_MARKS};
 use super::merge::merge;
 use super::moves::{Junction, Move, MoveKind, Step};
 use super::profile::Tangential;
@@ -34,6 +35,9 @@ struct Prepared {
     aux_after: Vec<AuxItem>,
     /// Index of the last raw move merged into this one.
     last: usize,
+    /// Arc lengths at which a fitted arc passes the vertices of the source lines after
+    /// `mv.line` (ascending, at most `MAX_MARKS`; empty for a line).
+    marks: Vec<f64>,
 }
 
 /// Moves of one run planned together before a chunk of them is committed (see
@@ -130,6 +134,7 @@ impl Lookahead {
                     curvature_per_mm: 0.0,
                     heading_rad: 0.0,
                     step_jerk_mm_s3: 0.0,
+                    line_marks: LineMarks::NONE,
                 }));
             }
         }
@@ -262,6 +267,7 @@ fn line_move(mv: Move, j: usize, aux: &mut [Option<Vec<AuxItem>>], lim: &Limits)
         vcap_mm_s: lim.vcap(&u).min(mv.feed_mm_s),
         tang: lim.tangential(&u),
         aux_after: aux.get_mut(j).and_then(Option::take).unwrap_or_default(),
+        marks: Vec::new(),
         last: j,
     }
 }
@@ -369,10 +375,21 @@ fn fit_arcs(moves: &[Move], i: usize, j: usize, lim: &Limits) -> Option<Vec<Prep
     pts.push([first.start_mm[0], first.start_mm[1]]);
     pts.extend(moves[i..=j].iter().map(|m| [m.end_mm[0], m.end_mm[1]]));
     let dk_max = lim.step_budget_mm_s2() / (first.feed_mm_s * first.feed_mm_s);
+    // The reported line advances by one at each vertex mark (`LineMarks`): fit only runs of
+    // consecutive source lines.
+    if moves[i..=j].windows(2).any(|w| w[1].line != w[0].line + 1) {
+        return None;
+    }
     let fitted = arcfit::fit_chain(&pts, t_start, t_end, tolerance_mm, dk_max)?;
-    let mut out = Vec::with_capacity(fitted.len());
+    let marked = arcfit::mark_vertices(&fitted, &pts, MAX_MARKS);
+    let mut out = Vec::with_capacity(marked.len());
     let mut start = first.start_mm;
-    for f in fitted {
+    for arcfit::Marked {
+        fitted: f,
+        chord,
+        marks,
+    } in marked
+    {
         let raw = &moves[i + f.vertex - 1];
         let mut end = raw.end_mm;
         if !f.ends_at_vertex {
@@ -399,7 +416,7 @@ fn fit_arcs(moves: &[Move], i: usize, j: usize, lim: &Limits) -> Option<Vec<Prep
             } else {
                 first.junction
             },
-            line: raw.line,
+            line: moves[(i + chord - 1).min(j)].line,
             ..*first
         };
         start = end;
@@ -414,6 +431,7 @@ fn fit_arcs(moves: &[Move], i: usize, j: usize, lim: &Limits) -> Option<Vec<Prep
             tang,
             aux_after: Vec::new(),
             last: i + f.vertex - 1,
+            marks,
         });
     }
     Some(out)
@@ -721,6 +739,15 @@ fn emit_move(
         if *done >= m.len_mm - 1e-9 {
             step = step.max(step_jerk(s1, dk_out));
         }
+        // Vertices passed before this piece advance its first line; those within it are
+        // its marks (at most MAX_MARKS per move, so `new` cannot refuse them).
+        let before = m.marks.iter().take_while(|&&x| x <= from).count();
+        let within: Vec<f64> = m.marks[before..]
+            .iter()
+            .take_while(|&&x| x <= *done)
+            .map(|x| if len > 0.0 { (x - from) / len } else { 0.0 })
+            .collect();
+        let line_marks = LineMarks::new(&within).unwrap_or_default();
         let seg = Segment {
             start_mm: *pos,
             end_mm: end,
@@ -729,7 +756,7 @@ fn emit_move(
             duration_s: dur,
             jerk_s: jerk,
             kind,
-            line,
+            line: line + before as u32,
             length_mm: len,
             move_rest_mm: (m.len_mm - *done).max(0.0),
             override_cap: 1.0,
@@ -742,6 +769,7 @@ fn emit_move(
             curvature_per_mm: m.curv,
             heading_rad: m.heading + m.curv * from,
             step_jerk_mm_s3: step,
+            line_marks,
         };
         *pos = end;
         push(out, lim, seg);
@@ -814,6 +842,7 @@ fn emit_move(
                 curvature_per_mm: 0.0,
                 heading_rad: 0.0,
                 step_jerk_mm_s3: 0.0,
+                line_marks: LineMarks::NONE,
             };
             push(out, lim, seg);
         }

@@ -80,6 +80,7 @@ pub mod from_canon;
 pub mod interpolator;
 pub mod kinematics;
 pub mod limits;
+pub mod line_marks;
 pub mod lookahead;
 pub mod merge;
 pub mod moves;

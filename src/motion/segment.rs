@@ -2,6 +2,7 @@
 //! and the interpolator (servo thread). Every item is `Copy` and fixed-size, with no heap
 //! pointer inside, so it can travel through a lock-free ring buffer.
 
+use super::line_marks::LineMarks;
 use super::profile::Shape;
 use crate::gcode::canon::{InputKind, OverrideKind, ProbeKind, SpindleDir, WaitKind};
 use crate::gcode::NUM_AXES;
@@ -75,6 +76,9 @@ pub struct Segment {
     /// tangent arcs, or an arc and a line, meet) shows on the servo-period trace, mm/s³:
     /// counted in [`Segment::peaks`] so override and hold headroom allow for it.
     pub step_jerk_mm_s3: f64,
+    /// Where the segment passes the vertices of the source lines after `line` (an arc
+    /// fitted over several G1 lines, issue 14): the reported line advances at each.
+    pub line_marks: LineMarks,
 }
 
 impl Segment {
@@ -124,6 +128,15 @@ impl Segment {
             *p += (self.v0_mm_s[i] + self.v1_mm_s[i]) * h;
         }
         p
+    }
+
+    /// Source line executing after `travelled_mm` of this segment: `line`, advanced by one at
+    /// each vertex mark passed (realtime: no allocation).
+    pub fn line_at(&self, travelled_mm: f64) -> u32 {
+        if self.line_marks.is_empty() || self.length_mm <= 0.0 {
+            return self.line;
+        }
+        self.line + self.line_marks.passed(travelled_mm / self.length_mm)
     }
 
     /// Path length covered after `t_s`, mm (exact for straight segments, the speed-weighted
