@@ -285,7 +285,7 @@ impl Interp<'_> {
         let m19 = b.mcode(7) == Some(19);
         let g76 = motion == 760 && (g1.is_some() || axis);
         // G70/G71/G72 (and .1): Q profile, D/E/P (G70) or D/I/R (G71, G72).
-        let g7x = matches!(g1, Some(700 | 710 | 711 | 720 | 721));
+        let g7x = matches!(g1, Some(700 | 710..=712 | 720..=722));
         if !b"ijkredhpql".iter().any(|&c| b.has(c)) {
             return Ok(());
         }

@@ -56,6 +56,19 @@ impl Frame {
 /// for at its end (0: a sharp corner).
 type ProfileMove = (f64, f64, Option<((f64, f64), bool)>, f64);
 
+/// What a roughing cycle does with the levels of the part and its pockets.
+#[derive(Clone, Copy, PartialEq)]
+enum Kind {
+    /// G71/G72: passes at the levels start − k·I, then pockets roughed at those levels.
+    Rough,
+    /// G71.1/G72.1: the same passes; pockets bridged at their lip's level.
+    Bridge,
+    /// G71.2/G72.2 (LinuxCNC 2.9): no passes above the profile; the pass along it roughs
+    /// each pocket at levels counted down by I from the pocket's lip (a second roughing
+    /// tool, after G7x.1 bridged them).
+    Profile,
+}
+
 /// The words of a G7x block.
 struct Words {
     d: f64,
@@ -71,8 +84,10 @@ impl Interp<'_> {
             700 => "G70",
             710 => "G71",
             711 => "G71.1",
+            712 => "G71.2",
             720 => "G72",
-            _ => "G72.1",
+            721 => "G72.1",
+            _ => "G72.2",
         };
         if self.s.plane != Plane::Xz {
             return Err(self.err(col, format!("{name} requires the XZ plane (G18)")));
@@ -173,7 +188,12 @@ impl Interp<'_> {
             }
             let contour =
                 geom::offset(&els, w.d).map_err(|e| self.err(col, format!("{name}: {e}")))?;
-            rough(&contour, s0, &w, m.is_multiple_of(10), &mut cy);
+            let kind = match m % 10 {
+                0 => Kind::Rough,
+                1 => Kind::Bridge,
+                _ => Kind::Profile,
+            };
+            rough(&contour, s0, &w, kind, &mut cy);
         }
         if cy.over {
             return Err(self.err(
@@ -456,8 +476,8 @@ impl Cycle<'_> {
 }
 
 /// The roughing passes, then the finishing pass along the contour (with pockets roughed
-/// level by level when `pockets`).
-fn rough(contour: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
+/// level by level, or bridged, as `kind` says).
+fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
     let Some(first) = contour.first() else {
         return;
     };
@@ -477,7 +497,7 @@ fn rough(contour: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
     };
     let level = |k: u32| s0[0] - f64::from(k) * w.i;
     let mut k = 0;
-    while level(k) > ps[0] + 1e-7 && !cy.over {
+    while kind != Kind::Profile && level(k) > ps[0] + 1e-7 && !cy.over {
         let u = level(k);
         let vk = entry_v(u);
         cy.traverse([u, vk]);
@@ -491,7 +511,7 @@ fn rough(contour: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
         k += 1;
     }
     cy.traverse(ps);
-    finish_along(&els, s0, w, pockets, cy);
+    finish_along(&els, s0, w, kind, cy);
 }
 
 /// The retract after a pass fed from `v0` to `v1`: R, but at most half the pass, so the
@@ -501,7 +521,8 @@ fn retract(r: f64, v0: f64, v1: f64) -> f64 {
 }
 
 /// The last pass: along the contour, roughing (or bridging) each pocket on the way.
-fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
+fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
+    let pockets = kind != Kind::Bridge;
     let mut i = 0;
     let mut cur = els[0].a;
     while i < els.len() {
@@ -534,17 +555,21 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
             continue;
         }
         let bottom = geom::min_between(els, i + 1, e.b, j, back);
-        let mut k = ((s0[0] - ul) / w.i - 1e-9).ceil().max(0.0) as u32;
+        // G7x: the cycle's levels below the lip; G7x.2: the lip's level, then down by I.
+        let (top, mut k) = match kind {
+            Kind::Profile => (ul, 0),
+            _ => (s0[0], ((s0[0] - ul) / w.i - 1e-9).ceil().max(0.0) as u32),
+        };
         let (mut ci, mut cp) = (i + 1, e.b);
         loop {
-            let u = s0[0] - f64::from(k) * w.i;
+            let u = top - f64::from(k) * w.i;
             if u <= bottom + 1e-7 || cy.over {
                 break;
             }
             let Some((ai, a)) = geom::first_drop(els, ci, cp, u) else {
                 break;
             };
-            feed_along(els, ci, cp, ai, a, cy);
+            feed_along(els, ci, cp, ai, a, kind == Kind::Rough, cy);
             let Some((_, bpt)) = geom::first_reach(els, ai, a, u, true) else {
                 break;
             };
@@ -571,12 +596,15 @@ fn next_from(els: &[El], j: usize, p: Pt) -> (usize, Pt) {
     }
 }
 
-/// Feeds along the contour from (`i`, `p`) to (`j`, `q`).
-fn feed_along(els: &[El], i: usize, p: Pt, j: usize, q: Pt, cy: &mut Cycle) {
+/// Feeds along the contour from (`i`, `p`) to (`j`, `q`); `zero` makes the zero-length
+/// feed rs274's G7x makes when `p` is `q`.
+fn feed_along(els: &[El], i: usize, p: Pt, j: usize, q: Pt, zero: bool, cy: &mut Cycle) {
     if i == j {
         if geom::same(p, q) {
-            // rs274 feeds to the pocket level even when the lip is on it.
-            cy.feed(q);
+            // rs274's G7x feeds to the pocket level even when the lip is on it (G7x.2 not).
+            if zero {
+                cy.feed(q);
+            }
         } else {
             cy.element(&els[i].piece(p, q));
         }
