@@ -162,6 +162,19 @@ impl ProbeKind {
     }
 }
 
+/// The call of a LinuxCNC log comment (see [`CanonCmd::Log`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogKind {
+    /// `(LOGOPEN,file)`: open (truncate) the log file.
+    Open,
+    /// `(LOGAPPEND,file)`: open the log file for appending.
+    Append,
+    /// `(LOG,text)`: write a line.
+    Write,
+    /// `(LOGCLOSE)`: close the log file.
+    Close,
+}
+
 /// One canonical machining command. Variants mirror LinuxCNC canon calls; the doc comment of
 /// each names the call `rs274 -g` prints for it.
 #[derive(Debug, Clone, PartialEq)]
@@ -312,6 +325,15 @@ pub enum CanonCmd {
     Print(String),
     /// `COMMENT("…")`.
     Comment(String),
+    /// LinuxCNC's log comments: `LOGOPEN("file")`, `LOGAPPEND("file")`, `LOG("…")` (its
+    /// parameters substituted) and `LOGCLOSE()`. LinuxCNC's task writes the file as the
+    /// call is executed (probe logs); rs274 only prints the call.
+    Log {
+        /// Which call.
+        kind: LogKind,
+        /// The file name, or the line to write (empty for `LOGCLOSE`).
+        text: String,
+    },
     /// `PROGRAM_STOP()` (M0).
     ProgramStop,
     /// `OPTIONAL_PROGRAM_STOP()` (M1).

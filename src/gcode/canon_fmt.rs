@@ -6,7 +6,8 @@
 //! `hytask gcode canon`.
 
 use super::canon::{
-    Canon, CanonCmd, FeedMode, LengthUnits, MotionControl, OverrideKind, Plane, Pose, SpindleDir,
+    Canon, CanonCmd, FeedMode, LengthUnits, LogKind, MotionControl, OverrideKind, Plane, Pose,
+    SpindleDir,
 };
 use std::io::Write as _;
 
@@ -305,6 +306,14 @@ pub fn push_call(out: &mut Vec<u8>, cmd: &CanonCmd) -> bool {
             let _ = write!(out, "MESSAGE(\"{m}\")");
         }
         CanonCmd::Print(m) => push_str(out, m),
+        CanonCmd::Log { kind, text } => {
+            let _ = match kind {
+                LogKind::Open => write!(out, "LOGOPEN(\"{text}\")"),
+                LogKind::Append => write!(out, "LOGAPPEND(\"{text}\")"),
+                LogKind::Write => write!(out, "LOG(\"{text}\")"),
+                LogKind::Close => write!(out, "LOGCLOSE()"),
+            };
+        }
         CanonCmd::Comment(m) => {
             let _ = write!(out, "COMMENT(\"{m}\")");
         }

@@ -264,6 +264,7 @@ pub fn fold_from(
             // Interpreter bookkeeping with no effect on motion: (PRINT,…) goes to the
             // interpreter's log, tool-table edits arrive as UseToolLengthOffset when used.
             CanonCmd::Print(_)
+            | CanonCmd::Log { .. }
             | CanonCmd::PalletShuttle
             | CanonCmd::OnReset
             | CanonCmd::SetFeedReference

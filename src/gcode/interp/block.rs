@@ -285,7 +285,7 @@ impl Interp<'_> {
         let m19 = b.mcode(7) == Some(19);
         let g76 = motion == 760 && (g1.is_some() || axis);
         // G70/G71/G72 (and .1): Q profile, D/E/P (G70) or D/I/R (G71, G72).
-        let g7x = matches!(g1, Some(700 | 710 | 711 | 720 | 721));
+        let g7x = matches!(g1, Some(700 | 710..=712 | 720..=722));
         if !b"ijkredhpql".iter().any(|&c| b.has(c)) {
             return Ok(());
         }
@@ -391,12 +391,34 @@ impl Interp<'_> {
             let body = self.substitute(&text[skip + 6..]);
             return self.emit(CanonCmd::Print(body));
         }
+        if let Some(cmd) = self.log_comment(&lower, &text[skip..]) {
+            return self.emit(cmd);
+        }
         // rs274 drops the spaces a comment starts with (`( a )` is COMMENT("a ")), and
         // an empty `()` altogether (`( )` is COMMENT("")).
         if text.is_empty() {
             return Ok(());
         }
         self.emit(CanonCmd::Comment(text[skip..].to_string()))
+    }
+
+    /// LinuxCNC's log comments (`lower` is `text` in lower case): the file name of
+    /// LOGOPEN/LOGAPPEND as written, LOG's text with its parameters substituted; LOGCLOSE
+    /// only alone (with words after it, it is a comment, as in rs274).
+    fn log_comment(&self, lower: &str, text: &str) -> Option<CanonCmd> {
+        use crate::gcode::canon::LogKind;
+        let (kind, text) = if lower.starts_with("logopen,") {
+            (LogKind::Open, text[8..].to_string())
+        } else if lower.starts_with("logappend,") {
+            (LogKind::Append, text[10..].to_string())
+        } else if lower.starts_with("log,") {
+            (LogKind::Write, self.substitute(&text[4..]))
+        } else if lower == "logclose" {
+            (LogKind::Close, String::new())
+        } else {
+            return None;
+        };
+        Some(CanonCmd::Log { kind, text })
     }
 
     /// `(DEBUG,…)`/`(PRINT,…)` text with `#n` and `#<name>` replaced by `%f` values, and

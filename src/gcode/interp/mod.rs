@@ -468,21 +468,7 @@ impl<'a> Interp<'a> {
                 self.loc.file = self.files[f].name.clone();
                 return Err(self.err(1, "File ended with no percent sign or program end"));
             }
-            self.steps += 1;
-            if self.steps > self.opts.limits.max_blocks {
-                return Err(self.err(
-                    1,
-                    format!(
-                        "Program executes too many blocks (limit {}); endless loop?",
-                        self.opts.limits.max_blocks
-                    ),
-                ));
-            }
-            if self.steps.is_multiple_of(super::CANCEL_POLL_BLOCKS)
-                && (self.opts.cancel.as_ref()).is_some_and(|c| c.load(Ordering::Relaxed))
-            {
-                return Err(self.err(1, "Interpretation cancelled"));
-            }
+            self.count_step()?;
             self.block_start = self.count;
             self.step(f, l)?;
             if self.pending_probe.is_some() || self.pending_wait.is_some() {
@@ -491,6 +477,26 @@ impl<'a> Interp<'a> {
             if matches!(&self.out, Sink::Canon(v) if v.len() >= self.yield_after) {
                 return Ok(());
             }
+        }
+        Ok(())
+    }
+
+    /// Counts one executed line against the block limit, and polls for cancellation.
+    fn count_step(&mut self) -> Result<(), GcodeError> {
+        self.steps += 1;
+        if self.steps > self.opts.limits.max_blocks {
+            return Err(self.err(
+                1,
+                format!(
+                    "Program executes too many blocks (limit {}); endless loop?",
+                    self.opts.limits.max_blocks
+                ),
+            ));
+        }
+        if self.steps.is_multiple_of(super::CANCEL_POLL_BLOCKS)
+            && (self.opts.cancel.as_ref()).is_some_and(|c| c.load(Ordering::Relaxed))
+        {
+            return Err(self.err(1, "Interpretation cancelled"));
         }
         Ok(())
     }
@@ -581,6 +587,13 @@ impl<'a> Interp<'a> {
         let mut b = Block::default();
         self.block_into(&line.words, &mut b)?;
         self.diameter_words(&mut b);
+        self.assign(line)?;
+        self.loc.col = 1;
+        self.exec_block(&b, line)
+    }
+
+    /// The parameter assignments of `line`: every value is evaluated before any is set.
+    fn assign(&mut self, line: &Line) -> Result<(), GcodeError> {
         let mut sets: Vec<(Result<usize, Box<str>>, f64)> = Vec::with_capacity(line.assigns.len());
         for a in &line.assigns {
             let t = match &a.target {
@@ -610,8 +623,7 @@ impl<'a> Interp<'a> {
                 Err(n) => self.p.set_named(&n, v),
             }
         }
-        self.loc.col = 1;
-        self.exec_block(&b, line)
+        Ok(())
     }
 
     /// LinuxCNC re-reads the machine position after a tool change, before the next block:

@@ -83,7 +83,7 @@ impl Interp<'_> {
             330 => self.spindle_synced_feed(b),
             331 => self.rigid_tap(b),
             760 => self.threading_cycle(b),
-            700 | 710 | 711 | 720 | 721 => self.profile_cycle(m, b),
+            700 | 710..=712 | 720..=722 => self.profile_cycle(m, b),
             53 => self.nurbs_end(b),
             382..=385 => self.probe(m, b),
             800 => {

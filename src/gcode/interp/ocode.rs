@@ -261,22 +261,7 @@ impl Interp<'_> {
                         }
                     }
                 };
-                let mut saved = [0.0; 30];
-                saved.copy_from_slice(&self.p.numbered[1..31]);
-                // The callee sees its arguments in #1.. and 0 in the rest of #1-#30.
-                for i in 0..30 {
-                    self.p.numbered[1 + i] = args.get(i).copied().unwrap_or(0.0);
-                }
-                self.frames.push(Frame {
-                    ret: self.pc,
-                    saved,
-                    label: label.clone(),
-                    fanuc: None,
-                });
-                self.p.locals.push(HashMap::new());
-                self.s.saved.push(None);
-                self.s.auto_restore.push(false);
-                self.pc = (target.0, target.1 + 1);
+                self.enter_sub(label.clone(), target, &args);
                 Ok(())
             }
             OKind::If => {
@@ -419,6 +404,27 @@ impl Interp<'_> {
                 Ok(())
             }
         }
+    }
+
+    /// Enters subroutine `label`, defined at `target` (file, line of its `sub`), with
+    /// `args`: the callee sees them in #1.. and 0 in the rest of #1-#30; it returns to the
+    /// current program counter.
+    pub(super) fn enter_sub(&mut self, label: Box<str>, target: (usize, usize), args: &[f64]) {
+        let mut saved = [0.0; 30];
+        saved.copy_from_slice(&self.p.numbered[1..31]);
+        for i in 0..30 {
+            self.p.numbered[1 + i] = args.get(i).copied().unwrap_or(0.0);
+        }
+        self.frames.push(Frame {
+            ret: self.pc,
+            saved,
+            label,
+            fanuc: None,
+        });
+        self.p.locals.push(HashMap::new());
+        self.s.saved.push(None);
+        self.s.auto_restore.push(false);
+        self.pc = (target.0, target.1 + 1);
     }
 
     /// Returns from the innermost call: M73's auto-restore, the caller's `#1`–`#30` (not

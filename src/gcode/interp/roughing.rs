@@ -1,9 +1,10 @@
 //! LinuxCNC's lathe profile cycles: G71/G71.1 (roughing along Z), G72/G72.1 (roughing
 //! along X, facing) and G70 (finishing). The profile is the motion of the O-subroutine
-//! named by Q (G0/G1/G2/G3; G0 counts as G1, everything else in it is ignored), starting
-//! from the cycle's start point (the current position, or the X/Z of the block). An A word
-//! on a line of it rounds the corner at the line's end with that radius, as rs274 does
-//! (LinuxCNC's lathe_g70_71_demo.ngc); the A axis does not move.
+//! named by Q (G0/G1/G2/G3; G0 counts as G1), executed in a recording mode (its O-word
+//! statements and assignments run, its moves are recorded, its other words are ignored),
+//! starting from the cycle's start point (the current position, or the X/Z of the
+//! block). An A word on a line of it rounds the corner at the line's end with that
+//! radius, as rs274 does (LinuxCNC's lathe_g70_71_demo.ngc); the A axis does not move.
 //!
 //! Roughing: D is the finishing allowance left along the profile, I the depth of each
 //! pass (default 1), R the retract (default 0.5). Passes step down from the start point by
@@ -20,6 +21,7 @@ use crate::gcode::canon::{CanonCmd, Plane};
 use crate::gcode::modal::Block;
 use crate::gcode::parser::{self, OKind};
 use crate::gcode::GcodeError;
+use std::sync::Arc;
 
 /// Maps X/Z onto the cycle frame (u: pass level, v: feed direction) and back.
 #[derive(Clone, Copy)]
@@ -54,6 +56,19 @@ impl Frame {
 /// for at its end (0: a sharp corner).
 type ProfileMove = (f64, f64, Option<((f64, f64), bool)>, f64);
 
+/// What a roughing cycle does with the levels of the part and its pockets.
+#[derive(Clone, Copy, PartialEq)]
+enum Kind {
+    /// G71/G72: passes at the levels start − k·I, then pockets roughed at those levels.
+    Rough,
+    /// G71.1/G72.1: the same passes; pockets bridged at their lip's level.
+    Bridge,
+    /// G71.2/G72.2 (LinuxCNC 2.9): no passes above the profile; the pass along it roughs
+    /// each pocket at levels counted down by I from the pocket's lip (a second roughing
+    /// tool, after G7x.1 bridged them).
+    Profile,
+}
+
 /// The words of a G7x block.
 struct Words {
     d: f64,
@@ -69,8 +84,10 @@ impl Interp<'_> {
             700 => "G70",
             710 => "G71",
             711 => "G71.1",
+            712 => "G71.2",
             720 => "G72",
-            _ => "G72.1",
+            721 => "G72.1",
+            _ => "G72.2",
         };
         if self.s.plane != Plane::Xz {
             return Err(self.err(col, format!("{name} requires the XZ plane (G18)")));
@@ -171,7 +188,12 @@ impl Interp<'_> {
             }
             let contour =
                 geom::offset(&els, w.d).map_err(|e| self.err(col, format!("{name}: {e}")))?;
-            rough(&contour, s0, &w, m.is_multiple_of(10), &mut cy);
+            let kind = match m % 10 {
+                0 => Kind::Rough,
+                1 => Kind::Bridge,
+                _ => Kind::Profile,
+            };
+            rough(&contour, s0, &w, kind, &mut cy);
         }
         if cy.over {
             return Err(self.err(
@@ -240,7 +262,11 @@ impl Interp<'_> {
     }
 
     /// Reads the motion of subroutine `o<q>` from `start`: per move its end X, Z and, for
-    /// an arc, its centre and direction (counter-clockwise in the Z/X plane).
+    /// an arc, its centre and direction (counter-clockwise in the Z/X plane). The
+    /// subroutine is called and executed, as rs274 does, in a recording mode: its O-word
+    /// statements (loops, conditions, calls) and parameter assignments run, and each
+    /// motion line is recorded into the profile instead of moving (`#<_x>`/`#<_z>`
+    /// follow the recorded position); other words are ignored.
     fn read_profile(
         &mut self,
         q: f64,
@@ -250,23 +276,13 @@ impl Interp<'_> {
     ) -> Result<Vec<ProfileMove>, GcodeError> {
         let label = format!("{}", q.round() as i64);
         let f = self.pc.0;
-        let lines = self.label_lines(f, &label);
-        let sub = lines.iter().copied().find(|&l| {
+        let sub = self.label_lines(f, &label).into_iter().find(|&l| {
             self.files[f]
                 .olines
                 .get(&l)
                 .is_some_and(|o| o.kind == OKind::Sub)
         });
-        let end = sub.and_then(|s| {
-            lines.iter().copied().find(|&l| {
-                l > s
-                    && self.files[f]
-                        .olines
-                        .get(&l)
-                        .is_some_and(|o| o.kind == OKind::EndSub)
-            })
-        });
-        let (Some(s), Some(e)) = (sub, end) else {
+        let Some(s) = sub else {
             return Err(self.err(
                 col,
                 format!(
@@ -274,59 +290,108 @@ impl Interp<'_> {
                 ),
             ));
         };
-        let saved = (self.s.pos, self.s.absolute, self.loc.clone());
+        let saved = (self.s.pos, self.s.absolute, self.loc.clone(), self.pc);
         let mut out = vec![(start[0], start[2], None, 0.0)];
         self.s.pos = start;
-        let mut motion = 10;
-        let r = (|| {
-            for l in s + 1..e {
-                self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
-                if self.files[f].kind.get(l).copied() == Some(1) {
-                    return Err(self.err(
-                        1,
-                        format!("{name}: O-word statements inside the profile subroutine are not supported by hytask"),
-                    ));
-                }
-                let text = self.files[f].line_text(l).to_string();
-                let line = parser::parse_line(&text, self.opts.limits.max_expr_depth)
-                    .map_err(|(c, m)| self.err(c, m))?;
-                let mut b = self.block_of(&line.words)?;
-                self.diameter_words(&mut b);
-                if let Some(d) = b.gcode(3) {
-                    self.s.absolute = d == 900;
-                }
-                if let Some(g) = b.gcode(1) {
-                    motion = g;
-                }
-                if !b.has(b'x') && !b.has(b'z') {
-                    continue;
-                }
-                let p0 = self.s.pos;
-                let p = self.find_ends(&b);
-                let arc = match motion {
-                    20 | 30 => {
-                        let (i, k) = (b.get(b'i').unwrap_or(0.0), b.get(b'k').unwrap_or(0.0));
-                        let c = if let Some(r) = b.get(b'r') {
-                            r_center(p0, p, r, motion == 20)
-                        } else {
-                            (p0[0] + i, p0[2] + k)
-                        };
-                        Some((c, motion == 30))
-                    }
-                    _ => None,
-                };
-                // An A word rounds the corner at the end of the move (rs274 does so in a
-                // profile; the A axis does not move).
-                out.push((p[0], p[2], arc, b.get(b'a').unwrap_or(0.0)));
-                self.s.pos = p;
+        let depth = self.frames.len();
+        self.enter_sub(label.into(), (f, s), &[]);
+        let mut r = self.record_profile(depth, name, &mut out);
+        // An error inside leaves the calls it entered.
+        while self.frames.len() > depth {
+            if let Err(e) = self.leave_frame() {
+                r = r.and(Err(e));
             }
-            Ok(())
-        })();
+        }
         self.s.pos = saved.0;
         self.s.absolute = saved.1;
         self.loc = saved.2;
+        self.pc = saved.3;
         r?;
         Ok(out)
+    }
+
+    /// Executes the profile subroutine entered above call depth `depth` until it returns,
+    /// recording its moves into `out`.
+    fn record_profile(
+        &mut self,
+        depth: usize,
+        name: &str,
+        out: &mut Vec<ProfileMove>,
+    ) -> Result<(), GcodeError> {
+        let mut motion = 10;
+        while self.frames.len() > depth {
+            let (f, l) = self.pc;
+            if !Arc::ptr_eq(&self.loc.file, &self.files[f].name) {
+                self.loc.file = self.files[f].name.clone();
+            }
+            self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
+            self.loc.col = 1;
+            if l >= self.files[f].end {
+                return Err(self.err(
+                    1,
+                    format!("{name}: the profile subroutine ends without endsub or return"),
+                ));
+            }
+            self.count_step()?;
+            self.pc = (f, l + 1);
+            let text = self.files[f].line_text(l).to_string();
+            match self.files[f].kind.get(l).copied() {
+                Some(2) => {}
+                Some(1) => {
+                    let Some(o) = self.files[f].olines.get(&l).cloned() else {
+                        return Err(self.err(1, "internal: O-word line not indexed"));
+                    };
+                    let line = parser::parse_line(&text, self.opts.limits.max_expr_depth)
+                        .map_err(|(c, m)| self.err(c, m))?;
+                    self.exec_o(f, l, &o, &line)?;
+                }
+                _ => self.profile_line(&text, &mut motion, out)?,
+            }
+        }
+        Ok(())
+    }
+
+    /// One plain line of a profile subroutine: its assignments run, its move (if any) is
+    /// recorded. `motion` is the modal motion code (tenths) of the profile.
+    fn profile_line(
+        &mut self,
+        text: &str,
+        motion: &mut u16,
+        out: &mut Vec<ProfileMove>,
+    ) -> Result<(), GcodeError> {
+        let line = parser::parse_line(text, self.opts.limits.max_expr_depth)
+            .map_err(|(c, m)| self.err(c, m))?;
+        let mut b = self.block_of(&line.words)?;
+        self.diameter_words(&mut b);
+        self.assign(&line)?;
+        if let Some(d) = b.gcode(3) {
+            self.s.absolute = d == 900;
+        }
+        if let Some(g) = b.gcode(1) {
+            *motion = g;
+        }
+        if !b.has(b'x') && !b.has(b'z') {
+            return Ok(());
+        }
+        let p0 = self.s.pos;
+        let p = self.find_ends(&b);
+        let arc = match *motion {
+            20 | 30 => {
+                let (i, k) = (b.get(b'i').unwrap_or(0.0), b.get(b'k').unwrap_or(0.0));
+                let c = if let Some(r) = b.get(b'r') {
+                    r_center(p0, p, r, *motion == 20)
+                } else {
+                    (p0[0] + i, p0[2] + k)
+                };
+                Some((c, *motion == 30))
+            }
+            _ => None,
+        };
+        // An A word rounds the corner at the end of the move (rs274 does so in a profile;
+        // the A axis does not move).
+        out.push((p[0], p[2], arc, b.get(b'a').unwrap_or(0.0)));
+        self.s.pos = p;
+        Ok(())
     }
 }
 
@@ -411,8 +476,8 @@ impl Cycle<'_> {
 }
 
 /// The roughing passes, then the finishing pass along the contour (with pockets roughed
-/// level by level when `pockets`).
-fn rough(contour: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
+/// level by level, or bridged, as `kind` says).
+fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
     let Some(first) = contour.first() else {
         return;
     };
@@ -432,7 +497,7 @@ fn rough(contour: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
     };
     let level = |k: u32| s0[0] - f64::from(k) * w.i;
     let mut k = 0;
-    while level(k) > ps[0] + 1e-7 && !cy.over {
+    while kind != Kind::Profile && level(k) > ps[0] + 1e-7 && !cy.over {
         let u = level(k);
         let vk = entry_v(u);
         cy.traverse([u, vk]);
@@ -446,7 +511,7 @@ fn rough(contour: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
         k += 1;
     }
     cy.traverse(ps);
-    finish_along(&els, s0, w, pockets, cy);
+    finish_along(&els, s0, w, kind, cy);
 }
 
 /// The retract after a pass fed from `v0` to `v1`: R, but at most half the pass, so the
@@ -456,7 +521,8 @@ fn retract(r: f64, v0: f64, v1: f64) -> f64 {
 }
 
 /// The last pass: along the contour, roughing (or bridging) each pocket on the way.
-fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
+fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
+    let pockets = kind != Kind::Bridge;
     let mut i = 0;
     let mut cur = els[0].a;
     while i < els.len() {
@@ -489,17 +555,21 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, pockets: bool, cy: &mut Cycle) {
             continue;
         }
         let bottom = geom::min_between(els, i + 1, e.b, j, back);
-        let mut k = ((s0[0] - ul) / w.i - 1e-9).ceil().max(0.0) as u32;
+        // G7x: the cycle's levels below the lip; G7x.2: the lip's level, then down by I.
+        let (top, mut k) = match kind {
+            Kind::Profile => (ul, 0),
+            _ => (s0[0], ((s0[0] - ul) / w.i - 1e-9).ceil().max(0.0) as u32),
+        };
         let (mut ci, mut cp) = (i + 1, e.b);
         loop {
-            let u = s0[0] - f64::from(k) * w.i;
+            let u = top - f64::from(k) * w.i;
             if u <= bottom + 1e-7 || cy.over {
                 break;
             }
             let Some((ai, a)) = geom::first_drop(els, ci, cp, u) else {
                 break;
             };
-            feed_along(els, ci, cp, ai, a, cy);
+            feed_along(els, ci, cp, ai, a, kind == Kind::Rough, cy);
             let Some((_, bpt)) = geom::first_reach(els, ai, a, u, true) else {
                 break;
             };
@@ -526,12 +596,15 @@ fn next_from(els: &[El], j: usize, p: Pt) -> (usize, Pt) {
     }
 }
 
-/// Feeds along the contour from (`i`, `p`) to (`j`, `q`).
-fn feed_along(els: &[El], i: usize, p: Pt, j: usize, q: Pt, cy: &mut Cycle) {
+/// Feeds along the contour from (`i`, `p`) to (`j`, `q`); `zero` makes the zero-length
+/// feed rs274's G7x makes when `p` is `q`.
+fn feed_along(els: &[El], i: usize, p: Pt, j: usize, q: Pt, zero: bool, cy: &mut Cycle) {
     if i == j {
         if geom::same(p, q) {
-            // rs274 feeds to the pocket level even when the lip is on it.
-            cy.feed(q);
+            // rs274's G7x feeds to the pocket level even when the lip is on it (G7x.2 not).
+            if zero {
+                cy.feed(q);
+            }
         } else {
             cy.element(&els[i].piece(p, q));
         }

@@ -19,7 +19,7 @@ mod tests {
         assert!(g_code(870).is_some_and(|m| m.starts_with("G87 ")));
         for implemented in [
             0, 10, 20, 30, 50, 51, 70, 80, 330, 331, 382, 400, 410, 411, 420, 421, 430, 431, 490,
-            700, 710, 711, 720, 721, 760, 800, 810, 890,
+            700, 710, 711, 712, 720, 721, 722, 760, 800, 810, 890,
         ] {
             assert_eq!(g_code(implemented), None, "G{}", implemented / 10);
         }
