@@ -11,7 +11,7 @@
 
 use super::config::MotionConfig;
 use super::kinematics::{Kinematics, Machine};
-use super::limits::override_rates;
+use super::limits::{override_rates, scale_jerk_at, scale_rate_at, AxisMax};
 use super::segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
 use super::KinematicsError;
 use crate::gcode::canon::ProbeKind;
@@ -122,6 +122,8 @@ pub struct Interpolator {
     dt_s: f64,
     k1: f64,
     k2: f64,
+    /// Full axis limits, for the braking rates at the current scale ([`Self::braking`]).
+    axis_max: AxisMax,
     max_override: f64,
     kin: Machine,
     seg: Option<Segment>,
@@ -162,6 +164,7 @@ impl Interpolator {
             dt_s: cfg.servo_period_s,
             k1,
             k2,
+            axis_max: AxisMax::new(cfg),
             max_override: cfg.max_feed_override,
             kin,
             seg: None,
@@ -339,24 +342,59 @@ impl Interpolator {
         }
     }
 
+    /// While the scale falls (`k̇ ≤ 0`, braking toward a lower target, or `|k̇|` above the
+    /// segment's planned rate), the rates this segment allows at the *current* scale:
+    /// `(k̇ max, k̈ max)`, or `None` where the planned ones are at least as large.
+    ///
+    /// The planner's `scale_rate_max` holds for any scale up to the segment's override cap;
+    /// but `p''·k²` shrinks with `k`, so once `k` has fallen the segment leaves more room for
+    /// `p'·k̇` (a hold that began at scale 1 can brake harder as it goes). Valid for the whole
+    /// period because `k` does not rise in it: the caller keeps `k̇ ≤ 0` (see
+    /// [`Self::scale_jerk`]). The `k̈` bound is the one for that larger `|k̇|`; it is at least
+    /// the floor `k2` by construction of the rate. The segment's end ramp still applies, so
+    /// `|k̇|` is back within the next segment's planned rate when this one ends.
+    fn braking(&self, s: &Segment, e: f64) -> Option<(f64, f64)> {
+        if s.kind == SegmentKind::Dwell || self.kd > 0.0 {
+            return None;
+        }
+        if e >= 0.0 && -self.kd <= s.scale_rate_max {
+            return None;
+        }
+        let peaks = s.peaks();
+        let rate = scale_rate_at(s, &peaks, self.k, &self.axis_max, self.k2);
+        if rate <= s.scale_rate_max {
+            return None;
+        }
+        let k2 = scale_jerk_at(s, &peaks, self.k, rate, &self.axis_max);
+        Some((rate, k2))
+    }
+
     /// Second derivative of the scale for this period: drive `k` to `target` with |k̇|
     /// within the segment's rate limit and |k̈| ≤ k2, braking early enough in discrete time
     /// not to overshoot.
     fn scale_jerk(&self, s: &Segment, target: f64) -> f64 {
         let e = target - self.k;
         let dt = self.dt_s;
+        let braking = self.braking(s, e);
+        let (rate_max, jerk_max) = braking.unwrap_or((s.scale_rate_max, s.scale_jerk_max));
         // k̈ this segment allows, and what every segment within one braking allows.
         let left = (s.duration_s - self.t_s).max(0.0);
-        let mut k2_here = s.scale_jerk_max;
+        let mut k2_here = jerk_max;
         // This period may end in a later segment: respect its limit too.
-        let step_sigma = (self.k + self.kd.abs() * dt + s.scale_jerk_max * dt * dt) * dt;
+        let step_sigma = (self.k + self.kd.abs() * dt + jerk_max * dt * dt) * dt;
         if left <= 2.0 * step_sigma {
             k2_here = k2_here.min(s.next_scale_jerk_max);
         }
         let k2_here = k2_here.max(self.k2);
-        let k2 = s.brake_scale_jerk_max.clamp(self.k2, k2_here);
-        let rate = s
-            .scale_rate_max
+        // Stopping `k̇` is planned at what every segment within one braking allows; at the
+        // raised rates of `braking` only the floor is sure to be available in the segments
+        // ahead.
+        let k2 = if braking.is_some() {
+            self.k2
+        } else {
+            s.brake_scale_jerk_max.clamp(self.k2, k2_here)
+        };
+        let rate = rate_max
             .min(s.end_scale_rate_max + 0.9 * self.k2 * left / self.max_override)
             .max(self.k1);
         // Largest speed toward the target at the end of this period from which a k̈ = k2
@@ -375,7 +413,13 @@ impl Interpolator {
             rate
         };
         let vd = e.signum() * rate.min(brake);
-        ((vd - self.kd) / dt).clamp(-k2_here, k2_here)
+        let kdd = ((vd - self.kd) / dt).clamp(-k2_here, k2_here);
+        if braking.is_some() {
+            // Keep k̇ ≤ 0 through the period: the raised rates hold only while k falls.
+            kdd.min(-self.kd / dt)
+        } else {
+            kdd
+        }
     }
 
     /// One servo period.

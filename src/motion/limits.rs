@@ -289,46 +289,91 @@ fn min_ahead(items: &[Item], horizon_s: f64, beyond: f64) -> Vec<f64> {
 /// Largest `k̈` in `seg` for any scale up to `cap` and `|k̇| ≤ rate`: per axis
 /// `j·k³ + 3·a·k·k̇ + v·k̈ ≤ J`; never below the reserve-based `k2`, which is always safe.
 fn scale_jerk(seg: &Segment, cap: f64, rate: f64, cfg: &MotionConfig, k2: f64) -> f64 {
-    if seg.kind == SegmentKind::Dwell {
-        return f64::INFINITY;
-    }
-    let mut r = f64::INFINITY;
-    for (i, [v, a, j]) in seg.peaks().into_iter().enumerate() {
-        if v > 0.0 {
-            let ax = &cfg.axes[i];
-            r = r.min((ax.max_jerk_mm_s3 - j * cap.powi(3) - 3.0 * a * cap * rate) / v);
-        }
-    }
-    r.max(k2)
+    scale_jerk_at(seg, &seg.peaks(), cap, rate, &AxisMax::new(cfg)).max(k2)
 }
 
 /// Largest `k̇` in `seg` for any scale up to `cap`: per axis, acceleration
 /// `a·k² + v·k̇ ≤ A` and jerk `j·k³ + 3·a·k·k̇ + v·k̈ ≤ J` with `k̈ ≤ k2`; never below the
 /// reserve-based `k1`, which is always safe.
 fn scale_rate(seg: &Segment, cap: f64, cfg: &MotionConfig, k1: f64, k2: f64) -> f64 {
+    scale_rate_at(seg, &seg.peaks(), cap, &AxisMax::new(cfg), k2).max(k1)
+}
+
+/// Full acceleration and jerk of every axis (what the trace is checked against), kept by the
+/// interpolator to compute scale rates at the current scale.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisMax {
+    /// mm/s².
+    pub acc: [f64; NUM_AXES],
+    /// mm/s³.
+    pub jerk: [f64; NUM_AXES],
+}
+
+impl AxisMax {
+    /// From the configuration.
+    pub fn new(cfg: &MotionConfig) -> Self {
+        AxisMax {
+            acc: cfg.axes.map(|a| a.max_acc_mm_s2),
+            jerk: cfg.axes.map(|a| a.max_jerk_mm_s3),
+        }
+    }
+}
+
+/// Largest `k̈` in `seg` (segment peaks `peaks`, [`Segment::peaks`]) for any scale up to
+/// `cap` and `|k̇| ≤ rate`: per axis `j·k³ + 3·a·k·k̇ + v·k̈ ≤ J`. No floor: may be negative
+/// when no `k̈` is safe.
+pub(crate) fn scale_jerk_at(
+    seg: &Segment,
+    peaks: &[[f64; 3]; NUM_AXES],
+    cap: f64,
+    rate: f64,
+    max: &AxisMax,
+) -> f64 {
+    if seg.kind == SegmentKind::Dwell {
+        return f64::INFINITY;
+    }
+    let mut r = f64::INFINITY;
+    for (i, &[v, a, j]) in peaks.iter().enumerate() {
+        if v > 0.0 {
+            r = r.min((max.jerk[i] - j * cap.powi(3) - 3.0 * a * cap * rate) / v);
+        }
+    }
+    r
+}
+
+/// Largest `k̇` in `seg` (segment peaks `peaks`) for any scale up to `cap`: per axis,
+/// acceleration `a·k² + v·k̇ ≤ A` (on an arc the vector bound) and jerk
+/// `j·k³ + 3·a·k·k̇ + v·k̈ ≤ J` with `k̈ ≤ k2`. No floor.
+pub(crate) fn scale_rate_at(
+    seg: &Segment,
+    peaks: &[[f64; 3]; NUM_AXES],
+    cap: f64,
+    max: &AxisMax,
+    k2: f64,
+) -> f64 {
     if seg.kind == SegmentKind::Dwell {
         return f64::INFINITY;
     }
     let mut r = f64::INFINITY;
     let arc = arc_accelerations(seg);
-    for (i, [v, a, j]) in seg.peaks().into_iter().enumerate() {
-        let ax = &cfg.axes[i];
+    for (i, &[v, a, j]) in peaks.iter().enumerate() {
+        let (acc, jerk) = (max.acc[i], max.jerk[i]);
         match arc {
             // Vector bound: `|p''k² + p'k̇|² = (a_t·k² + v·k̇)² + (a_n·k²)²`, the `k̇` term
             // is tangential only.
             Some((at, an)) if i < 2 && v > 0.0 => {
                 let c2 = cap * cap;
-                let room = (ax.max_acc_mm_s2.powi(2) - (an * c2).powi(2)).max(0.0);
+                let room = (acc.powi(2) - (an * c2).powi(2)).max(0.0);
                 r = r.min((room.sqrt() - at * c2) / v);
             }
-            _ if v > 0.0 => r = r.min((ax.max_acc_mm_s2 - a * cap * cap) / v),
+            _ if v > 0.0 => r = r.min((acc - a * cap * cap) / v),
             _ => {}
         }
         if a > 0.0 {
-            r = r.min((ax.max_jerk_mm_s3 - j * cap.powi(3) - v * k2) / (3.0 * a * cap));
+            r = r.min((jerk - j * cap.powi(3) - v * k2) / (3.0 * a * cap));
         }
     }
-    r.max(k1)
+    r
 }
 
 /// Peak tangential and normal acceleration of an arc segment at scale 1 (`None` for a
