@@ -105,6 +105,13 @@ fn corpus_and_shipped_programs_behave_the_same_fused() {
 /// bits or single precision) and loops whose budget runs out at a fused backward branch.
 const CASES: &[(&str, &str)] = &[
     (
+        "first-order filters, REAL and LREAL, and the mixed forms that stay two instructions",
+        "PROGRAM T\nVAR_INPUT a : INT; x : REAL; END_VAR\nVAR r, s : REAL; l : LREAL; END_VAR\n\
+         r := r * 0.99 + INT_TO_REAL(a) * 0.01; l := l * 0.5 + INT_TO_LREAL(a) * 0.125;\n\
+         s := x * 0.75 + INT_TO_REAL(a) * -3.5; r := r + INT_TO_REAL(a) * 0.25;\n\
+         l := x * 0.5 + INT_TO_LREAL(a) * 0.1; s := r * 1.0E30 + INT_TO_REAL(a) * 1.0E30;\nEND_PROGRAM\n",
+    ),
+    (
         "three-address and compare-and-branch, INT",
         "PROGRAM T\nVAR_INPUT a, b : INT; END_VAR\nVAR c, d : INT; e : DINT; f : BOOL; END_VAR\n\
          c := a + b; d := a * 3; e := INT_TO_DINT(a) * 100000;\n\
@@ -215,9 +222,10 @@ fn two_operation_forms_fire_and_far_cells_stay_unfused() {
             .code()
             .to_vec()
     };
-    let head = "PROGRAM T\nVAR a, b, c : INT; p, q, e : BOOL; r : REAL; t : TON; END_VAR\n";
+    let head =
+        "PROGRAM T\nVAR a, b, c : INT; p, q, e : BOOL; r : REAL; l : LREAL; t : TON; END_VAR\n";
     type Want = dyn Fn(&Op) -> bool;
-    let cases: [(&str, &Want); 8] = [
+    let cases: [(&str, &Want); 10] = [
         ("e := (a MOD 7 = 0) OR q;", &|op| {
             matches!(op, Op::PushLIC(..))
         }),
@@ -225,8 +233,14 @@ fn two_operation_forms_fire_and_far_cells_stay_unfused() {
             matches!(op, Op::BinSLL(..))
         }),
         ("a := a + b * 3;", &|op| matches!(op, Op::BinLIL(..))),
-        ("r := r * 0.5 + INT_TO_REAL(a) * 0.25;", &|op| {
+        ("r := r + INT_TO_REAL(a) * 0.25;", &|op| {
             matches!(op, Op::BinSIToF(..))
+        }),
+        ("r := r * 0.5 + INT_TO_REAL(a) * 0.25;", &|op| {
+            matches!(op, Op::FilterF(true, _, _, _, 0.5, 0.25))
+        }),
+        ("l := l * 0.5 + INT_TO_LREAL(a) * 0.25;", &|op| {
+            matches!(op, Op::FilterF(false, _, _, _, 0.5, 0.25))
         }),
         ("c := LIMIT(0, a, 500);", &|op| {
             matches!(op, Op::ClampI(_, _, 0, 500))
@@ -261,7 +275,12 @@ fn two_operation_forms_fire_and_far_cells_stay_unfused() {
     let two = |op: &Op| {
         matches!(
             op,
-            Op::PushLIC(..) | Op::BinSLL(..) | Op::BinLIL(..) | Op::BinSIToF(..) | Op::ClampI(..)
+            Op::PushLIC(..)
+                | Op::BinSLL(..)
+                | Op::BinLIL(..)
+                | Op::BinSIToF(..)
+                | Op::FilterF(..)
+                | Op::ClampI(..)
         )
     };
     assert!(!ops.iter().any(two), "{ops:?}");

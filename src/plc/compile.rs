@@ -13,7 +13,7 @@ use super::expr::{Expr, ExprKind, Ident, Lit};
 use super::program::{EnumInfo, InterfaceEntry, Program, VarKind};
 use super::stdfb::StdFb;
 use super::types::{elementary, Ty};
-use super::vm::{Cmp, Op};
+use super::vm::{Cmp, Code, Op};
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
@@ -429,9 +429,19 @@ impl<'u> Compiler<'u> {
             self.entries.values().chain(extra.iter()).copied(),
         );
         let depth = unit.pous.len() + 2;
+        let code = match Code::new(std::mem::take(&mut self.ops)) {
+            Ok(code) => code,
+            Err(e) => {
+                self.err(
+                    Span { line: 1, col: 1 },
+                    format!("internal compiler error: {e}"),
+                );
+                return None;
+            }
+        };
         Some(Program::new(
             Arc::from(file),
-            std::mem::take(&mut self.ops),
+            code,
             std::mem::take(&mut self.spans),
             std::mem::take(&mut self.init),
             stack * depth + 8,

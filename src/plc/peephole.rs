@@ -186,7 +186,8 @@ fn target_mut(op: &mut Op) -> Option<&mut u32> {
     }
 }
 
-fn targets(mut op: Op) -> Option<u32> {
+/// The jump target or call entry of an instruction, if it has one.
+pub(crate) fn target(mut op: Op) -> Option<u32> {
     target_mut(&mut op).copied()
 }
 
@@ -202,6 +203,7 @@ pub fn optimize(ops: &mut Vec<Op>, spans: &mut Vec<Span>, entries: &mut [&mut u3
     pass(ops, spans, entries, triples);
     pass(ops, spans, entries, commuted);
     pass(ops, spans, entries, super::superop::fuse);
+    pass(ops, spans, entries, super::superop::fuse_filter);
 }
 
 /// One rewriting pass with `rule`, which sees the code from an instruction on (never
@@ -215,7 +217,7 @@ fn pass(
     let n = ops.len();
     let mut is_target = vec![false; n + 1];
     for &op in ops.iter() {
-        if let Some(t) = targets(op) {
+        if let Some(t) = target(op) {
             is_target[t as usize] = true;
         }
     }

@@ -8,7 +8,7 @@ use super::ast::Section;
 use super::diag::Span;
 use super::types::Ty;
 use super::value::{format_cell, parse_value, TypeMismatch, Value};
-use super::vm::{FaultKind, Op, Vm};
+use super::vm::{Code, FaultKind, Op, Vm};
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -93,7 +93,7 @@ pub struct EnumInfo {
 #[derive(Debug, Clone)]
 pub struct Program {
     pub(crate) file: Arc<str>,
-    pub(crate) ops: Vec<Op>,
+    pub(crate) ops: Code,
     pub(crate) spans: Vec<Span>,
     pub(crate) mem: Vec<u64>,
     pub(crate) init: Vec<u64>,
@@ -121,7 +121,7 @@ impl Program {
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
         file: Arc<str>,
-        ops: Vec<Op>,
+        ops: Code,
         spans: Vec<Span>,
         init: Vec<u64>,
         stack: usize,

@@ -29,7 +29,7 @@ fn effect(op: Op) -> (usize, usize) {
         LoadLL(..) => (0, 2),
         PushLIC(..) => (0, 1),
         BinSLL(..) | BinSIToF(..) => (1, 0),
-        BinLIL(..) | ClampI(..) | StdMov { .. } | StdSetMov { .. } => (0, 0),
+        BinLIL(..) | ClampI(..) | FilterF(..) | StdMov { .. } | StdSetMov { .. } => (0, 0),
     }
 }
 

@@ -105,6 +105,20 @@ fn block_call(w: &[Op]) -> Option<Op> {
     })
 }
 
+/// The rule of the fifth pass, over the fourth's output: the first-order filter
+/// `r := r * k1 + INT_TO_REAL(a) * k2` in one instruction when both products and the sum
+/// round alike (all REAL or all LREAL).
+pub(super) fn fuse_filter(w: &[Op], _at: usize) -> Option<Rewrite> {
+    match *w {
+        [Op::PushLF(Bin::FMul(s1), x, k1), Op::BinSIToF(Bin::FMul(s2), Bin::FAdd(s3), s, y, d, k2), ..]
+            if s1 == s && s2 == s && s3 == s =>
+        {
+            Some(([Some(Op::FilterF(s, short(x)?, y, d, k1, k2)), None], 2))
+        }
+        _ => None,
+    }
+}
+
 /// The rule of the fourth pass (see `peephole::pass`).
 pub(super) fn fuse(w: &[Op], _at: usize) -> Option<Rewrite> {
     if let Some(op) = block_call(w) {

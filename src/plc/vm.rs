@@ -426,6 +426,10 @@ pub enum Op {
     /// single precision if the flag says so (fused `LoadIToF` + `BinC` + `BinS`:
     /// `r := r * 0.99 + INT_TO_REAL(a) * 0.01`).
     BinSIToF(Bin, Bin, bool, u16, u16, f32),
+    /// `mem[base + d] = mem[base + x] * k1 + float(mem[base + y]) * k2`, every step in
+    /// single precision when the flag says so, else in double (fused `PushLF(FMul)` +
+    /// `BinSIToF(FMul, FAdd)`: the first-order filter `r := r * 0.99 + INT_TO_REAL(a) * 0.01`).
+    FilterF(bool, u16, u16, u16, f32, f32),
     /// `mem[base + d] = LIMIT(lo, mem[base + x], hi)` on signed cells (fused
     /// `PushLI(MinMaxI(max))` + `BinCSI(MinMaxI(min))`).
     ClampI(u16, u16, i32, i32),
@@ -465,10 +469,63 @@ pub enum Op {
     },
 }
 
+/// Code checked once when it is built: not empty, its last instruction a `Ret` or `Jmp`
+/// (control never falls off the end) and every jump target and call entry inside it, so a
+/// compiler bug surfaces as a compile error instead of a panic in the scan. (A fetch without
+/// the per-instruction bounds check, which this would allow, measured no faster.)
+#[derive(Debug, Clone, Default)]
+pub struct Code(Vec<Op>);
+
+/// Why instructions are not valid [`Code`] (a compiler bug, never a user's program).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum BadCode {
+    /// No instructions, or the last one could fall through past the end.
+    #[error("code does not end with RET or JMP")]
+    OpenEnd,
+    /// A jump or call leads outside the code.
+    #[error("instruction {at} jumps to {target}, outside the {len} instructions")]
+    Target {
+        /// The instruction.
+        at: usize,
+        /// Where it leads.
+        target: u32,
+        /// Code length.
+        len: usize,
+    },
+}
+
+impl Code {
+    /// Checks that control cannot leave the code.
+    pub fn new(ops: Vec<Op>) -> Result<Code, BadCode> {
+        if !matches!(ops.last(), Some(Op::Ret | Op::Jmp(_))) {
+            return Err(BadCode::OpenEnd);
+        }
+        for (at, op) in ops.iter().enumerate() {
+            if let Some(target) = super::peephole::target(*op) {
+                if target as usize >= ops.len() {
+                    return Err(BadCode::Target {
+                        at,
+                        target,
+                        len: ops.len(),
+                    });
+                }
+            }
+        }
+        Ok(Code(ops))
+    }
+}
+
+impl std::ops::Deref for Code {
+    type Target = [Op];
+    fn deref(&self) -> &[Op] {
+        &self.0
+    }
+}
+
 /// The machine state of one scan, borrowed from the program's preallocated storage.
 pub struct Vm<'a> {
     /// Code.
-    pub ops: &'a [Op],
+    pub ops: &'a Code,
     /// Memory cells.
     pub mem: &'a mut [u64],
     /// Operand stack.
@@ -495,11 +552,58 @@ fn fb(v: f64, single: bool) -> u64 {
     }
 }
 
+/// A float function of `x` (cell bits). Out of line: rare, and each is a library call that
+/// would otherwise add its register shuffling to the interpreter loop.
+#[inline(never)]
+fn math(m: MathFn, s: bool, x: u64) -> u64 {
+    let x = f(x);
+    let y = match m {
+        MathFn::Abs => x.abs(),
+        MathFn::Sqrt => x.sqrt(),
+        MathFn::Ln => x.ln(),
+        MathFn::Log => x.log10(),
+        MathFn::Exp => x.exp(),
+        MathFn::Sin => x.sin(),
+        MathFn::Cos => x.cos(),
+        MathFn::Tan => x.tan(),
+        MathFn::Asin => x.asin(),
+        MathFn::Acos => x.acos(),
+        MathFn::Atan => x.atan(),
+    };
+    fb(y, s)
+}
+
+/// `x` shifted or rotated by `n` within the width of `k`. Out of line: rare and long.
+#[inline(never)]
+fn shift(s: Shift, k: IntKind, x: u64, n: u32) -> u64 {
+    let w = k.bits();
+    let x = x & (u64::MAX >> (64 - w));
+    let r = match s {
+        Shift::Shl if n >= w => 0,
+        Shift::Shr if n >= w => 0,
+        Shift::Shl => x << n,
+        Shift::Shr => x >> n,
+        Shift::Rol | Shift::Ror => {
+            let n = if s == Shift::Rol {
+                n % w
+            } else {
+                (w - n % w) % w
+            };
+            if n == 0 {
+                x
+            } else {
+                (x << n) | (x >> (w - n))
+            }
+        }
+    };
+    k.wrap(r as i64) as u64
+}
+
 impl Vm<'_> {
     /// Runs the code at `entry` with base `base` until its `Ret`. On a fault returns the
     /// kind and the pc of the faulting instruction.
     pub fn run(&mut self, entry: u32, base: u32) -> Result<(), (FaultKind, u32)> {
-        let ops = self.ops;
+        let ops: &[Op] = self.ops;
         let mut pc = entry as usize;
         let mut base = base as usize;
         let mut sp = 0usize;
@@ -719,23 +823,7 @@ impl Vm<'_> {
                 Op::FDiv(s) => bin!(|a, b| fb(f(a) / f(b), s)),
                 Op::FPow(s) => bin!(|a, b| fb(f(a).powf(f(b)), s)),
                 Op::FNeg => st[sp - 1] = (-f(st[sp - 1])).to_bits(),
-                Op::Math(m, s) => {
-                    let x = f(st[sp - 1]);
-                    let y = match m {
-                        MathFn::Abs => x.abs(),
-                        MathFn::Sqrt => x.sqrt(),
-                        MathFn::Ln => x.ln(),
-                        MathFn::Log => x.log10(),
-                        MathFn::Exp => x.exp(),
-                        MathFn::Sin => x.sin(),
-                        MathFn::Cos => x.cos(),
-                        MathFn::Tan => x.tan(),
-                        MathFn::Asin => x.asin(),
-                        MathFn::Acos => x.acos(),
-                        MathFn::Atan => x.atan(),
-                    };
-                    st[sp - 1] = fb(y, s);
-                }
+                Op::Math(m, s) => st[sp - 1] = math(m, s, st[sp - 1]),
                 Op::Wrap(k) => st[sp - 1] = k.wrap(st[sp - 1] as i64) as u64,
                 Op::IToF(s) => st[sp - 1] = fb(st[sp - 1] as i64 as f64, s),
                 Op::UToF(s) => st[sp - 1] = fb(st[sp - 1] as f64, s),
@@ -769,27 +857,7 @@ impl Vm<'_> {
                 }
                 Op::Shift(s, k) => {
                     let n = pop!() as u32;
-                    let w = k.bits();
-                    let x = st[sp - 1] & (u64::MAX >> (64 - w));
-                    let r = match s {
-                        Shift::Shl if n >= w => 0,
-                        Shift::Shr if n >= w => 0,
-                        Shift::Shl => x << n,
-                        Shift::Shr => x >> n,
-                        Shift::Rol | Shift::Ror => {
-                            let n = if s == Shift::Rol {
-                                n % w
-                            } else {
-                                (w - n % w) % w
-                            };
-                            if n == 0 {
-                                x
-                            } else {
-                                (x << n) | (x >> (w - n))
-                            }
-                        }
-                    };
-                    st[sp - 1] = k.wrap(r as i64) as u64;
+                    st[sp - 1] = shift(s, k, st[sp - 1], n);
                 }
                 Op::Jmp(t) => {
                     charge!(t);
@@ -863,6 +931,12 @@ impl Vm<'_> {
                     let v = b1.apply(i, (k as f64).to_bits());
                     mem[base + d as usize] = b2.apply(a, v);
                 }
+                Op::FilterF(s, x, y, d, k1, k2) => {
+                    let v = Bin::FMul(s).apply(mem[base + x as usize], (k1 as f64).to_bits());
+                    let i = fb(mem[base + y as usize] as i64 as f64, s);
+                    let w = Bin::FMul(s).apply(i, (k2 as f64).to_bits());
+                    mem[base + d as usize] = Bin::FAdd(s).apply(v, w);
+                }
                 Op::ClampI(x, d, lo, hi) => {
                     let v = Bin::MinMaxI(true).apply(mem[base + x as usize], lo as i64 as u64);
                     mem[base + d as usize] = Bin::MinMaxI(false).apply(v, hi as i64 as u64);
@@ -879,5 +953,99 @@ impl Vm<'_> {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `Code::new` refuses code that could leave itself:
+    /// each way out is refused.
+    #[test]
+    fn code_that_could_run_off_its_end_is_refused() {
+        assert_eq!(Code::new(vec![]).unwrap_err(), BadCode::OpenEnd);
+        assert_eq!(
+            Code::new(vec![Op::Ret, Op::Push(1)]).unwrap_err(),
+            BadCode::OpenEnd
+        );
+        assert_eq!(
+            Code::new(vec![Op::Ret, Op::Jz(0)]).unwrap_err(),
+            BadCode::OpenEnd,
+            "a conditional jump falls through"
+        );
+        assert_eq!(
+            Code::new(vec![
+                Op::Ret,
+                Op::Call {
+                    entry: 0,
+                    at: 0,
+                    rel: true
+                }
+            ])
+            .unwrap_err(),
+            BadCode::OpenEnd,
+            "a call as the last instruction returns past the end"
+        );
+        for bad in [
+            Op::Jmp(3),
+            Op::Jz(3),
+            Op::Jnz(7),
+            Op::JzL(0, 3),
+            Op::Call {
+                entry: 3,
+                at: 0,
+                rel: false,
+            },
+            Op::CallInd(9),
+        ] {
+            assert!(
+                matches!(
+                    Code::new(vec![Op::Push(0), bad, Op::Ret]),
+                    Err(BadCode::Target { at: 1, len: 3, .. })
+                ),
+                "{bad:?}"
+            );
+        }
+        let ok = Code::new(vec![Op::Push(1), Op::Jz(2), Op::Jmp(0)]).unwrap();
+        assert_eq!(ok.len(), 3);
+    }
+
+    /// Code that passes runs as before: a loop charged against the budget faults at its
+    /// backward jump, a call returns after itself.
+    #[test]
+    fn accepted_code_runs() {
+        let ops = vec![
+            Op::Call {
+                entry: 2,
+                at: 0,
+                rel: false,
+            },
+            Op::Ret,
+            Op::SetL(0, 5),
+            Op::Ret,
+        ];
+        let code = Code::new(ops).unwrap();
+        let (mut mem, mut st, mut fr) = ([0u64; 1], [0u64; 4], [(0u32, 0u32); 2]);
+        let mut vm = Vm {
+            ops: &code,
+            mem: &mut mem,
+            stack: &mut st,
+            frames: &mut fr,
+            now: 0,
+            fuel: 10,
+        };
+        assert_eq!(vm.run(0, 0), Ok(()));
+        assert_eq!(mem[0], 5);
+        let code = Code::new(vec![Op::Jmp(0)]).unwrap();
+        let mut vm = Vm {
+            ops: &code,
+            mem: &mut mem,
+            stack: &mut st,
+            frames: &mut fr,
+            now: 0,
+            fuel: 10,
+        };
+        assert_eq!(vm.run(0, 0), Err((FaultKind::BudgetExhausted, 0)));
     }
 }
