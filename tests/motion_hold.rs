@@ -110,9 +110,11 @@ fn hold_on_arcs_from_full_feed_is_bounded() {
     // 47.4 mm/s); with the 20 % reserve on it the loops ran at 42.3 mm/s, and their worst
     // stop was 4.541× / 4.526× the optimum (9.079 mm, 0.428 s). Now 3.156× / 3.566×
     // (7.849 mm, 0.374 s from 47.4 mm/s). Session 10 (braking rate at the current scale):
-    // 2.247× / 2.575× (5.588 mm, 0.270 s).
+    // 2.247× / 2.575× (5.588 mm, 0.270 s). With the fitted arcs split every 10 source
+    // vertices (line marks, session 10) the stop meets more segment ends, where braking
+    // is ramped to what the next segment was planned for: 2.302× / 2.813×.
     assert!(v > 47.0, "loop speed {v}");
-    assert!(rd < 2.35 && rt < 2.7, "distance {rd}×, time {rt}×");
+    assert!(rd < 2.4 && rt < 2.9, "distance {rd}×, time {rt}×");
 }
 
 /// Overrides in [0, 2], hold, resume and abort at pseudo-random periods on arcs planned at
