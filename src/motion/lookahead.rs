@@ -9,6 +9,7 @@
 
 use super::arcfit::{self, V2};
 use super::blend::Corner;
+use super::fit_choice;
 use super::limits::Limits;
 use super::line_marks::{LineMarks, MAX_MARKS};
 use super::merge::merge;
@@ -434,7 +435,56 @@ fn fit_arcs(moves: &[Move], i: usize, j: usize, lim: &Limits) -> Option<Vec<Prep
             marks,
         });
     }
-    Some(out)
+    let ends = [t_start.is_some(), t_end.is_some()];
+    faster_than_chords(&out, &moves[i..=j], ends, lim).then_some(out)
+}
+
+/// True when the fitted chain `arcs` is estimated to run faster than the chords `raw` it
+/// replaces (see [`fit_choice`]): over noisy chords the curvature steps between the arcs can
+/// cap the speed far below the chords' blends.
+fn faster_than_chords(
+    arcs: &[Prepared],
+    raw: &[Move],
+    gentle_ends: [bool; 2],
+    lim: &Limits,
+) -> bool {
+    let piece = |p: &Prepared| fit_choice::Piece {
+        len_mm: p.len_mm,
+        cap_mm_s: p.vcap_mm_s,
+        tang: p.tang,
+    };
+    let fitted: Vec<_> = arcs.iter().map(piece).collect();
+    let fitted_j: Vec<f64> = arcs
+        .windows(2)
+        .map(|w| {
+            let cap = w[0].vcap_mm_s.min(w[1].vcap_mm_s);
+            let dk = (w[0].curv - w[1].curv).abs();
+            if dk > 0.0 {
+                cap.min((lim.step_budget_mm_s2() / dk).sqrt())
+            } else {
+                cap
+            }
+        })
+        .collect();
+    let (chords, chords_j) = fit_choice::chords(raw, lim);
+    // At the ends: a stop where the neighbour is not a gentle XY move, else the chords go on at
+    // their cap and the arcs at the curvature step to the (straight) neighbour.
+    let step = |curv: f64| (lim.step_budget_mm_s2() / curv.abs().max(1e-12)).sqrt();
+    let gentle = |g: bool, v: f64| if g { v } else { 0.0 };
+    let (Some(first), Some(last)) = (arcs.first(), arcs.last()) else {
+        return false;
+    };
+    let fit_ends = [
+        gentle(gentle_ends[0], step(first.curv)),
+        gentle(gentle_ends[1], step(last.curv)),
+    ];
+    let chord_ends = [
+        gentle(gentle_ends[0], f64::INFINITY),
+        gentle(gentle_ends[1], f64::INFINITY),
+    ];
+    // Only a clear loss refuses the fit (the estimate leaves out the chords' blend halves).
+    fit_choice::estimate_s(&fitted, &fitted_j, fit_ends)
+        <= (1.0 + fit_choice::MARGIN) * fit_choice::estimate_s(&chords, &chords_j, chord_ends)
 }
 
 /// Plans a run (or, with `commit` = `Some(c)`, a chunk of one: only the merged moves made of

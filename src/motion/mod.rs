@@ -76,6 +76,7 @@ pub mod config;
 pub mod css;
 pub mod draw;
 mod error;
+pub mod fit_choice;
 pub mod from_canon;
 pub mod interpolator;
 pub mod kinematics;
