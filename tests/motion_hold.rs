@@ -175,7 +175,6 @@ fn random_override_hold_abort_schedules_on_arcs_stay_within_limits() {
 /// trace of the hold and of the next 400 periods stays within every limit.
 #[test]
 fn hold_then_resume_or_abort_at_every_period_stays_within_limits() {
-    use hytask::motion::{trace::Trace, InterpState, Interpolator, SliceSource};
     let cfg = MotionConfig::default();
     let mut g = Prog::new();
     g.feed(3000.0).g64(0.05);
@@ -185,57 +184,44 @@ fn hold_then_resume_or_abort_at_every_period_stays_within_limits() {
     let square = plan(&g.canon, &cfg).unwrap();
     let (loops, _) = loops_of(80);
     for (name, p) in [("square", &square), ("loops", &loops)] {
-        let mut it = Interpolator::new(&cfg, p.start_mm);
-        let mut src = SliceSource::new(&p.items);
-        let mut hist = [p.start_mm; 4];
         let mut cases = 0;
-        for n in 0.. {
-            let out = *it.step(&mut src);
-            hist.rotate_left(1);
-            hist[3] = out.pose_mm;
-            if out.state == InterpState::Done {
-                break;
-            }
-            if n < 4 {
-                continue;
-            }
-            let (mut h, mut hs) = (it.clone(), src.clone());
-            let mut tr = Trace {
-                dt_s: cfg.servo_period_s,
-                ..Trace::default()
-            };
-            tr.poses_mm.extend_from_slice(&hist);
-            h.hold();
-            let act_at = 1 + (n * 37) % 150;
-            for m in 0..act_at + 400 {
-                if m == act_at {
-                    match n % 4 {
-                        0 => h.resume(),
-                        1 => {
-                            h.set_feed_override(2.0);
-                            h.resume();
+        branch_at_periods(
+            p,
+            &cfg,
+            |_| true,
+            |n, mut h, mut hs, mut tr| {
+                h.hold();
+                let act_at = 1 + (n * 37) % 150;
+                for m in 0..act_at + 400 {
+                    if m == act_at {
+                        match n % 4 {
+                            0 => h.resume(),
+                            1 => {
+                                h.set_feed_override(2.0);
+                                h.resume();
+                            }
+                            2 => h.set_feed_override(0.3),
+                            _ => h.abort(),
                         }
-                        2 => h.set_feed_override(0.3),
-                        _ => h.abort(),
                     }
+                    tr.poses_mm.push(h.step(&mut hs).pose_mm);
                 }
-                tr.poses_mm.push(h.step(&mut hs).pose_mm);
-            }
-            let pk = tr.peaks();
-            let (mut v, mut aj) = (0.0f64, 0.0f64);
-            for (i, l) in cfg.axes.iter().enumerate() {
-                v = v.max(pk.vel[i] / l.max_vel_mm_s);
-                aj = aj.max(pk.acc[i] / l.max_acc_mm_s2);
-                aj = aj.max(pk.jerk[i] / l.max_jerk_mm_s3);
-            }
-            let at = format!("{name}: hold at {n}, action {} at +{act_at}", n % 4);
-            assert!(aj <= 1.0 + LIMIT_TOL, "{at}: acceleration/jerk {aj}");
-            // Known, not fixed (the session-9 interpolator does the same, 1.0000089): a resume
-            // to scale 1 on a cruise at the velocity limit overshoots the scale by ~1e-5
-            // (the discrete braking law toward the target chatters around it for ~40 periods).
-            assert!(v <= 1.0 + 2e-5, "{at}: velocity {v}");
-            cases += 1;
-        }
+                let pk = tr.peaks();
+                let (mut v, mut aj) = (0.0f64, 0.0f64);
+                for (i, l) in cfg.axes.iter().enumerate() {
+                    v = v.max(pk.vel[i] / l.max_vel_mm_s);
+                    aj = aj.max(pk.acc[i] / l.max_acc_mm_s2);
+                    aj = aj.max(pk.jerk[i] / l.max_jerk_mm_s3);
+                }
+                let at = format!("{name}: hold at {n}, action {} at +{act_at}", n % 4);
+                assert!(aj <= 1.0 + LIMIT_TOL, "{at}: acceleration/jerk {aj}");
+                // Known, not fixed (the session-9 interpolator does the same, 1.0000089): a resume
+                // to scale 1 on a cruise at the velocity limit overshoots the scale by ~1e-5
+                // (the discrete braking law toward the target chatters around it for ~40 periods).
+                assert!(v <= 1.0 + 2e-5, "{at}: velocity {v}");
+                cases += 1;
+            },
+        );
         assert!(cases > 1000, "{name}: {cases} cases");
     }
 }

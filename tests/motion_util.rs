@@ -133,16 +133,19 @@ pub struct Stop {
     pub peak_ratio: f64,
 }
 
-/// A feed hold requested at every period `n` of a nominal run of `p` where `at(n)`: the
-/// interpolator is cloned at each request point, so one nominal run serves every stop.
-pub fn hold_stops(p: &Plan, cfg: &MotionConfig, at: impl Fn(usize) -> bool) -> Vec<Stop> {
+/// Runs `p` nominally and, at every period `n` from the fifth where `at(n)`, hands `branch`
+/// a clone of the interpolator and its source as they stand after that period, with a trace
+/// seeded with the last four nominal poses (the branch's finite differences start from
+/// them): one nominal run serves every request point.
+pub fn branch_at_periods<'a>(
+    p: &'a Plan,
+    cfg: &MotionConfig,
+    at: impl Fn(usize) -> bool,
+    mut branch: impl FnMut(usize, hytask::motion::Interpolator, hytask::motion::SliceSource<'a>, Trace),
+) {
     use hytask::motion::{InterpState, Interpolator, SliceSource};
-    let dist =
-        |a: &[f64; 9], b: &[f64; 9]| (0..9).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
     let mut it = Interpolator::new(cfg, p.start_mm);
     let mut src = SliceSource::new(&p.items);
-    let mut stops = Vec::new();
-    // The last four nominal poses: the stop's finite differences start from them.
     let mut hist = [p.start_mm; 4];
     for n in 0.. {
         let out = *it.step(&mut src);
@@ -154,13 +157,24 @@ pub fn hold_stops(p: &Plan, cfg: &MotionConfig, at: impl Fn(usize) -> bool) -> V
         if n < 4 || !at(n) {
             continue;
         }
-        let (mut h, mut hs) = (it.clone(), src.clone());
-        h.hold();
         let mut tr = Trace {
             dt_s: cfg.servo_period_s,
             ..Trace::default()
         };
         tr.poses_mm.extend_from_slice(&hist);
+        branch(n, it.clone(), src.clone(), tr);
+    }
+}
+
+/// A feed hold requested at every period `n` of a nominal run of `p` where `at(n)`.
+pub fn hold_stops(p: &Plan, cfg: &MotionConfig, at: impl Fn(usize) -> bool) -> Vec<Stop> {
+    use hytask::motion::InterpState;
+    let dist =
+        |a: &[f64; 9], b: &[f64; 9]| (0..9).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let mut stops = Vec::new();
+    branch_at_periods(p, cfg, at, |n, mut h, mut hs, mut tr| {
+        let speed_mm_s = dist(&tr.poses_mm[3], &tr.poses_mm[2]) / cfg.servo_period_s;
+        h.hold();
         let mut d = 0.0;
         for _ in 0..20_000 {
             let o = *h.step(&mut hs);
@@ -172,11 +186,11 @@ pub fn hold_stops(p: &Plan, cfg: &MotionConfig, at: impl Fn(usize) -> bool) -> V
         }
         stops.push(Stop {
             period: n,
-            speed_mm_s: dist(&hist[3], &hist[2]) / cfg.servo_period_s,
+            speed_mm_s,
             dist_mm: d,
             time_s: (tr.poses_mm.len() - 4) as f64 * cfg.servo_period_s,
             peak_ratio: tr.peaks().worst_ratio(cfg),
         });
-    }
+    });
     stops
 }

@@ -1025,27 +1025,24 @@ mod tests {
             Op::SetL(0, 5),
             Op::Ret,
         ];
-        let code = Code::new(ops).unwrap();
         let (mut mem, mut st, mut fr) = ([0u64; 1], [0u64; 4], [(0u32, 0u32); 2]);
-        let mut vm = Vm {
-            ops: &code,
-            mem: &mut mem,
-            stack: &mut st,
-            frames: &mut fr,
-            now: 0,
-            fuel: 10,
+        let mut run = |ops: Vec<Op>, mem: &mut [u64]| {
+            let code = Code::new(ops).unwrap();
+            Vm {
+                ops: &code,
+                mem,
+                stack: &mut st,
+                frames: &mut fr,
+                now: 0,
+                fuel: 10,
+            }
+            .run(0, 0)
         };
-        assert_eq!(vm.run(0, 0), Ok(()));
+        assert_eq!(run(ops, &mut mem), Ok(()));
         assert_eq!(mem[0], 5);
-        let code = Code::new(vec![Op::Jmp(0)]).unwrap();
-        let mut vm = Vm {
-            ops: &code,
-            mem: &mut mem,
-            stack: &mut st,
-            frames: &mut fr,
-            now: 0,
-            fuel: 10,
-        };
-        assert_eq!(vm.run(0, 0), Err((FaultKind::BudgetExhausted, 0)));
+        assert_eq!(
+            run(vec![Op::Jmp(0)], &mut mem),
+            Err((FaultKind::BudgetExhausted, 0))
+        );
     }
 }

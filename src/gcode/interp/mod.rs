@@ -444,16 +444,23 @@ impl<'a> Interp<'a> {
         self.ended
     }
 
+    /// Points the error location at the line the program counter is on (column 1) and
+    /// returns the counter: every line executor starts here, so errors name the right line.
+    fn locate_pc(&mut self) -> (usize, usize) {
+        let (f, l) = self.pc;
+        if !Arc::ptr_eq(&self.loc.file, &self.files[f].name) {
+            self.loc.file = self.files[f].name.clone();
+        }
+        self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
+        self.loc.col = 1;
+        (f, l)
+    }
+
     /// Executes lines until the program ends or, with live probing, until a line that
     /// probes has been executed (then [`Self::pending_probe`] is set).
     pub(crate) fn resume(&mut self) -> Result<(), GcodeError> {
         while !self.ended {
-            let (f, l) = self.pc;
-            if !Arc::ptr_eq(&self.loc.file, &self.files[f].name) {
-                self.loc.file = self.files[f].name.clone();
-            }
-            self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
-            self.loc.col = 1;
+            let (f, l) = self.locate_pc();
             if l >= self.files[f].end {
                 let ended = self.files[0].closed || self.opts.mdi;
                 if f == 0 && ended && self.frames.is_empty() {

@@ -21,7 +21,6 @@ use crate::gcode::canon::{CanonCmd, Plane};
 use crate::gcode::modal::Block;
 use crate::gcode::parser::{self, OKind};
 use crate::gcode::GcodeError;
-use std::sync::Arc;
 
 /// Maps X/Z onto the cycle frame (u: pass level, v: feed direction) and back.
 #[derive(Clone, Copy)]
@@ -320,12 +319,7 @@ impl Interp<'_> {
     ) -> Result<(), GcodeError> {
         let mut motion = 10;
         while self.frames.len() > depth {
-            let (f, l) = self.pc;
-            if !Arc::ptr_eq(&self.loc.file, &self.files[f].name) {
-                self.loc.file = self.files[f].name.clone();
-            }
-            self.loc.line = u32::try_from(l + 1).unwrap_or(u32::MAX);
-            self.loc.col = 1;
+            let (f, l) = self.locate_pc();
             if l >= self.files[f].end {
                 return Err(self.err(
                     1,
