@@ -179,11 +179,7 @@ pub fn load(file: &Path, motion: &MotionArgs) -> anyhow::Result<Vec<crate::gcode
     let max = motion.max_commands.unwrap_or(PLAN_MAX_COMMANDS);
     opts.limits.max_canon = opts.limits.max_canon.min(max);
     match crate::gcode::load_file(file, &opts) {
-        Ok(prog) => {
-            // As a job: a feed below any machine's resolution is refused, not simulated.
-            crate::machine::job::check_feeds(&prog.canon)?;
-            Ok(prog.canon)
-        }
+        Ok(prog) => Ok(prog.canon),
         Err(e) if e.to_string().contains("too many canonical commands") => {
             Err(anyhow::Error::new(e).context(format!(
                 "{}: plan and plot hold every command in memory, at most {max} \

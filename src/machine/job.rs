@@ -52,28 +52,6 @@ use std::time::Duration;
 /// planned again while it runs (see the module doc).
 pub const KEEP_ITEMS_MAX: usize = 65_536;
 
-/// Slowest programmed feed accepted other than 0: 1e-6 units/min (units/rev with G95, 1/min
-/// with G93), below any machine's resolution and far below a fine inch feed per revolution
-/// (0.0005 in/rev). `F` written with 320 zeros (a subnormal) was planned as a move of
-/// ~1e321 s, and `hytask plan` overflowed on it.
-pub const MIN_FEED: f64 = 1e-6;
-
-/// Refuses a programmed feed between 0 and [`MIN_FEED`], naming file:line:col.
-pub fn check_feeds(canon: &[Canon]) -> Result<(), ApiError> {
-    for c in canon {
-        if let CanonCmd::SetFeedRate(f) = c.cmd {
-            if f != 0.0 && f.abs() < MIN_FEED {
-                let l = &c.loc;
-                return Err(ApiError::Gcode(format!(
-                    "{}:{}:{}: feed F{f:e} is below the slowest accepted {MIN_FEED:e}",
-                    l.file, l.line, l.col
-                )));
-            }
-        }
-    }
-    Ok(())
-}
-
 /// Commands interpreted at a time by the streaming passes.
 const CANON_CHUNK: usize = 4_096;
 
@@ -249,7 +227,6 @@ fn stream_pass(
     let (mut chunk, mut commands) = (Vec::new(), 0);
     loop {
         let more = run.next_chunk(&mut chunk).map_err(gcode)?;
-        check_feeds(&chunk)?;
         if first_piece_end(&chunk).is_some() {
             return Ok(Streamed::Probes);
         }
@@ -332,7 +309,6 @@ fn plan_job(
     name: &str,
 ) -> Result<Plan, ApiError> {
     let refuse = |e: motion::PlanError| ApiError::Gcode(format!("{name}: {e}"));
-    check_feeds(canon)?;
     let Some(k) = first_piece_end(canon) else {
         return motion::plan_from(canon, motion, start_mm).map_err(refuse);
     };

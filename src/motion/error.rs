@@ -37,6 +37,22 @@ pub enum PlanError {
         /// What is not supported and why.
         what: String,
     },
+    /// A programmed feed between 0 and [`MIN_FEED`](super::MIN_FEED): named by position,
+    /// as the G-code error it is (the planner is the one place every job, MDI line, probing
+    /// piece and `hytask plan` passes through).
+    #[error("{file}:{line}:{col}: feed F{feed:e} is below the slowest accepted {min:e}")]
+    FeedTooSlow {
+        /// File of the block.
+        file: String,
+        /// Line of the block.
+        line: u32,
+        /// Column of the F word.
+        col: u32,
+        /// The programmed feed.
+        feed: f64,
+        /// [`MIN_FEED`](super::MIN_FEED).
+        min: f64,
+    },
     /// A command carries a value that cannot be planned (zero feed, NaN coordinate, ...).
     #[error("line {line}: {what}")]
     Invalid {

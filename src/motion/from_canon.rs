@@ -271,6 +271,15 @@ pub fn fold_from(
             | CanonCmd::Probe { .. }
             | CanonCmd::SetToolTableEntry { .. }
             | CanonCmd::Finish => {}
+            CanonCmd::SetFeedRate(f) if *f != 0.0 && f.abs() < super::MIN_FEED => {
+                return Err(PlanError::FeedTooSlow {
+                    file: c.loc.file.to_string(),
+                    line,
+                    col: c.loc.col,
+                    feed: *f,
+                    min: super::MIN_FEED,
+                });
+            }
             CanonCmd::SetFeedRate(f) => st.feed = *f,
             CanonCmd::SetFeedMode(m) => st.feed_mode = *m,
             CanonCmd::SetMotionControl(m) => st.control = *m,

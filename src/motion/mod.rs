@@ -94,6 +94,12 @@ pub mod stream;
 pub mod svg;
 pub mod trace;
 
+/// Slowest programmed feed accepted other than 0: 1e-6 units/min (units/rev with G95, 1/min
+/// with G93), below any machine's resolution and far below a fine inch feed per revolution
+/// (0.0005 in/rev). `F` written with 320 zeros (a subnormal) was planned as a move of
+/// ~1e321 s, and `hytask plan` overflowed sizing its trace.
+pub const MIN_FEED: f64 = 1e-6;
+
 pub use config::{AxisLimits, KinematicsConfig, MotionConfig, ScaraConfig};
 pub use error::{KinematicsError, PlanError};
 pub use interpolator::{
