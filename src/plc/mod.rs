@@ -27,6 +27,7 @@ pub mod lexer;
 pub mod link;
 #[cfg(not(loom))]
 pub mod online;
+pub mod op;
 pub mod parser;
 mod peephole;
 pub mod program;
