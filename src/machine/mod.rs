@@ -8,6 +8,7 @@ pub mod io_devices;
 pub mod job;
 pub mod job_cancel;
 pub mod job_file;
+pub mod job_stream;
 pub mod mode;
 pub mod probing;
 pub mod runtime;
