@@ -207,6 +207,7 @@ pub(super) fn digest(items: &[Item]) -> u64 {
                     h.write_u64(v.to_bits());
                 }
                 h.write_u32(s.line);
+                std::hash::Hash::hash(&s.line_marks, &mut h);
                 h.write_u8(s.kind as u8);
             }
             // Rare: the debug text names every field (f64 in its shortest exact form).
@@ -214,4 +215,40 @@ pub(super) fn digest(items: &[Item]) -> u64 {
         }
     }
     h.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::line_marks::LineMarks;
+
+    /// The digest covers every field a replayed batch could differ in, the line marks of
+    /// fitted arcs included (they set the line the machine reports).
+    #[test]
+    fn the_digest_sees_every_field_of_a_segment() {
+        let cfg = MotionConfig::default();
+        let loc = crate::gcode::SourceLoc {
+            file: std::sync::Arc::from("t"),
+            line: 1,
+            col: 1,
+        };
+        let mut end = [0.0; NUM_AXES];
+        end[0] = 10.0;
+        let plan = motion::plan_straight_feed([0.0; NUM_AXES], end, 600.0, loc, &cfg).unwrap();
+        let items = plan.items;
+        let Some(i) = items.iter().position(|it| matches!(it, Item::Segment(_))) else {
+            panic!("no segment in {items:?}");
+        };
+        let mut marked = items.clone();
+        if let Item::Segment(s) = &mut marked[i] {
+            s.line_marks = LineMarks::new(&[0.5]).unwrap();
+        }
+        assert_ne!(digest(&items), digest(&marked));
+        let mut other_line = items.clone();
+        if let Item::Segment(s) = &mut other_line[i] {
+            s.line += 1;
+        }
+        assert_ne!(digest(&items), digest(&other_line));
+        assert_eq!(digest(&items), digest(&items.clone()));
+    }
 }

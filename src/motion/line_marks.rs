@@ -18,7 +18,7 @@ pub const MAX_MARKS: usize = 10;
 const SCALE: f64 = 254.0;
 
 /// Marks of one segment, in increasing order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub struct LineMarks {
     at: [u8; MAX_MARKS],
     n: u8,
