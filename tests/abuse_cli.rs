@@ -72,3 +72,39 @@ fn plan_refuses_a_subnormal_feed_by_position() {
         "{e}"
     );
 }
+
+/// Found in session 10: `hytask plan` of a slow but accepted feed (`F0.001`, 10 mm: a job
+/// of 600,000 s) ran the servo-period trace for hours and held GBs. Now the plan and its
+/// time are reported and the trace is not run beyond `--max-trace-s` (default 4 h), which
+/// `--trace` and `plot --velocity` name when they refuse.
+#[test]
+fn plan_reports_a_very_long_job_without_running_its_trace() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("slow.ngc");
+    std::fs::write(&p, "G21 G90\nG1 X10 F0.001\nM2\n").unwrap();
+    let file = p.to_str().unwrap();
+    let out = hytask_ok(&["plan", file]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("job time:        600000.")
+            && text.contains("trace:           not run")
+            && text.contains("--max-trace-s 14400"),
+        "{text}"
+    );
+    let csv = dir.path().join("t.csv");
+    let svg = dir.path().join("v.svg");
+    for args in [
+        vec!["plan", file, "--trace", csv.to_str().unwrap()],
+        vec!["plot", file, "--velocity", "-o", svg.to_str().unwrap()],
+    ] {
+        let out = hytask(&args);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(stderr(&out).contains("--max-trace-s"), "{args:?}");
+    }
+    // A short job is traced as before; the limit is the option's.
+    std::fs::write(&p, "G21 G90\nG1 X10 F600\nM2\n").unwrap();
+    let out = hytask_ok(&["plan", file, "--max-trace-s", "0.5"]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("not run"));
+    let out = hytask_ok(&["plan", file, "--max-trace-s", "5"]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("periods of 1.000 ms"));
+}

@@ -43,6 +43,12 @@ pub struct MotionArgs {
     /// where a job streams; the interpreter's own cap (50 M) let one small file take GBs.
     #[arg(long)]
     pub max_commands: Option<usize>,
+    /// Longest planned job, s, that `plan` and `plot` run through the interpolator at the
+    /// servo period (the trace, its peaks, the optimal bound, `--trace`, `--velocity`).
+    /// Default 14,400 (4 h): one period is one sample, so a job of F0.001 would otherwise
+    /// take hours and GBs; the plan itself and its time are always reported.
+    #[arg(long, value_name = "SECONDS")]
+    pub max_trace_s: Option<f64>,
     /// Velocity limit of X Y Z, mm/s.
     #[arg(long)]
     pub max_vel: Option<f64>,
@@ -68,6 +74,29 @@ pub struct MotionArgs {
     /// `[tool_table]` of `--config`, else none (the same default as `hytask gcode canon`).
     #[arg(long)]
     pub tool_table: Option<PathBuf>,
+}
+
+/// Default of `--max-trace-s`: 4 h of machine time (14.4 M servo periods at 1 ms).
+pub const DEFAULT_MAX_TRACE_S: f64 = 14_400.0;
+
+impl MotionArgs {
+    /// `--max-trace-s`, or its default.
+    pub fn max_trace_s(&self) -> f64 {
+        self.max_trace_s.unwrap_or(DEFAULT_MAX_TRACE_S)
+    }
+}
+
+/// Refuses to run a trace of `plan` longer than `max_s` of machine time, naming the option.
+pub fn check_traceable(plan: &crate::motion::Plan, max_s: f64) -> anyhow::Result<()> {
+    if plan.duration_s <= max_s {
+        return Ok(());
+    }
+    anyhow::bail!(
+        "the job is planned to take {:.0} s, longer than --max-trace-s {:.0} s: its \
+         servo-period trace is not run (raise --max-trace-s to run it)",
+        plan.duration_s,
+        max_s
+    )
 }
 
 /// Keys accepted in the `--config` file.
@@ -196,10 +225,17 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
     let cfg = args.motion.config()?;
     let canon = load(&args.file, &args.motion)?;
     let mut out = String::new();
-    let within = report(&args.file.display().to_string(), &canon, &cfg, &mut out)?;
+    let max_trace_s = args.motion.max_trace_s();
+    let within = report(
+        &args.file.display().to_string(),
+        &canon,
+        &cfg,
+        max_trace_s,
+        &mut out,
+    )?;
     print!("{out}");
     if let Some(path) = &args.trace {
-        write_trace(&canon, &cfg, path)?;
+        write_trace(&canon, &cfg, max_trace_s, path)?;
         println!("trace:           written to {}", path.display());
     }
     Ok(if within {
@@ -214,9 +250,11 @@ pub fn run(args: PlanArgs) -> anyhow::Result<ExitCode> {
 pub fn write_trace(
     canon: &[crate::gcode::Canon],
     cfg: &MotionConfig,
+    max_trace_s: f64,
     path: &Path,
 ) -> anyhow::Result<()> {
     let plan = crate::motion::plan(canon, cfg)?;
+    check_traceable(&plan, max_trace_s)?;
     let tr = trace::run_all(&plan, cfg);
     let file =
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
@@ -227,11 +265,13 @@ pub fn write_trace(
 }
 
 /// Plans `canon`, interpolates it at the servo period and writes the report; returns false
-/// if a trace peak exceeds its limit (which the planner is built never to allow).
+/// if a trace peak exceeds its limit (which the planner is built never to allow). A job
+/// planned longer than `max_trace_s` is reported without its trace (see `--max-trace-s`).
 pub fn report(
     name: &str,
     canon: &[crate::gcode::Canon],
     cfg: &MotionConfig,
+    max_trace_s: f64,
     out: &mut String,
 ) -> anyhow::Result<bool> {
     use std::fmt::Write;
@@ -239,9 +279,11 @@ pub fn report(
     let plan = crate::motion::plan(canon, cfg)?;
     let plan_s = t0.elapsed().as_secs_f64();
     let b = bounds::bounds(canon, cfg)?;
-    let optimal = bounds::time_optimal_s(&plan, canon, cfg)?;
-    let tr = trace::measure(&plan, cfg, trace::max_periods(&plan, cfg));
-    let pk = tr.peaks;
+    let traced = check_traceable(&plan, max_trace_s);
+    let optimal = match traced {
+        Ok(()) => Some(bounds::time_optimal_s(&plan, canon, cfg)?),
+        Err(_) => None,
+    };
     writeln!(out, "file:            {name}")?;
     writeln!(
         out,
@@ -282,12 +324,14 @@ pub fn report(
         b.feed_limited_s,
         ratio(b.feed_limited_s)
     )?;
-    writeln!(
-        out,
-        "optimal bound:   {:.3} s  (plan = {:.3}x; time-optimal on the planned path, no jerk limit)",
-        optimal,
-        ratio(optimal)
-    )?;
+    if let Some(optimal) = optimal {
+        writeln!(
+            out,
+            "optimal bound:   {:.3} s  (plan = {:.3}x; time-optimal on the planned path, no jerk limit)",
+            optimal,
+            ratio(optimal)
+        )?;
+    }
     writeln!(
         out,
         "corner estimate: {:.3} s  (plan = {:.3}x; programmed polyline, not a bound)",
@@ -300,6 +344,12 @@ pub fn report(
         b.naive_stop_s,
         ratio(b.naive_stop_s)
     )?;
+    if let Err(e) = traced {
+        writeln!(out, "trace:           not run: {e}")?;
+        return Ok(true);
+    }
+    let tr = trace::measure(&plan, cfg, trace::max_periods(&plan, cfg));
+    let pk = tr.peaks;
     writeln!(
         out,
         "trace:           {} periods of {:.3} ms = {:.3} s",
@@ -397,7 +447,14 @@ mod tests {
             },
         ];
         let mut out = String::new();
-        assert!(report("t.ngc", &canon, &MotionConfig::default(), &mut out).unwrap());
+        assert!(report(
+            "t.ngc",
+            &canon,
+            &MotionConfig::default(),
+            DEFAULT_MAX_TRACE_S,
+            &mut out
+        )
+        .unwrap());
         assert!(out.contains("job time:"), "{out}");
         assert!(out.contains("distance:        31.623 mm"), "{out}");
         assert!(out.contains("feed bound:      1.581 s"), "{out}");

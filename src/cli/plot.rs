@@ -68,6 +68,7 @@ pub fn run(args: PlotArgs) -> anyhow::Result<ExitCode> {
         width_px: f64::from(args.width),
     };
     let svg = if args.velocity {
+        super::plan::check_traceable(&plan, args.motion.max_trace_s())?;
         feed_chart(&plan, &canon, &cfg, start, &options)?
     } else {
         draw::render(&plan, &options)
