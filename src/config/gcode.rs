@@ -1,6 +1,7 @@
 //! `[gcode]`: what the G-code interpreter takes from the machine configuration besides the
 //! tool table: the var file (LinuxCNC's `PARAMETER_FILE`), the subroutine search path
-//! (`SUBROUTINE_PATH`) and the values of `#<_ini[section]name>`.
+//! (`SUBROUTINE_PATH`), the directory of the log comments' files and the values of
+//! `#<_ini[section]name>`.
 //!
 //! LinuxCNC programs read their machine's ini file through `#<_ini[section]name>`. hytask
 //! has a TOML configuration instead, so the names are mapped ([`GcodeConfig::ini_values`]):
@@ -42,6 +43,12 @@ pub struct GcodeConfig {
     /// directory.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub subroutine_path: Vec<PathBuf>,
+    /// Where LinuxCNC's log comments write: `(LOGOPEN,name)` and `(LOGAPPEND,name)` open
+    /// `name` under this directory (a relative name, without `..`). Absent: log comments
+    /// write nothing and the operator is told. A relative path is relative to the
+    /// configuration file's directory.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log_dir: Option<PathBuf>,
     /// Free values for programs: `[gcode.ini.<section>] <name> = <number>`, read as
     /// `#<_ini[<section>]<name>>`.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -78,6 +85,13 @@ impl GcodeConfig {
             .is_some_and(|p| p.as_os_str().is_empty())
         {
             issues.push("gcode.var_file", "must not be empty");
+        }
+        if self
+            .log_dir
+            .as_ref()
+            .is_some_and(|p| p.as_os_str().is_empty())
+        {
+            issues.push("gcode.log_dir", "must not be empty");
         }
         for (i, p) in self.subroutine_path.iter().enumerate() {
             if p.as_os_str().is_empty() {

@@ -11,7 +11,7 @@
 //! [spindle]       max/min rpm, enable/direction/speed/at-speed channels
 //! [coolant]       flood/mist outputs
 //! [tool_table]    path
-//! [gcode]         var_file, subroutine_path, ini.<section>.<name> (`#<_ini[section]name>`)
+//! [gcode]         var_file, subroutine_path, log_dir, ini.<section>.<name> (`#<_ini[section]name>`)
 //! [control]       socket_path, mode, group, jobs_dir, max_job_bytes, idle_timeout_s,
 //!                 max_clients, max_buffered_bytes, operators, observers, unlisted
 //! [job]           prepare_timeout_s
@@ -122,7 +122,7 @@ pub fn parse(text: &str, origin: &str) -> Result<MachineConfig, ConfigError> {
 }
 
 /// Reads, parses and validates a machine file. A relative `tool_table.path`,
-/// `gcode.var_file` or `gcode.subroutine_path` entry is made relative to the file's directory (and `[plc]` paths are resolved against it).
+/// `gcode.var_file`, `gcode.log_dir` or `gcode.subroutine_path` entry is made relative to the file's directory (and `[plc]` paths are resolved against it).
 pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
     let text = read(path)?;
     let mut config = parse(&text, &path.display().to_string())?;
@@ -131,9 +131,11 @@ pub fn load(path: &Path) -> Result<MachineConfig, ConfigError> {
             t.path = dir.join(&t.path);
         }
     }
-    if let (Some(v), Some(dir)) = (&mut config.gcode.var_file, path.parent()) {
-        if v.is_relative() {
-            *v = dir.join(&*v);
+    for p in [&mut config.gcode.var_file, &mut config.gcode.log_dir] {
+        if let (Some(v), Some(dir)) = (p, path.parent()) {
+            if v.is_relative() {
+                *v = dir.join(&*v);
+            }
         }
     }
     if let Some(dir) = path.parent() {

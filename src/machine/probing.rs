@@ -139,14 +139,15 @@ pub struct PieceRunner {
     pub(crate) primer: super::feeder::Primer,
 }
 
-/// Appends a piece's message texts to the job's and renumbers the piece's message items.
+/// Appends a piece's message and log texts to the job's and renumbers the piece's items
+/// that carry one.
 pub fn append_messages(plan: &mut Plan, messages: &Mutex<Vec<String>>) {
     let mut all = messages.lock().unwrap_or_else(|p| p.into_inner());
     let offset = all.len() as u32;
     all.extend(plan.messages.iter().cloned());
     for item in &mut plan.items {
         if let Item::Aux(a) = item {
-            if let AuxKind::Message { id } = &mut a.kind {
+            if let Some(id) = a.kind.text_id_mut() {
                 *id += offset;
             }
         }

@@ -75,6 +75,8 @@ struct ActiveJob {
     error: Option<String>,
     /// A probing job's persistent parameters from its live run (see `probing`).
     measured: Measured,
+    /// The file its log comments write (see `job_log`).
+    log: job_log::JobLog,
 }
 
 /// A probing job's persistent parameters from its live run, once its last piece is read.
@@ -125,6 +127,7 @@ pub struct Machine {
 }
 
 mod events;
+mod job_log;
 mod remote_loss;
 pub use events::describe_trip;
 use events::Receivers;

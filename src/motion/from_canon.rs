@@ -264,7 +264,6 @@ pub fn fold_from(
             // Interpreter bookkeeping with no effect on motion: (PRINT,…) goes to the
             // interpreter's log, tool-table edits arrive as UseToolLengthOffset when used.
             CanonCmd::Print(_)
-            | CanonCmd::Log { .. }
             | CanonCmd::PalletShuttle
             | CanonCmd::OnReset
             | CanonCmd::SetFeedReference
@@ -495,6 +494,11 @@ pub fn fold_from(
                 let id = out.messages.len() as u32;
                 out.messages.push(m.clone());
                 out.steps.push(aux(AuxKind::Message { id }));
+            }
+            CanonCmd::Log { kind, text } => {
+                let id = out.messages.len() as u32;
+                out.messages.push(text.clone());
+                out.steps.push(aux(AuxKind::Log { id, kind: *kind }));
             }
             CanonCmd::ProgramStop => out.steps.push(aux(AuxKind::ProgramStop)),
             CanonCmd::OptionalProgramStop => out.steps.push(aux(AuxKind::OptionalProgramStop)),

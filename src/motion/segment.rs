@@ -4,7 +4,7 @@
 
 use super::line_marks::LineMarks;
 use super::profile::Shape;
-use crate::gcode::canon::{InputKind, OverrideKind, ProbeKind, SpindleDir, WaitKind};
+use crate::gcode::canon::{InputKind, LogKind, OverrideKind, ProbeKind, SpindleDir, WaitKind};
 use crate::gcode::NUM_AXES;
 
 /// What a segment does, for overrides and display.
@@ -256,6 +256,15 @@ pub enum AuxKind {
         /// Index into `Plan::messages`.
         id: u32,
     },
+    /// A log comment, `(LOGOPEN,…)`, `(LOGAPPEND,…)`, `(LOG,…)` or `(LOGCLOSE)`: the file
+    /// name or the line is `Plan::messages[id]`. The machine writes it off the realtime path
+    /// when the tool gets there (`machine::runtime::job_log`).
+    Log {
+        /// Index into `Plan::messages`.
+        id: u32,
+        /// Open, append, write or close.
+        kind: LogKind,
+    },
     /// M48–M53.
     OverrideEnable {
         /// Which override.
@@ -323,9 +332,21 @@ impl AuxKind {
                 | AuxKind::DigitalOutput { synced: true, .. }
                 | AuxKind::AnalogOutput { synced: true, .. }
                 | AuxKind::Message { .. }
+                | AuxKind::Log { .. }
                 | AuxKind::OverrideEnable { .. }
                 | AuxKind::SpindleSyncEnd
         )
+    }
+}
+
+impl AuxKind {
+    /// The index into `Plan::messages` of an item that carries a text (`(MSG, …)` and the
+    /// log comments): a plan made of pieces renumbers them as it appends each piece's texts.
+    pub fn text_id_mut(&mut self) -> Option<&mut u32> {
+        match self {
+            AuxKind::Message { id } | AuxKind::Log { id, .. } => Some(id),
+            _ => None,
+        }
     }
 }
 

@@ -21,7 +21,7 @@ use super::kinematics::{self, Kinematics};
 use super::limits::{self, Limits};
 use super::lookahead::Lookahead;
 use super::moves::Step;
-use super::segment::{AuxKind, Item};
+use super::segment::Item;
 use super::{KinematicsConfig, MotionConfig, Plan, PlanError};
 use crate::gcode::{Canon, NUM_AXES};
 use std::collections::BTreeSet;
@@ -116,7 +116,7 @@ impl PlanStream {
         }
         for mut step in folded.steps {
             if let Step::Aux(a) = &mut step {
-                if let AuxKind::Message { id } = &mut a.kind {
+                if let Some(id) = a.kind.text_id_mut() {
                     *id += offset;
                 }
             }

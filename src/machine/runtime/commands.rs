@@ -194,6 +194,7 @@ impl Machine {
             messages,
             error: None,
             measured,
+            log: super::job_log::JobLog::new(self.config.gcode.log_dir.clone()),
         });
         drop(book);
         if let Some(mut p) = previous {

@@ -215,6 +215,22 @@ fn handle_job_event(m: &Machine, news: JobNews) {
             m.publish("message", json!({"text": text, "line": line}));
             return;
         }
+        JobEvent::Log { id, kind, line } => {
+            let Some(a) = book.active.as_mut() else {
+                return;
+            };
+            let text = lock(&a.messages)
+                .get(id as usize)
+                .cloned()
+                .unwrap_or_default();
+            let refused = a.log.apply(kind, &text).err();
+            drop(book);
+            if let Some(why) = refused {
+                tracing::warn!("line {line}: {why}");
+                m.publish("message", json!({"text": why, "line": line}));
+            }
+            return;
+        }
     };
     let manual = book.active.as_ref().is_some_and(|a| a.manual);
     book.status.state = state.into();

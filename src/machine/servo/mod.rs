@@ -477,6 +477,15 @@ pub enum JobEvent {
         /// Line.
         line: u32,
     },
+    /// A log comment was reached: file name or line `messages[id]` of the plan.
+    Log {
+        /// Index into the plan's messages.
+        id: u32,
+        /// Open, append, write or close.
+        kind: crate::gcode::canon::LogKind,
+        /// Line.
+        line: u32,
+    },
 }
 
 /// Errors that end a job without faulting the machine (LinuxCNC reports them and stops the

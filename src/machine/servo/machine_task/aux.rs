@@ -107,6 +107,7 @@ impl MachineTask {
                 done = false;
             }
             AuxKind::Message { id } => self.emit_job(JobEvent::Message { id, line }),
+            AuxKind::Log { id, kind } => self.emit_job(JobEvent::Log { id, kind, line }),
             AuxKind::OverrideEnable { .. }
             | AuxKind::UserMcode { .. }
             | AuxKind::SpindleSyncEnd => {}
