@@ -119,6 +119,7 @@ impl Machine {
                 job: job_rx,
                 fault: fault_rx,
                 plc: plc_rx,
+                job_lost: 0,
             })),
             link_events: Mutex::new(link_events),
             plc_stats,

@@ -68,6 +68,8 @@ pub(super) struct Receivers {
     pub(super) fault: EventReceiver<FaultEvent>,
     /// The PLC task's faults (`None` without `[plc]`).
     pub(super) plc: Option<EventReceiver<crate::plc::task::PlcFault>>,
+    /// Job events lost so far to a full `job` receiver (already reported).
+    pub(super) job_lost: u64,
 }
 
 impl Machine {
@@ -114,7 +116,20 @@ impl Machine {
         while let Some(e) = rx.job.pop() {
             handle_job_event(self, e);
         }
+        // More messages or log lines reached in a burst than the receiver holds between two
+        // drains (about 1,000 in 5 ms): say so rather than lose them silently.
+        let lost = rx.job.lost();
+        let newly = lost.saturating_sub(rx.job_lost);
+        rx.job_lost = lost;
         drop(guard);
+        if newly > 0 {
+            let msg = format!(
+                "{newly} job events (messages, log lines) were reached faster than they could \
+                 be reported, and were lost"
+            );
+            tracing::warn!("{msg}");
+            self.publish("message", json!({ "text": msg }));
+        }
         if let Some(links) = lock(&self.link_events).as_ref() {
             while let Ok(e) = links.try_recv() {
                 self.publish("io", e.to_json());
