@@ -402,7 +402,7 @@ impl Interpolator {
         // period itself (trapezoid of the current and the new k̇).
         let toward = self.kd * e.signum();
         let room = (e.abs() - toward * dt / 2.0).max(0.0);
-        let brake = ((k2 * dt / 2.0).powi(2) + 2.0 * k2 * room).sqrt() - k2 * dt / 2.0;
+        let brake = discrete_brake_speed(room, k2, dt);
         // Above scale 1 the override caps assume |k̇| ≤ k1 (their margin covers the lag of
         // that rate only): rising, arrive at 1 no faster than k1 and stay at k1 above it.
         let rate = if e > 0.0 && target > 1.0 {
@@ -584,5 +584,63 @@ impl Interpolator {
                 return;
             }
         }
+    }
+}
+
+/// The largest speed `v` toward a target at the end of this period such that `v·dt/2` (the
+/// rest of this period's trapezoid) plus the distance of stopping from `v` in whole servo
+/// periods, each lowering the speed by at most `k2·dt`, is at most `room`.
+///
+/// The continuous stopping distance `v²/(2·k2)` is short of the discrete one by up to
+/// `k2·dt²/8` (when `v` is an odd number of half steps), so a law built on it overshoots its
+/// target by that much and then chatters around it: resuming to scale 1 on a cruise at the
+/// velocity limit went 1.4e-5 over the limit for ~40 periods. Stopping from `v = m·a + r`
+/// (`a = k2·dt`, `0 ≤ r < a`) covers `dt/2·((2m+1)·r + a·m²)`; with this period's `v·dt/2` the
+/// total is linear in `v` between multiples of `a`, so `v` follows in closed form.
+fn discrete_brake_speed(room: f64, k2: f64, dt: f64) -> f64 {
+    let a = k2 * dt;
+    if room <= 0.0 || a <= 0.0 || dt <= 0.0 {
+        return 0.0;
+    }
+    // Largest whole m with a·m·(m+1)·dt/2 ≤ room (the total at v = m·a).
+    let m = ((-1.0 + (1.0 + 8.0 * room / (a * dt)).sqrt()) / 2.0)
+        .floor()
+        .max(0.0);
+    (2.0 * room / dt + a * m * (m + 1.0)) / (2.0 * m + 2.0)
+}
+
+#[cfg(test)]
+mod brake_tests {
+    use super::discrete_brake_speed;
+
+    /// Distance of `v·dt/2` plus the fastest stop from `v` in whole periods.
+    fn covered(v: f64, k2: f64, dt: f64) -> f64 {
+        let mut d = v * dt / 2.0;
+        let mut v = v;
+        while v > 0.0 {
+            let next = (v - k2 * dt).max(0.0);
+            d += (v + next) * dt / 2.0;
+            v = next;
+        }
+        d
+    }
+
+    #[test]
+    fn the_speed_stops_exactly_within_the_room_in_whole_periods() {
+        let dt = 1e-3;
+        for k2 in [5.0, 37.3, 199.3] {
+            for i in 1..400 {
+                let room = 1e-7 * f64::from(i) * f64::from(i);
+                let v = discrete_brake_speed(room, k2, dt);
+                let d = covered(v, k2, dt);
+                assert!(
+                    (d - room).abs() <= 1e-12 * room.max(1.0),
+                    "{k2} {room}: {d}"
+                );
+                // A little faster no longer fits: v is the largest.
+                assert!(covered(v * (1.0 + 1e-6) + 1e-12, k2, dt) > room);
+            }
+        }
+        assert_eq!(discrete_brake_speed(0.0, 10.0, dt), 0.0);
     }
 }
