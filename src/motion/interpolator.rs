@@ -597,7 +597,7 @@ impl Interpolator {
 /// velocity limit went 1.4e-5 over the limit for ~40 periods. Stopping from `v = m·a + r`
 /// (`a = k2·dt`, `0 ≤ r < a`) covers `dt/2·((2m+1)·r + a·m²)`; with this period's `v·dt/2` the
 /// total is linear in `v` between multiples of `a`, so `v` follows in closed form.
-fn discrete_brake_speed(room: f64, k2: f64, dt: f64) -> f64 {
+pub(crate) fn discrete_brake_speed(room: f64, k2: f64, dt: f64) -> f64 {
     let a = k2 * dt;
     if room <= 0.0 || a <= 0.0 || dt <= 0.0 {
         return 0.0;

@@ -24,6 +24,8 @@
 //! follows it back out, so the tap leaves in the thread it cut; once the spindle position
 //! is back at the start, the axis stops at the start point.
 
+use super::interpolator::discrete_brake_speed;
+
 /// One servo cycle's reading of the spindle encoder.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SpindleSample {
@@ -139,6 +141,40 @@ impl SpindleLock {
         }
     }
 
+    /// A thread move that continues the synchronisation of the one that just ended at this
+    /// point, without waiting for the index (G76's exit taper after its thread, consecutive
+    /// G33 lines), as LinuxCNC's motion keeps one synchronisation across consecutive
+    /// synchronised moves: `rev0` is the revolution at which the previous move's target
+    /// reached its end, `dir` its spindle direction. The axis starts from rest, lags the
+    /// spindle and catches up as after an index, so the groove goes on in phase instead of
+    /// the tool dwelling in the cut for up to a revolution.
+    pub fn continuing(
+        pitch: f64,
+        length: f64,
+        vmax: f64,
+        amax: f64,
+        rev0: f64,
+        dir: f64,
+    ) -> SpindleLock {
+        SpindleLock {
+            phase: LockPhase::In,
+            rev0,
+            dir,
+            ..SpindleLock::new(LockMode::Thread, pitch, length, vmax, amax)
+        }
+    }
+
+    /// The revolution at which a thread move's target reaches its end, and the spindle
+    /// direction: where a [`continuing`](Self::continuing) move takes over.
+    pub fn end_revolution(&self) -> (f64, f64) {
+        (self.rev0 + self.dir * self.length / self.pitch, self.dir)
+    }
+
+    /// Thread or rigid tap.
+    pub fn mode(&self) -> LockMode {
+        self.mode
+    }
+
     /// The current phase.
     pub fn phase(&self) -> LockPhase {
         self.phase
@@ -244,15 +280,18 @@ impl SpindleLock {
         let a_c = 0.5 * self.amax;
         let corr = err.signum() * (2.0 * a_c * err.abs()).sqrt().min(err.abs() / (4.0 * dt));
         let mut v_des = (v_sync + corr).clamp(-self.vmax, self.vmax);
+        // Braking toward the end (going in) or the start (coming out) in whole servo periods
+        // at 80 % of the acceleration, counting this period's trapezoid: the slew can always
+        // follow it, so the axis stops on the point without being clamped onto it (a clamp
+        // is a velocity step: the exit taper of a G76 thread braked at 1.9× the limit).
+        let a_brake = 0.8 * self.amax;
         if let Some(end) = end {
-            // Planned with 80 % of the acceleration, so that the cycle-by-cycle slew can
-            // follow the braking curve and the axis stops at the end, not past it.
-            let room = (end - self.s).max(0.0);
-            v_des = v_des.min((1.6 * self.amax * room).sqrt());
+            let room = end - self.s - self.v.max(0.0) * dt / 2.0;
+            v_des = v_des.min(discrete_brake_speed(room, a_brake, dt));
         }
         if let Some(start) = start {
-            let room = (self.s - start).max(0.0);
-            v_des = v_des.max(-(1.6 * self.amax * room).sqrt());
+            let room = self.s - start - (-self.v).max(0.0) * dt / 2.0;
+            v_des = v_des.max(-discrete_brake_speed(room, a_brake, dt));
         }
         self.slew(dt, v_des);
         if let Some(end) = end {

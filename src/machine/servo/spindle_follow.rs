@@ -94,6 +94,23 @@ impl SyncMove {
     }
 }
 
+/// Where a thread move that ended normally left off, for the next one to continue its
+/// synchronisation (see [`SpindleLock::continuing`]).
+#[derive(Debug, Clone, Copy)]
+struct ChainEnd {
+    /// Where the tool stopped.
+    pose: [f64; NUM_AXES],
+    /// The revolution at which its target reached the end, and the spindle direction.
+    rev_end: f64,
+    dir: f64,
+    /// Servo cycles since it ended.
+    age: u32,
+}
+
+/// Cycles within which a synchronised move starting where the last one ended continues it:
+/// the interpolator reaches the next move's barrier one or two cycles after the end item.
+const CHAIN_CYCLES: u32 = 4;
+
 /// The synchronised-move runner of the `interpolator` task (see the module documentation).
 #[derive(Debug, Clone)]
 pub struct SpindleFollower {
@@ -101,6 +118,7 @@ pub struct SpindleFollower {
     sample: SpindleSample,
     reversed: bool,
     mv: Option<SyncMove>,
+    chain: Option<ChainEnd>,
 }
 
 impl SpindleFollower {
@@ -111,6 +129,7 @@ impl SpindleFollower {
             sample: SpindleSample::default(),
             reversed: false,
             mv: None,
+            chain: None,
         }
     }
 
@@ -142,6 +161,12 @@ impl SpindleFollower {
         if let Some(sp) = &mut self.spindle {
             self.sample = sp.step(dt, rpm);
         }
+        if let Some(c) = &mut self.chain {
+            c.age += 1;
+            if c.age > CHAIN_CYCLES {
+                self.chain = None;
+            }
+        }
     }
 
     /// Starts the move from `from` to `end` at `pitch_mm` per revolution (G33.1 with `tap`),
@@ -156,6 +181,12 @@ impl SpindleFollower {
     ) -> Result<StartOutcome, LockError> {
         self.mv = None;
         self.reversed = false;
+        // A thread move that starts where the last one ended, at once, goes on with its
+        // synchronisation (no wait for the index).
+        let chain = self
+            .chain
+            .take()
+            .filter(|c| !tap && c.pose.iter().zip(&from).all(|(a, b)| (a - b).abs() <= 1e-6));
         if self.spindle.is_none() {
             return if tap {
                 Err(LockError::NoSpindlePosition)
@@ -186,8 +217,12 @@ impl SpindleFollower {
         } else {
             LockMode::Thread
         };
+        let lock = match chain {
+            Some(c) => SpindleLock::continuing(pitch_mm, length, vmax, amax, c.rev_end, c.dir),
+            None => SpindleLock::new(mode, pitch_mm, length, vmax, amax),
+        };
         self.mv = Some(SyncMove {
-            lock: SpindleLock::new(mode, pitch_mm, length, vmax, amax),
+            lock,
             start: from,
             unit,
             length,
@@ -201,6 +236,7 @@ impl SpindleFollower {
 
     /// Stop the move on its line within the acceleration limit (an abort).
     pub fn stop(&mut self) {
+        self.chain = None;
         if let Some(m) = &mut self.mv {
             m.stopping = true;
         }
@@ -210,6 +246,7 @@ impl SpindleFollower {
     pub fn cancel(&mut self) {
         self.mv = None;
         self.reversed = false;
+        self.chain = None;
     }
 
     /// One cycle of the running move (call after [`Self::spindle_step`]). `None` when no
@@ -244,6 +281,15 @@ impl SpindleFollower {
         }
         out.pose_mm = m.pose();
         out.to_go_mm = (m.length - m.s).max(0.0);
+        if out.done && !m.stopping && m.lock.mode() == LockMode::Thread {
+            let (rev_end, dir) = m.lock.end_revolution();
+            self.chain = Some(ChainEnd {
+                pose: out.pose_mm,
+                rev_end,
+                dir,
+                age: 0,
+            });
+        }
         if out.done || out.stopped {
             self.mv = None;
             self.reversed = false;
@@ -317,6 +363,105 @@ mod tests {
         let e = f.start(&cfg(), a, b, 1.0, true).unwrap_err();
         assert!(e.to_string().contains("G33.1"), "{e}");
         assert!(!f.active());
+    }
+
+    /// Runs the follower's current move to its end at 600 rpm; returns the poses, one per
+    /// cycle, and the spindle revolutions of each.
+    fn run_to_end(f: &mut SpindleFollower, dt: f64) -> Vec<([f64; NUM_AXES], f64)> {
+        let mut out = Vec::new();
+        for _ in 0..100_000 {
+            f.spindle_step(dt, 600.0);
+            let st = f.step(dt).unwrap();
+            assert_eq!(st.error, None);
+            out.push((st.pose_mm, f.sample().revs));
+            if st.done {
+                return out;
+            }
+        }
+        panic!("the move did not end");
+    }
+
+    /// G76's exit taper after its thread: the taper continues the thread's synchronisation
+    /// at once (no wait of up to a revolution for the index with the tool in the cut), and
+    /// once caught up its progress is locked to the spindle in phase with the thread.
+    /// Acceleration stays within the limit through the corner. A move that starts somewhere
+    /// else, or later, waits for the index as before.
+    #[test]
+    fn a_thread_move_starting_where_the_last_ended_continues_its_synchronisation() {
+        let p = sim_spindle_params(6000.0, 0.2);
+        let (dt, pitch) = (0.001, 1.5);
+        let mut f = SpindleFollower::new(Some(p));
+        for _ in 0..500 {
+            f.spindle_step(dt, 600.0); // up to speed: 10 rev/s
+        }
+        let start = [0.0; NUM_AXES];
+        let mut corner = start;
+        corner[2] = -30.0;
+        f.start(&cfg(), start, corner, pitch, false).unwrap();
+        let thread = run_to_end(&mut f, dt);
+        let rev0 = thread
+            .iter()
+            .find(|(p, _)| p[2] < 0.0)
+            .map(|&(_, r)| r)
+            .unwrap();
+        let mut exit = corner;
+        exit[0] = 3.0;
+        exit[2] = -33.0;
+        let taper_len = 18.0f64.sqrt();
+        f.spindle_step(dt, 600.0); // the interpolator reaches the next barrier
+        assert_eq!(
+            f.start(&cfg(), corner, exit, pitch, false),
+            Ok(StartOutcome::Following)
+        );
+        let taper = run_to_end(&mut f, dt);
+        assert!(
+            taper[1].0[0] > 0.0,
+            "moving in its second cycle, not waiting for the index"
+        );
+        // Locked in phase with the thread once caught up: the taper's progress is the pitch
+        // times the revolutions since the thread's target reached the corner.
+        // The thread started on the index: an integer revolution, in the cycle it moved.
+        let rev_index = rev0.floor();
+        assert!(rev0 - rev_index < 0.02, "started on the index: {rev0}");
+        let rev_corner = rev_index + 30.0 / pitch;
+        let mid = taper.len() / 2;
+        let (pose, revs) = taper[mid];
+        let s = (pose[0].powi(2) + (pose[2] + 30.0).powi(2)).sqrt();
+        assert!(s < taper_len - 0.5, "mid-taper, not braking yet: {s}");
+        // The lock's own steady offset (feed-forward of this cycle's speed), mid-thread.
+        let (tp, trevs) = thread[thread.len() / 2];
+        let thread_offset = -tp[2] - pitch * (trevs - rev_index);
+        let taper_offset = s - pitch * (revs - rev_corner);
+        assert!(
+            (taper_offset - thread_offset).abs() < 1e-6,
+            "in phase: the taper is {taper_offset} mm off the spindle, the thread {thread_offset}"
+        );
+        // Acceleration of every axis through the corner within the limit.
+        let poses: Vec<[f64; NUM_AXES]> = thread.iter().chain(&taper).map(|p| p.0).collect();
+        for (i, lim) in cfg().axes.iter().enumerate() {
+            let v: Vec<f64> = poses.windows(2).map(|w| (w[1][i] - w[0][i]) / dt).collect();
+            let a = v
+                .windows(2)
+                .map(|w| ((w[1] - w[0]) / dt).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                a <= lim.max_acc_mm_s2 * (1.0 + 1e-9),
+                "axis {i}: acceleration {a}"
+            );
+        }
+        // From elsewhere, or after a while: the index again.
+        let elsewhere = [1.0; NUM_AXES];
+        let mut end = elsewhere;
+        end[2] -= 5.0;
+        f.start(&cfg(), elsewhere, end, pitch, false).unwrap();
+        f.spindle_step(dt, 600.0);
+        let first = f.step(dt).unwrap().pose_mm;
+        f.spindle_step(dt, 600.0);
+        let second = f.step(dt).unwrap().pose_mm;
+        assert!(
+            first == elsewhere || second == elsewhere,
+            "waits for the index"
+        );
     }
 
     #[test]
