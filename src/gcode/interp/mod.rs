@@ -640,8 +640,11 @@ impl<'a> Interp<'a> {
         if let Some(tool) = self.s.comp_tool_left.take() {
             self.s.pos[..3].copy_from_slice(&tool);
         }
-        for i in 0..6 {
-            self.s.pos[i] += self.s.tool_offset[i] - self.s.tlo_at_motion[i];
+        let d = self.program_shift_of_tool(std::array::from_fn(|i| {
+            self.s.tool_offset[i] - self.s.tlo_at_motion[i]
+        }));
+        for (p, d) in self.s.pos.iter_mut().zip(d) {
+            *p += d;
         }
         self.s.tlo_at_motion = self.s.tool_offset;
         self.s.synch_pending = false;
