@@ -613,7 +613,10 @@ impl<'a> Interp<'a> {
                     Ok(idx)
                 }
                 Target::Named(n) => {
-                    if self.predefined(n).is_some() {
+                    // `#<_ini[…]…>` reads the machine's ini file: read-only when there is
+                    // one, as in LinuxCNC (rs274 without an ini file lets it be set).
+                    let ini = !self.opts.ini.is_empty() && self.opts.ini.lookup(n).is_some();
+                    if ini || self.predefined(n).is_some() {
                         return Err(
                             self.err(a.col, format!("Cannot set read-only parameter #<{n}>"))
                         );
