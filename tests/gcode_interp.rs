@@ -573,3 +573,29 @@ fn fanuc_m98_errors_name_the_line() {
         e.message
     );
 }
+
+/// The machine's ini values: `[RS274NGC] ORIENT_OFFSET` is added to every M19 angle,
+/// unwrapped (rs274 -i with ORIENT_OFFSET = 42 prints 87, 42 and 392 for these), and an
+/// `#<_ini[…]>` value is read-only once there is an ini file.
+#[test]
+fn ini_orient_offset_and_read_only_ini_values() {
+    let opts = InterpOptions {
+        ini: std::sync::Arc::new(hytask::gcode::IniValues::parse(
+            "[RS274NGC]\nORIENT_OFFSET = 42.0\n[VARS]\nTOOLCHANGE_X = 10\n",
+        )),
+        ..InterpOptions::default()
+    };
+    let p = load_str("t.ngc", "M19 R45 Q2\nM19 P1\nM19 R350\nM2\n", &opts).unwrap();
+    let angles: Vec<f64> = body(&p)
+        .iter()
+        .filter_map(|c| match c {
+            CanonCmd::OrientSpindle { angle, .. } => Some(*angle),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(angles, vec![87.0, 42.0, 392.0]);
+    let e = err_with("#<_ini[vars]toolchange_x> = 3\nM2\n", &opts);
+    assert!(e.to_string().contains("read-only"), "{e}");
+    // Without an ini file (rs274 standalone) it may be set.
+    run("#<_ini[vars]toolchange_x> = 3\nM2\n");
+}

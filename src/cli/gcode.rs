@@ -39,6 +39,12 @@ pub struct InterpArgs {
     /// file, so traces diff cleanly), or `mm` with `--config` (the daemon's units).
     #[arg(long)]
     pub machine_units: Option<String>,
+    /// LinuxCNC ini file, as `rs274 -i` reads it, so that a trace can be diffed against
+    /// rs274 run with the same file: its numbers are the `#<_ini[section]name>` values
+    /// (instead of `--config`'s), its `[RS274NGC] SUBROUTINE_PATH` is searched after
+    /// `--subroutine-path` (relative entries from the ini file's directory).
+    #[arg(long)]
+    pub ini: Option<PathBuf>,
 }
 
 impl InterpArgs {
@@ -57,11 +63,25 @@ impl InterpArgs {
             Some(m) => crate::machine::job::interp_options(m),
             None => InterpOptions::default(),
         };
+        let mut subroutine_path = self.subroutine_path.clone();
+        let mut ini = base.ini.clone();
+        if let Some(p) = &self.ini {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading the ini file {}", p.display()))?;
+            let dir = p.parent().unwrap_or(std::path::Path::new("."));
+            subroutine_path.extend(
+                crate::gcode::ini::subroutine_path(&text)
+                    .iter()
+                    .map(|d| dir.join(d)),
+            );
+            ini = std::sync::Arc::new(crate::gcode::IniValues::parse(&text));
+        }
         Ok(InterpOptions {
             tool_table: super::plan::tool_table(self.tool_table.as_deref(), machine.as_ref()),
-            subroutine_path: self.subroutine_path.clone(),
+            subroutine_path,
             block_delete: self.block_delete,
             machine_units,
+            ini,
             ..base
         })
     }
@@ -126,6 +146,7 @@ mod tests {
             subroutine_path: Vec::new(),
             block_delete: false,
             machine_units: None,
+            ini: None,
         }
     }
 

@@ -380,7 +380,7 @@ pub enum CanonCmd {
     /// `ORIENT_SPINDLE(0, angle, mode)` (M19 R… P…): stop the spindle at `angle` degrees;
     /// `mode` 0 turns either way, 1 clockwise, 2 counter-clockwise.
     OrientSpindle {
-        /// Degrees, 0..=360.
+        /// Degrees: M19's R (0..=360) plus the machine's `ORIENT_OFFSET`, not wrapped.
         angle: f64,
         /// 0, 1 or 2 (M19 P).
         mode: u8,

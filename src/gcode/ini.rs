@@ -45,6 +45,28 @@ impl IniValues {
         Some(self.get(section, key))
     }
 
+    /// The numeric values of a LinuxCNC ini file's text, as `#<_ini[section]name>` reads
+    /// them: every `NAME = value` under its `[SECTION]` whose value is a number (a value
+    /// that is not, a path or a list, cannot be read as a parameter and is left out).
+    /// Lines starting with `#` or `;` are comments.
+    pub fn parse(text: &str) -> IniValues {
+        let mut v = IniValues::default();
+        let mut section = String::new();
+        for line in text.lines().map(str::trim) {
+            if line.starts_with(['#', ';']) {
+                continue;
+            }
+            if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+                section = name.trim().to_string();
+            } else if let Some((name, value)) = line.split_once('=') {
+                if let Ok(x) = value.trim().parse::<f64>() {
+                    v.insert(&section, name.trim(), x);
+                }
+            }
+        }
+        v
+    }
+
     /// Number of values.
     pub fn len(&self) -> usize {
         self.map.len()
@@ -56,9 +78,43 @@ impl IniValues {
     }
 }
 
+/// The `SUBROUTINE_PATH` of an ini file's `[RS274NGC]` section: its directories, as
+/// written (colon separated; relative ones are relative to where the program runs).
+pub fn subroutine_path(text: &str) -> Vec<String> {
+    let mut in_rs274ngc = false;
+    for line in text.lines().map(str::trim) {
+        if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+            in_rs274ngc = name.trim().eq_ignore_ascii_case("RS274NGC");
+        } else if let Some((name, value)) = line.split_once('=') {
+            if in_rs274ngc && name.trim().eq_ignore_ascii_case("SUBROUTINE_PATH") {
+                return value
+                    .trim()
+                    .split(':')
+                    .filter(|p| !p.is_empty())
+                    .map(str::to_string)
+                    .collect();
+            }
+        }
+    }
+    Vec::new()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parses_numbers_by_section_and_the_subroutine_path() {
+        let text = "# machine\n[VARS]\nTOOLCHANGE_X = 10\nNAME = mill\n; note\n\
+                    [RS274NGC]\nSUBROUTINE_PATH = subs:../lib\nFEATURES = 4\n";
+        let v = IniValues::parse(text);
+        assert_eq!(v.lookup("_ini[vars]toolchange_x"), Some(Some(10.0)));
+        assert_eq!(v.lookup("_ini[vars]name"), Some(None));
+        assert_eq!(v.get("rs274ngc", "features"), Some(4.0));
+        assert_eq!(v.len(), 2);
+        assert_eq!(subroutine_path(text), vec!["subs", "../lib"]);
+        assert!(subroutine_path("[EMC]\nSUBROUTINE_PATH = x\n").is_empty());
+    }
 
     #[test]
     fn lookup_ignores_case_and_tells_unknown_from_not_ini() {

@@ -78,8 +78,9 @@ pub enum OKind {
     Repeat,
     /// `endrepeat`
     EndRepeat,
-    /// A bare `O123` line: a program number as some CAM posts write it at the top, which
-    /// rs274 accepts and ignores.
+    /// A bare `O123` or `O<name>` line: a program number or name as some CAM posts write it
+    /// at the top (or a Fanuc subprogram's first line), which rs274 accepts; it does nothing
+    /// where the program flows through it.
     ProgramNumber,
 }
 
@@ -298,10 +299,10 @@ impl Parser<'_> {
         let kw = self.c.word();
         let kind = match OKind::from_name(&kw) {
             Some(k) => k,
-            // `O32123` alone (or with a comment): a program number.
+            // `O32123` or `O<name>` alone (or with a comment): a program number or name
+            // heading the program (or a Fanuc subprogram), as rs274 accepts it.
             None if kw.is_empty()
                 && label_expr.is_none()
-                && label.bytes().all(|b| b.is_ascii_digit())
                 && matches!(self.c.peek(), None | Some(b'(' | b';')) =>
             {
                 OKind::ProgramNumber
@@ -595,6 +596,11 @@ mod tests {
             Some(OKind::ProgramNumber)
         );
         assert!(parse_line("O32123 G0 X1", 32).is_err());
+        assert_eq!(
+            o("O<MyProgram> (named)").map(|c| c.kind),
+            Some(OKind::ProgramNumber)
+        );
+        assert!(parse_line("O<MyProgram> G0 X1", 32).is_err());
         assert!(o("o[10] sub").is_some_and(|c| c.kind == OKind::Sub && c.label_expr.is_some()));
         assert!(parse_line("o100 call [1] (open [2]", 32).is_err());
     }

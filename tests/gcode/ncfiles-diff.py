@@ -19,6 +19,14 @@ configurations give it:
   (`[RS274NGC] SUBROUTINE_PATH`; the real ini would also load Python remaps and HAL-side
   settings the standalone interpreter cannot run), hytask from `--subroutine-path`;
 - machine units: inches for both (rs274 standalone; `--machine-units inch`).
+A program below a DIR argument is a test of its own (LinuxCNC's interpreter suite,
+tests/interp: one directory per test, whose test.sh runs `rs274 [-t test.tbl] [-i
+test.ini] -g prog.ngc`): it gets its own directory's setup instead, the nearest `*.tbl`
+and `*.ini` in its directory or a parent below the DIR (else the corpus `tool.tbl`), and
+rs274 reads that ini itself (`-i`), as the test does, and so does hytask (`--ini`: its
+numbers as `#<_ini[…]>` values, its SUBROUTINE_PATH), with the test's `subs/` directory on
+the path; the ini's machine settings (ORIENT_OFFSET, FEATURES, axis types) act in rs274
+only.
 
 Traces are compared with the differential suite's normalisation (tests/gcode_differential.rs):
   motion  only the motion calls (STRAIGHT_TRAVERSE, STRAIGHT_FEED, ARC_FEED, NURBS_FEED,
@@ -124,8 +132,20 @@ def nearest(path, pattern, stop):
         d = os.path.dirname(d)
 
 
+# The DIR arguments: a program below one of them takes its setup from its own test
+# directory (see `setup_for`).
+DIR_ROOTS = []
+
+
 def root_of(path):
-    return next((r for r in ROOTS if path.startswith(r + "/")), os.path.dirname(path))
+    """The package root or DIR argument a program lies below (else its own directory)."""
+    roots = ROOTS + DIR_ROOTS
+    hit = [r for r in roots if path.startswith(r.rstrip("/") + "/")]
+    return max(hit, key=len).rstrip("/") if hit else os.path.dirname(path)
+
+
+def in_dir_roots(path):
+    return any(path.startswith(r.rstrip("/") + "/") for r in DIR_ROOTS)
 
 
 def ini_values(ini):
@@ -160,11 +180,21 @@ def ini_for(path):
 
 
 def setup_for(path):
-    """(tool table, subroutine directories, ini) for one program."""
+    """(tool table, subroutine directories, ini, own) for one program.
+
+    A program below a DIR argument (LinuxCNC's interpreter tests: one directory per test,
+    run by its test.sh as `rs274 [-t test.tbl] [-i test.ini] -g prog.ngc`) gets its own
+    test's setup: the nearest `*.tbl` and `*.ini` in its directory or a parent below the
+    DIR, and `own` is true so that rs274 reads that ini itself, as the test does. The
+    called files such a test keeps in `subs/` (its ini's SUBROUTINE_PATH) are searched too,
+    also when the ini is not at hand."""
     ini = ini_for(path)
     vals = ini_values(ini) if ini else {}
     base = os.path.dirname(ini) if ini else ""
     tbl = None
+    own = in_dir_roots(path)
+    if own:
+        tbl = nearest(path, r".*\.tbl", root_of(path))
     if "TOOL_TABLE" in vals:
         # a sample configuration's table may sit in a parent directory (sim/sim.tbl)
         name = vals["TOOL_TABLE"]
@@ -175,12 +205,14 @@ def setup_for(path):
             d = os.path.dirname(d)
     subs = [os.path.dirname(path)]
     subs += [resolve(base, p) for p in vals.get("SUBROUTINE_PATH", "").split(":") if p]
+    if own:
+        subs.append(os.path.join(os.path.dirname(path), "subs"))
     subs += STOCK_SUBS
     seen = []
     for s in subs:
         if s not in seen and os.path.isdir(s):
             seen.append(s)
-    return tbl or CORPUS_TBL, seen, ini
+    return tbl or CORPUS_TBL, seen, ini, own and ini is not None
 
 
 def run(cmd, cwd, timeout):
@@ -246,12 +278,12 @@ def error_line_match(path, err_r, err_h):
 def classify(path, hytask, timeout, tmp):
     if is_subroutine_file(path):
         return {"class": "subroutine"}
-    tbl, subs, _ = setup_for(path)
+    tbl, subs, ini, own = setup_for(path)
     cwd = os.path.dirname(path)
     base = ["rs274", "-t", tbl, "-g", path]
-    rc_r, out_r, err_r = run(base, cwd, timeout)
-    with_ini = False
-    if rc_r not in (0, None):
+    with_ini = own
+    rc_r, out_r, err_r = run(base[:1] + (["-i", ini] if own else []) + base[1:], cwd, timeout)
+    if rc_r not in (0, None) and not own:
         # Only now the subroutine path: with any ini, rs274 prints one ON_RESET() fewer at
         # exit (an artefact of its standalone driver), dropped from hytask's trace below.
         ini = os.path.join(tmp, "sub.ini")
@@ -263,6 +295,8 @@ def classify(path, hytask, timeout, tmp):
     if rc_r is None:
         return {"class": "rs274-hang"}
     cmd = [hytask, "gcode", "canon", "--machine-units", "inch", "--tool-table", tbl]
+    if own:
+        cmd += ["--ini", ini]
     for s in subs:
         cmd += ["--subroutine-path", s]
     rc_h, out_h, err_h = run(cmd + [path], cwd, timeout)
@@ -352,12 +386,14 @@ def main():
     ap.add_argument("--list", action="store_true", help="one line per program")
     ap.add_argument("--only", choices=CLASSES, help="with --list: only this class")
     a = ap.parse_args()
-    files = [f for d in a.dirs for f in dir_files(d)] if a.dirs else package_files()
+    DIR_ROOTS[:] = [os.path.abspath(d) for d in a.dirs]
+    files = [os.path.abspath(f) for d in a.dirs for f in dir_files(d)] if a.dirs \
+        else package_files()
     rows = []
     with tempfile.TemporaryDirectory(prefix="ncfiles-diff-") as tmp:
         for f in files:
             r = classify(f, a.hytask, a.timeout, tmp)
-            rows.append((group_of(f, a.dirs), r))
+            rows.append((group_of(f, DIR_ROOTS), r))
             if a.list and (a.only is None or a.only == r["class"]):
                 extra = ""
                 if r["class"] == "same" and not r.get("calls"):

@@ -18,6 +18,15 @@ pub(crate) fn rotate(x: f64, y: f64, deg: f64) -> (f64, f64) {
 }
 
 impl Interp<'_> {
+    /// How the program position moves when the tool length offset changes by `d` (old
+    /// minus new, machine axes): the offset moves the machine frame, so its X/Y part shows
+    /// in the program frame turned back by the `G10 L2 … R` rotation, as in rs274.
+    pub(crate) fn program_shift_of_tool(&self, d: [f64; 6]) -> [f64; 6] {
+        let mut v = d;
+        (v[0], v[1]) = rotate(d[0], d[1], -self.s.rotation);
+        v
+    }
+
     /// Machine position (program units) of program position `p` in the active frame.
     /// `with_tool`: add the tool length offset (the tool tip's frame), as canon does.
     pub(crate) fn machine_of_program(&self, p: &[f64; 6], with_tool: bool) -> [f64; 6] {

@@ -77,8 +77,15 @@ impl Interp<'_> {
         }
         self.s.spindle = 0;
         if b.has(b'r') || b.has(b'p') {
+            // The machine's `[RS274NGC] ORIENT_OFFSET` (the spindle's index against its
+            // zero) is added as it is, unwrapped, as rs274 does.
+            let offset = self
+                .opts
+                .ini
+                .get("rs274ngc", "orient_offset")
+                .unwrap_or(0.0);
             self.emit(CanonCmd::OrientSpindle {
-                angle: b.get(b'r').unwrap_or(0.0),
+                angle: b.get(b'r').unwrap_or(0.0) + offset,
                 mode,
             })?;
         }

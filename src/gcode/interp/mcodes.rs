@@ -507,10 +507,38 @@ impl Interp<'_> {
                 * super::motion::lin(i, self.s.k_mp())
         });
         let spindle_tool = self.s.tool == n;
+        // L10 under an XY rotation (`G10 L2 … R`): the X/Y offsets that put the program
+        // position at (X, Y) through the rotation, both set when either is given, as rs274
+        // computes them. An axis not given keeps the program position the tool would have
+        // with its table offsets in force (the offsets are machine-frame X/Y, turned
+        // against the program frame, so one axis given moves both).
+        let table_xy = self
+            .tools
+            .at_slot(slot)
+            .map(|t| [t.offset[0] / k, t.offset[1] / k]);
+        let rotated_xy =
+            (l == 10 && self.s.rotation != 0.0 && (b.has(b'x') || b.has(b'y'))).then(|| {
+                let s = &self.s;
+                let m = self.machine_of_program(&s.pos, true);
+                let [tx, ty] = table_xy.unwrap_or([0.0; 2]);
+                let (px, py) =
+                    super::frame::rotate(m[0] - s.g5x[0] - tx, m[1] - s.g5x[1] - ty, -s.rotation);
+                // Targets with the G92 offset, which canon turns with the program position.
+                let vx = b.get(b'x').map_or(px, |v| v + s.g92[0]);
+                let vy = b.get(b'y').map_or(py, |v| v + s.g92[1]);
+                let (rx, ry) = super::frame::rotate(vx, vy, s.rotation);
+                [(m[0] - s.g5x[0] - rx) * k, (m[1] - s.g5x[1] - ry) * k]
+            });
         let Some(t) = self.tools.tools.get_mut(slot - 1) else {
             return Err(self.err(col, "Tool table slot out of range"));
         };
+        if let Some([x, y]) = rotated_xy {
+            (t.offset[0], t.offset[1]) = (x, y);
+        }
         for (i, &c) in AX.iter().enumerate() {
+            if rotated_xy.is_some() && i < 2 {
+                continue;
+            }
             if let Some(v) = b.get(c) {
                 let lin = i < 3;
                 let kk = if lin { k } else { 1.0 };

@@ -613,7 +613,10 @@ impl<'a> Interp<'a> {
                     Ok(idx)
                 }
                 Target::Named(n) => {
-                    if self.predefined(n).is_some() {
+                    // `#<_ini[…]…>` reads the machine's ini file: read-only when there is
+                    // one, as in LinuxCNC (rs274 without an ini file lets it be set).
+                    let ini = !self.opts.ini.is_empty() && self.opts.ini.lookup(n).is_some();
+                    if ini || self.predefined(n).is_some() {
                         return Err(
                             self.err(a.col, format!("Cannot set read-only parameter #<{n}>"))
                         );
@@ -640,8 +643,11 @@ impl<'a> Interp<'a> {
         if let Some(tool) = self.s.comp_tool_left.take() {
             self.s.pos[..3].copy_from_slice(&tool);
         }
-        for i in 0..6 {
-            self.s.pos[i] += self.s.tool_offset[i] - self.s.tlo_at_motion[i];
+        let d = self.program_shift_of_tool(std::array::from_fn(|i| {
+            self.s.tool_offset[i] - self.s.tlo_at_motion[i]
+        }));
+        for (p, d) in self.s.pos.iter_mut().zip(d) {
+            *p += d;
         }
         self.s.tlo_at_motion = self.s.tool_offset;
         self.s.synch_pending = false;

@@ -184,8 +184,11 @@ impl Interp<'_> {
         // The probe starts where canon last put the tool: a tool length offset applied
         // since the last move has not moved it.
         let mut start = self.s.pos;
-        for (i, v) in start.iter_mut().enumerate() {
-            *v += self.s.tool_offset[i] - self.s.tlo_at_motion[i];
+        let d = self.program_shift_of_tool(std::array::from_fn(|i| {
+            self.s.tool_offset[i] - self.s.tlo_at_motion[i]
+        }));
+        for (v, d) in start.iter_mut().zip(d) {
+            *v += d;
         }
         let kind = match m {
             382 => ProbeKind::TowardErr,
@@ -374,8 +377,9 @@ impl Interp<'_> {
 
     /// Makes `off` the active tool length offset (the program position moves with it).
     fn use_tool_offset(&mut self, off: Pose) -> Result<(), GcodeError> {
-        for (i, p) in self.s.pos.iter_mut().enumerate() {
-            *p += self.s.tool_offset[i] - off[i];
+        let d = self.program_shift_of_tool(std::array::from_fn(|i| self.s.tool_offset[i] - off[i]));
+        for (p, d) in self.s.pos.iter_mut().zip(d) {
+            *p += d;
         }
         self.s.tool_offset = off;
         self.emit(CanonCmd::UseToolLengthOffset(off))

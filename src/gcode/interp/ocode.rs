@@ -161,15 +161,23 @@ impl Interp<'_> {
                 let end = self
                     .find_next(f, l, &label, &[OKind::EndSub])
                     .ok_or_else(|| missing(self, "sub has no matching endsub"))?;
-                // rs274 evaluates the endsub value while skipping the definition.
-                if let Some(e) = self.files[f]
+                // rs274 runs the endsub while skipping the definition, as if the
+                // subroutine had returned: its value (or nothing, which clears both) lands
+                // in #<_value> and #<_value_returned>.
+                match self.files[f]
                     .olines
                     .get(&end)
                     .and_then(|o| o.args.first().cloned())
                 {
-                    let v = expr::eval(&e, self).map_err(|m| self.err(o.col, m))?;
-                    self.s.value = v;
-                    self.s.value_returned = 1.0;
+                    Some(e) => {
+                        let v = expr::eval(&e, self).map_err(|m| self.err(o.col, m))?;
+                        self.s.value = v;
+                        self.s.value_returned = 1.0;
+                    }
+                    None => {
+                        self.s.value = 0.0;
+                        self.s.value_returned = 0.0;
+                    }
                 }
                 self.pc = (f, end + 1);
                 Ok(())

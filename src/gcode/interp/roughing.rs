@@ -504,7 +504,14 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         cy.traverse([u, vk]);
         k += 1;
     }
-    cy.traverse(ps);
+    if s0[0] <= ps[0] + 1e-7 {
+        // The start is level with the profile's first point, so no pass is needed above
+        // it (also for G7x.2, which makes none): rs274 then cuts the move to the profile
+        // as its first element, fed, not traversed.
+        els.insert(0, El::line(s0, ps));
+    } else {
+        cy.traverse(ps);
+    }
     finish_along(&els, s0, w, kind, cy);
 }
 

@@ -182,8 +182,9 @@ fn b(v: bool) -> f64 {
 pub(crate) fn predefined(it: &Interp<'_>, name: &str) -> Option<f64> {
     let s = &it.s;
     let axis = |i: usize| s.pos[i];
-    let abs =
-        |i: usize| s.pos[i] + s.g5x[i] + s.g92[i] + if i < 6 { s.tool_offset[i] } else { 0.0 };
+    // The machine position, through the XY rotation of `G10 L2 … R` as canon moves the
+    // machine (rs274's `#<_abs_x>`: `machine = rotate(program + G92) + G5x + tool`).
+    let abs = |i: usize| it.machine_of_program(&s.pos, true)[i];
     Some(match name {
         // LinuxCNC 2.9's interpreter reports its version as major 2.9, minor 0.
         "_vmajor" => 2.9,
