@@ -155,6 +155,31 @@ pub(super) fn div_rem(k: IntKind, a: u64, b: u64, div: bool) -> u64 {
     k.wrap(r as i64) as u64
 }
 
+/// The multiplier of [`mod16`] for divisor `d` (`2..=65535`): `ceil(2^32 / d)`.
+pub fn mod_magic(d: u16) -> u32 {
+    u32::MAX / d as u32 + 1
+}
+
+/// `a MOD d` (the sign of the dividend) for `2 <= d < 2^16`, with `m` =
+/// [`mod_magic`]`(d)`: for `|a| < 2^16` (every cell of a 16-bit kind) Lemire's remainder by
+/// multiplication, exact for 16-bit operands and a 32-bit multiplier, a few cycles where the
+/// divide takes tens and stalls what depends on it. A wider value (a raw cell written from
+/// outside) takes the divide, so the result is the division's for every cell.
+#[inline(always)]
+pub fn mod16(a: i64, d: u16, m: u32) -> i64 {
+    let ua = a.unsigned_abs();
+    if ua >> 16 != 0 {
+        return a % d as i64;
+    }
+    let low = m.wrapping_mul(ua as u32);
+    let r = ((low as u64 * d as u64) >> 32) as i64;
+    if a < 0 {
+        -r
+    } else {
+        r
+    }
+}
+
 impl Bin {
     /// Whether its operands are floats (REAL/LREAL cells).
     pub fn float(self) -> bool {
@@ -471,6 +496,10 @@ pub enum Op {
     /// single precision when the flag says so, else in double (fused `PushLF(FMul)` +
     /// `BinSIToF(FMul, FAdd)`: the first-order filter `r := r * 0.99 + INT_TO_REAL(a) * 0.01`).
     FilterF(bool, u16, u16, u16, f32, f32),
+    /// Push `(mem[base + x] MOD d) b k` for a cell of 16 bits or fewer and a divisor
+    /// `2 <= d <= 32767`, the remainder by multiplication with `m` = [`mod_magic`]`(d)`
+    /// instead of a division (fused `PushLIC(Mod(kind), b, x, d, k)`: `a MOD 7 = 0`).
+    PushModC(Bin, u16, u16, u32, i32),
     /// `mem[base + d] = LIMIT(lo, mem[base + x], hi)` on signed cells (fused
     /// `PushLI(MinMaxI(max))` + `BinCSI(MinMaxI(min))`).
     ClampI(u16, u16, i32, i32),
@@ -623,6 +652,21 @@ mod tests {
                 for b in floats {
                     assert_eq!(c.test(a, b), reference(c, a, b), "{c:?} {a} {b}");
                 }
+            }
+        }
+    }
+
+    /// The remainder by multiplication equals the division's for every 16-bit dividend
+    /// (signed and unsigned) and divisors across the range.
+    #[test]
+    fn remainder_by_multiplication_is_exact() {
+        let mut ds: Vec<u16> = vec![2, 3, 5, 7, 10, 12, 60, 100, 256, 1000, 4096, 9999, 32767];
+        ds.extend((0..40u32).map(|i| (i * 7919 % 32766 + 2) as u16));
+        for d in ds {
+            let m = mod_magic(d);
+            let wide = [65536, -65536, 1 << 40, i64::MIN, i64::MAX];
+            for a in (-65535i64..=65535).chain(wide) {
+                assert_eq!(mod16(a, d, m), a % d as i64, "{a} MOD {d}");
             }
         }
     }

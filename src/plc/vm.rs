@@ -399,6 +399,10 @@ impl Vm<'_> {
                     let v = b1.apply(mem[base + x as usize], k1 as i64 as u64);
                     push!(b2.apply(v, k2 as i64 as u64))
                 }
+                Op::PushModC(b, x, d, m, k) => {
+                    let r = mod16(mem[base + x as usize] as i64, d, m);
+                    push!(b.apply(r as u64, k as i64 as u64))
+                }
                 Op::BinSLL(b1, b2, x, y, d) => {
                     let a = pop!();
                     let v = b1.apply(mem[base + x as usize], mem[base + y as usize]);
