@@ -38,8 +38,8 @@ impl Cmp {
     pub(super) fn test<T: PartialOrd>(self, a: T, b: T) -> bool {
         // 0 less, 1 equal, 2 greater, 3 unordered (NaN; folded away for integers, which
         // are always ordered).
-        let ge = a >= b;
-        let outcome = ge as u8 + (a > b) as u8 + 3 * (!ge && !(a < b)) as u8;
+        let (ge, lt) = (a >= b, a < b);
+        let outcome = ge as u8 + (a > b) as u8 + 3 * (!ge && !lt) as u8;
         (self as u8 >> outcome) & 1 != 0
     }
 }
