@@ -175,6 +175,15 @@ const CASES: &[(&str, &str)] = &[
          t3(PT := T#1d3ms, IN := e); t4(IN := p); e := t3.Q OR t4.Q;\n\
          IF t1.Q THEN c := 0; END_IF;\nEND_PROGRAM\n",
     ),
+    (
+        "remainders by constants multiplied out: every 16-bit kind, signs, wide dividends",
+        "PROGRAM T\nVAR_INPUT a : INT; s : SINT; END_VAR\n\
+         VAR u : UINT; us : USINT; w : WORD; n : DINT; i : INT; e, f, g, h : BOOL; END_VAR\n\
+         u := u + 12345; us := us + 77; w := w + 4099; i := i * 3 - 20000; n := n + 70001;\n\
+         e := (a MOD 7 = 0) OR (s MOD 3 = -1); f := (u MOD 1000 > 500) XOR (us MOD 9 < 4);\n\
+         g := (w MOD 256 = 3) OR (i MOD 32767 < -100); h := (i MOD 12 >= 0) AND (n MOD 7 = 2);\n\
+         IF (i MOD 5 = -2) OR (a MOD 2 <> 0) THEN u := u + 1; END_IF;\nEND_PROGRAM\n",
+    ),
 ];
 
 /// The forms of the third generation of fusion fire on the code that needs them (a test
@@ -223,10 +232,25 @@ fn two_operation_forms_fire_and_far_cells_stay_unfused() {
             .to_vec()
     };
     let head =
-        "PROGRAM T\nVAR a, b, c : INT; p, q, e : BOOL; r : REAL; l : LREAL; t : TON; END_VAR\n";
+        "PROGRAM T\nVAR a, b, c : INT; p, q, e : BOOL; r : REAL; l : LREAL; t : TON; n : DINT; s : SINT; u : UINT; END_VAR\n";
     type Want = dyn Fn(&Op) -> bool;
-    let cases: [(&str, &Want); 10] = [
-        ("e := (a MOD 7 = 0) OR q;", &|op| {
+    let cases: [(&str, &Want); 14] = [
+        // A remainder of a 16-bit (or narrower) cell by a constant is multiplied out.
+        (
+            "e := (a MOD 7 = 0) OR q;",
+            &|op| matches!(op, Op::PushModC(_, _, 7, m, 0) if *m == hytask::plc::op::mod_magic(7)),
+        ),
+        ("e := (s MOD 3 <> 1) OR q;", &|op| {
+            matches!(op, Op::PushModC(_, _, 3, _, 1))
+        }),
+        // A 32-bit cell, a divisor of 1 or beyond 15 bits keep the divide.
+        ("e := (n MOD 7 = 0) OR q;", &|op| {
+            matches!(op, Op::PushLIC(..))
+        }),
+        ("e := (a MOD 1 = 0) OR q;", &|op| {
+            matches!(op, Op::PushLIC(..))
+        }),
+        ("e := (u MOD 40000 = 0) OR q;", &|op| {
             matches!(op, Op::PushLIC(..))
         }),
         ("e := (a > b) OR (p AND NOT q);", &|op| {
@@ -276,6 +300,7 @@ fn two_operation_forms_fire_and_far_cells_stay_unfused() {
         matches!(
             op,
             Op::PushLIC(..)
+                | Op::PushModC(..)
                 | Op::BinSLL(..)
                 | Op::BinLIL(..)
                 | Op::BinSIToF(..)

@@ -163,6 +163,41 @@ fn m6_timeout_aborts_the_job_naming_its_line() {
     );
 }
 
+/// An M100–M199 the PLC takes but never finishes (M150: routed to the PLC, unknown to
+/// mill.st): the job is aborted after `plc.mcode_timeout_s`, naming the M-code and its line.
+#[test]
+fn mcode_timeout_aborts_the_job_naming_its_line() {
+    let (d, _dir) = start(|t| {
+        for from in ["mcode_timeout_s = 5.0", "mcodes = [100]"] {
+            assert_eq!(
+                t.matches(from).count(),
+                1,
+                "config/sim.toml changed: {from}"
+            );
+        }
+        t.replace("mcode_timeout_s = 5.0", "mcode_timeout_s = 1.0")
+            .replace("mcodes = [100]", "mcodes = [100, 150]")
+    });
+    let mut c = d.client();
+    ready(&mut c);
+    run_text(
+        &mut c,
+        "G21 G90\nG0 X50\nM150\nG0 X100\nM2\n",
+        "m150-timeout.ngc",
+    );
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("failed"), "{s}");
+    let reason = s["job"]["reason"].as_str().unwrap_or_default();
+    assert!(
+        reason.contains("line 3") && reason.contains("M150") && reason.contains("mcode_timeout_s"),
+        "{reason}"
+    );
+    assert!(
+        (axis(&s, "X")["actual"].as_f64().unwrap() - 50.0).abs() < 0.01,
+        "stopped before the move after the M150: {s}"
+    );
+}
+
 /// The guard door: open, cycle start is refused; opened mid-job, feed holds; resume is
 /// refused until it is closed again, then the job finishes.
 #[test]
@@ -227,6 +262,51 @@ fn coolant_pump_and_m100_lubrication_pulse() {
         output(s, "coolant_pump") == 0.0
     });
     assert_eq!(output(&s, "lube_pump"), 0.0, "the pulse is 2 s: {s}");
+}
+
+/// The spindle lamps of the mill's program: ready while the spindle is commanded on and at
+/// speed; speed lost while it is commanded on lights the fault lamp, which stays until the
+/// spindle is commanded off. The test plays the spindle drive: the simulated plant's own
+/// spin-up (`spindle.at_speed_input`) is left out, so the at-speed input is the test's.
+#[test]
+fn spindle_ready_and_lost_speed_fault_lamps() {
+    let (d, _dir) = start(|t| {
+        assert_eq!(
+            t.matches("at_speed_input = \"spindle_at_speed\"\n").count(),
+            1
+        );
+        t.replace("at_speed_input = \"spindle_at_speed\"\n", "")
+    });
+    let mut c = d.client();
+    ready(&mut c);
+    // A move first: a dwell before any move dwells at the origin (lookahead last_pose).
+    run_text(
+        &mut c,
+        "G21 G90\nG0 X100\nM3 S1000\nG4 P40\nM5\nM2\n",
+        "spindle.ngc",
+    );
+    let s = wait_status(&mut c, "spindle on", HANG, |s| {
+        output(s, "spindle_on") == 1.0
+    });
+    assert_eq!(output(&s, "spindle_ready"), 0.0, "not at speed yet: {s}");
+    input(&mut c, "spindle_at_speed", true);
+    let s = wait_status(&mut c, "ready lamp", HANG, |s| {
+        output(s, "spindle_ready") == 1.0
+    });
+    assert_eq!(output(&s, "spindle_fault"), 0.0, "{s}");
+    input(&mut c, "spindle_at_speed", false);
+    let s = wait_status(&mut c, "fault lamp", HANG, |s| {
+        output(s, "spindle_fault") == 1.0
+    });
+    assert_eq!(output(&s, "spindle_ready"), 0.0, "{s}");
+    assert_eq!(output(&s, "spindle_on"), 1.0, "still commanded on: {s}");
+    let s = wait_job_end(&mut c, "job end", HANG);
+    assert_eq!(s["job"]["state"], json!("done"), "{s}");
+    let s = wait_status(&mut c, "fault lamp off", HANG, |s| {
+        output(s, "spindle_fault") == 0.0
+    });
+    assert_eq!(output(&s, "spindle_on"), 0.0, "M5: {s}");
+    assert_eq!(output(&s, "spindle_ready"), 0.0, "{s}");
 }
 
 /// The e-stop chain: the button breaks it; `estop.reset` re-arms it with the machine, so the

@@ -611,3 +611,44 @@ fn example_programs() {
     }
     assert_eq!(p.format(fault), "TRUE");
 }
+
+/// The mill's lubrication (config/plc/mill.st, issue 11): a 2 s pulse of the way-oil pump
+/// every 60 s of job time, none while no job runs, in PLC time (10 ms scans). The M100 pulse
+/// is driven end to end in plc_machine; the 60 s interval is too long for the daemon tests.
+#[test]
+fn mill_lubricates_every_60_s_of_job_time() {
+    use hytask::plc::Value;
+    let src = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/config/plc/mill.st"))
+        .unwrap();
+    let mut p = compile("mill.st", &src, Options::default()).unwrap();
+    let (job, pump) = (p.var("job_running").unwrap(), p.var("lube_pump").unwrap());
+    let mut rises = Vec::new();
+    let mut falls = Vec::new();
+    let mut on = false;
+    // 10 s idle, then 130 s of job, then 70 s idle.
+    for scan in 0..21_000i64 {
+        let running = (1_000..14_000).contains(&scan);
+        p.set(job, Value::Bool(running)).unwrap();
+        p.scan(&[], &mut [], scan * 10_000_000).unwrap();
+        let now_on = p.get(pump) == Value::Bool(true);
+        if now_on && !on {
+            rises.push(scan);
+        } else if on && !now_on {
+            falls.push(scan);
+        }
+        on = now_on;
+    }
+    // The job starts at scan 1,000 (10 s): pulses at 70 s and 130 s (the interval timer
+    // restarts the scan after it fires), 2 s each.
+    assert_eq!(rises.len(), 2, "rises {rises:?} falls {falls:?}");
+    assert_eq!(falls.len(), 2, "rises {rises:?} falls {falls:?}");
+    for (r, want) in rises.iter().zip([7_000, 13_000]) {
+        assert!(
+            (r - want).abs() <= 3,
+            "pulse at scan {r}, want ~{want}: {rises:?}"
+        );
+    }
+    for (r, f) in rises.iter().zip(&falls) {
+        assert!((f - r - 200).abs() <= 1, "a 2 s pulse: {r}..{f}");
+    }
+}

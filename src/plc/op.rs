@@ -7,34 +7,40 @@
 use super::stdfb::StdFb;
 use super::types::IntKind;
 
-/// Comparison operators.
+/// Comparison operators. Each discriminant is the set of outcomes for which the comparison
+/// holds (bit 0 less, 1 equal, 2 greater, 3 unordered), so [`Cmp::test`] is a shift and a
+/// mask instead of a jump on the operator: a fused instruction's comparison then costs no
+/// second branch beside its own dispatch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
 pub enum Cmp {
     /// `=`
-    Eq,
-    /// `<>`
-    Ne,
+    Eq = EQ,
+    /// `<>` (true when unordered, as `!=` on NaN)
+    Ne = LT | GT | UNORD,
     /// `<`
-    Lt,
+    Lt = LT,
     /// `<=`
-    Le,
+    Le = LT | EQ,
     /// `>`
-    Gt,
+    Gt = GT,
     /// `>=`
-    Ge,
+    Ge = GT | EQ,
 }
+
+const LT: u8 = 1;
+const EQ: u8 = 2;
+const GT: u8 = 4;
+const UNORD: u8 = 8;
 
 impl Cmp {
     #[inline(always)]
     pub(super) fn test<T: PartialOrd>(self, a: T, b: T) -> bool {
-        match self {
-            Cmp::Eq => a == b,
-            Cmp::Ne => a != b,
-            Cmp::Lt => a < b,
-            Cmp::Le => a <= b,
-            Cmp::Gt => a > b,
-            Cmp::Ge => a >= b,
-        }
+        // 0 less, 1 equal, 2 greater, 3 unordered (NaN; folded away for integers, which
+        // are always ordered).
+        let (ge, lt) = (a >= b, a < b);
+        let outcome = ge as u8 + (a > b) as u8 + 3 * (!ge && !lt) as u8;
+        (self as u8 >> outcome) & 1 != 0
     }
 }
 
@@ -78,27 +84,32 @@ pub enum Shift {
     Ror,
 }
 
-/// Binary operations that fuse with their right operand (see `peephole`).
+/// Binary operations that fuse with their right operand (see `peephole`). The logic
+/// operations come first so that [`Bin::apply`] tells them apart with one range test.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Bin {
-    /// Integer add.
-    Add(IntKind),
-    /// Integer subtract.
-    Sub(IntKind),
-    /// Integer multiply.
-    Mul(IntKind),
-    /// Signed comparison.
-    CmpI(Cmp),
-    /// Unsigned comparison.
-    CmpU(Cmp),
-    /// Float comparison.
-    CmpF(Cmp),
     /// Bitwise AND.
     And,
     /// Bitwise OR.
     Or,
     /// Bitwise XOR.
     Xor,
+    /// BOOL `a AND NOT b` (fused `NotB` + `And`).
+    AndN,
+    /// BOOL `a OR NOT b`.
+    OrN,
+    /// Signed comparison.
+    CmpI(Cmp),
+    /// Integer add.
+    Add(IntKind),
+    /// Integer subtract.
+    Sub(IntKind),
+    /// Integer multiply.
+    Mul(IntKind),
+    /// Unsigned comparison.
+    CmpU(Cmp),
+    /// Float comparison.
+    CmpF(Cmp),
     /// Float add.
     FAdd(bool),
     /// Float subtract.
@@ -113,10 +124,6 @@ pub enum Bin {
     Div(IntKind),
     /// Integer remainder by a constant that is not zero.
     Mod(IntKind),
-    /// BOOL `a AND NOT b` (fused `NotB` + `And`).
-    AndN,
-    /// BOOL `a OR NOT b`.
-    OrN,
 }
 
 /// Integer `a / b` (`div`) or `a MOD b` of kind `k`, `b` not zero: truncating, the
@@ -148,6 +155,31 @@ pub(super) fn div_rem(k: IntKind, a: u64, b: u64, div: bool) -> u64 {
     k.wrap(r as i64) as u64
 }
 
+/// The multiplier of [`mod16`] for divisor `d` (`2..=65535`): `ceil(2^32 / d)`.
+pub fn mod_magic(d: u16) -> u32 {
+    u32::MAX / d as u32 + 1
+}
+
+/// `a MOD d` (the sign of the dividend) for `2 <= d < 2^16`, with `m` =
+/// [`mod_magic`]`(d)`: for `|a| < 2^16` (every cell of a 16-bit kind) Lemire's remainder by
+/// multiplication, exact for 16-bit operands and a 32-bit multiplier, a few cycles where the
+/// divide takes tens and stalls what depends on it. A wider value (a raw cell written from
+/// outside) takes the divide, so the result is the division's for every cell.
+#[inline(always)]
+pub fn mod16(a: i64, d: u16, m: u32) -> i64 {
+    let ua = a.unsigned_abs();
+    if ua >> 16 != 0 {
+        return a % d as i64;
+    }
+    let low = m.wrapping_mul(ua as u32);
+    let r = ((low as u64 * d as u64) >> 32) as i64;
+    if a < 0 {
+        -r
+    } else {
+        r
+    }
+}
+
 impl Bin {
     /// Whether its operands are floats (REAL/LREAL cells).
     pub fn float(self) -> bool {
@@ -157,9 +189,43 @@ impl Bin {
         )
     }
 
-    /// `a op b`, exactly as the unfused instruction computes it.
+    /// The logic operations as masks: `b` is XORed with the first, then the result is
+    /// `(a & b & second) | ((a ^ b) & third)` (AND, OR, XOR and the negated-operand forms).
+    #[inline(always)]
+    fn logic(self) -> Option<(u64, u64, u64)> {
+        Some(match self {
+            Bin::And => (0, !0, 0),
+            Bin::Or => (0, !0, !0),
+            Bin::Xor => (0, 0, !0),
+            Bin::AndN => (1, !0, 0),
+            Bin::OrN => (1, !0, !0),
+            _ => return None,
+        })
+    }
+
+    /// `a op b`, exactly as the unfused instruction computes it. Inlined into every fused
+    /// instruction: the common operations (logic, signed comparison, integer add and
+    /// subtract) are picked out by tests and computed without a branch on the operator,
+    /// because a jump table here is a second indirect jump beside the instruction's own
+    /// dispatch; the others go through one match.
     #[inline(always)]
     pub fn apply(self, a: u64, b: u64) -> u64 {
+        if let Some((n, both, either)) = self.logic() {
+            let b = b ^ n;
+            return (a & b & both) | ((a ^ b) & either);
+        }
+        match self {
+            Bin::CmpI(c) => return c.test(a as i64, b as i64) as u64,
+            Bin::Add(k) => return k.wrap((a as i64).wrapping_add(b as i64)) as u64,
+            Bin::Sub(k) => return k.wrap((a as i64).wrapping_sub(b as i64)) as u64,
+            _ => {}
+        }
+        self.apply_other(a, b)
+    }
+
+    /// The less common operations of [`Bin::apply`].
+    #[inline(always)]
+    fn apply_other(self, a: u64, b: u64) -> u64 {
         match self {
             Bin::Add(k) => k.wrap((a as i64).wrapping_add(b as i64)) as u64,
             Bin::Sub(k) => k.wrap((a as i64).wrapping_sub(b as i64)) as u64,
@@ -430,6 +496,10 @@ pub enum Op {
     /// single precision when the flag says so, else in double (fused `PushLF(FMul)` +
     /// `BinSIToF(FMul, FAdd)`: the first-order filter `r := r * 0.99 + INT_TO_REAL(a) * 0.01`).
     FilterF(bool, u16, u16, u16, f32, f32),
+    /// Push `(mem[base + x] MOD d) b k` for a cell of 16 bits or fewer and a divisor
+    /// `2 <= d <= 32767`, the remainder by multiplication with `m` = [`mod_magic`]`(d)`
+    /// instead of a division (fused `PushLIC(Mod(kind), b, x, d, k)`: `a MOD 7 = 0`).
+    PushModC(Bin, u16, u16, u32, i32),
     /// `mem[base + d] = LIMIT(lo, mem[base + x], hi)` on signed cells (fused
     /// `PushLI(MinMaxI(max))` + `BinCSI(MinMaxI(min))`).
     ClampI(u16, u16, i32, i32),
@@ -535,5 +605,112 @@ pub(super) fn fb(v: f64, single: bool) -> u64 {
         (v as f32 as f64).to_bits()
     } else {
         v.to_bits()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CMPS: [Cmp; 6] = [Cmp::Eq, Cmp::Ne, Cmp::Lt, Cmp::Le, Cmp::Gt, Cmp::Ge];
+
+    /// The comparison as written in the language, for checking the mask form.
+    fn reference<T: PartialOrd>(c: Cmp, a: T, b: T) -> bool {
+        match c {
+            Cmp::Eq => a == b,
+            Cmp::Ne => a != b,
+            Cmp::Lt => a < b,
+            Cmp::Le => a <= b,
+            Cmp::Gt => a > b,
+            Cmp::Ge => a >= b,
+        }
+    }
+
+    /// The outcome-mask comparison agrees with the operators, unordered (NaN) floats and
+    /// the extremes of the integers included.
+    #[test]
+    fn comparison_masks_agree_with_the_operators() {
+        let ints = [i64::MIN, -7, -1, 0, 1, 3, i64::MAX];
+        let floats = [
+            f64::NEG_INFINITY,
+            -2.5,
+            -0.0,
+            0.0,
+            1.0,
+            f64::INFINITY,
+            f64::NAN,
+        ];
+        for c in CMPS {
+            for a in ints {
+                for b in ints {
+                    assert_eq!(c.test(a, b), reference(c, a, b), "{c:?} {a} {b}");
+                    let (ua, ub) = (a as u64, b as u64);
+                    assert_eq!(c.test(ua, ub), reference(c, ua, ub), "{c:?} {ua} {ub}");
+                }
+            }
+            for a in floats {
+                for b in floats {
+                    assert_eq!(c.test(a, b), reference(c, a, b), "{c:?} {a} {b}");
+                }
+            }
+        }
+    }
+
+    /// The remainder by multiplication equals the division's for every 16-bit dividend
+    /// (signed and unsigned) and divisors across the range.
+    #[test]
+    fn remainder_by_multiplication_is_exact() {
+        let mut ds: Vec<u16> = vec![2, 3, 5, 7, 10, 12, 60, 100, 256, 1000, 4096, 9999, 32767];
+        ds.extend((0..40u32).map(|i| (i * 7919 % 32766 + 2) as u16));
+        for d in ds {
+            let m = mod_magic(d);
+            let wide = [65536, -65536, 1 << 40, i64::MIN, i64::MAX];
+            for a in (-65535i64..=65535).chain(wide) {
+                assert_eq!(mod16(a, d, m), a % d as i64, "{a} MOD {d}");
+            }
+        }
+    }
+
+    /// Every fusable operation computes through the fast tests what the plain match
+    /// computes, on integers (every kind), BOOLs and floats.
+    #[test]
+    fn fast_operations_agree_with_the_plain_match() {
+        let mut ops = vec![Bin::And, Bin::Or, Bin::Xor, Bin::AndN, Bin::OrN];
+        for k in IntKind::ALL {
+            ops.extend([
+                Bin::Add(k),
+                Bin::Sub(k),
+                Bin::Mul(k),
+                Bin::Div(k),
+                Bin::Mod(k),
+            ]);
+        }
+        for c in CMPS {
+            ops.extend([Bin::CmpI(c), Bin::CmpU(c), Bin::CmpF(c)]);
+        }
+        for s in [false, true] {
+            ops.extend([
+                Bin::FAdd(s),
+                Bin::FSub(s),
+                Bin::FMul(s),
+                Bin::MinMaxI(s),
+                Bin::MinMaxF(s),
+            ]);
+        }
+        let mut vals: Vec<u64> = [0i64, 1, -1, 2, 7, -300, 40_000, i32::MIN as i64, i64::MAX]
+            .iter()
+            .map(|&v| v as u64)
+            .collect();
+        vals.extend([1.5f64, -0.25, f64::NAN].map(f64::to_bits));
+        for b in ops {
+            for &x in &vals {
+                for &y in &vals {
+                    if matches!(b, Bin::Div(_) | Bin::Mod(_)) && y == 0 {
+                        continue;
+                    }
+                    assert_eq!(b.apply(x, y), b.apply_other(x, y), "{b:?} {x:#x} {y:#x}");
+                }
+            }
+        }
     }
 }

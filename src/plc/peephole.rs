@@ -8,8 +8,9 @@
 //! store of a binary result, a pair of loads, and a jump to the next instruction (an IF
 //! without ELSE) disappear into one instruction each; then `x op (y op2 k)` with a
 //! commutative `op` is reordered so both operations fuse; last two operations that are
-//! still apart become one (`superop`). Fewer dispatches per scan, same
-//! effect. A sequence is never fused across a jump target.
+//! still apart become one (`superop`), and a remainder of a 16-bit cell by
+//! a constant is computed by multiplication instead of a divide. Fewer dispatches per scan,
+//! same effect. A sequence is never fused across a jump target.
 
 use super::diag::Span;
 use super::vm::{Bin, Op};
@@ -204,6 +205,7 @@ pub fn optimize(ops: &mut Vec<Op>, spans: &mut Vec<Span>, entries: &mut [&mut u3
     pass(ops, spans, entries, commuted);
     pass(ops, spans, entries, super::superop::fuse);
     pass(ops, spans, entries, super::superop::fuse_filter);
+    pass(ops, spans, entries, super::superop::fuse_mod);
 }
 
 /// One rewriting pass with `rule`, which sees the code from an instruction on (never

@@ -27,7 +27,7 @@ fn effect(op: Op) -> (usize, usize) {
         PushLL(..) | PushLI(..) | PushLF(..) | LoadIToF(..) => (0, 1),
         BinS(..) => (2, 0),
         LoadLL(..) => (0, 2),
-        PushLIC(..) => (0, 1),
+        PushLIC(..) | PushModC(..) => (0, 1),
         BinSLL(..) | BinSIToF(..) => (1, 0),
         BinLIL(..) | ClampI(..) | FilterF(..) | StdMov { .. } | StdSetMov { .. } => (0, 0),
     }

@@ -49,6 +49,31 @@ const TIMER: &[Member] = &[
     ("_PREV", B, HID),
 ];
 
+/// Cells of a timer instance (TON, TOF, TP).
+pub const TIMER_CELLS: usize = 6;
+
+/// One call of the on-delay timer on its instance cells. Apart from [`StdFb::exec`] so that
+/// the interpreter calls it directly on a timer's call instruction: the most common block
+/// of PLC code, run without the jump on the block type and with its cells checked once.
+#[inline(always)]
+pub fn ton(c: &mut [u64; TIMER_CELLS], now: i64) {
+    let (inp, pt) = (c[0] != 0, c[1] as i64);
+    if !inp {
+        c[2] = 0;
+        c[3] = 0;
+    } else {
+        if c[5] == 0 {
+            c[4] = now as u64;
+        }
+        let et = now.wrapping_sub(c[4] as i64).min(pt).max(0);
+        c[3] = et as u64;
+        c[2] = (et >= pt) as u64;
+    }
+    c[5] = inp as u64;
+}
+
+const _: () = assert!(TIMER.len() == TIMER_CELLS);
+
 impl StdFb {
     /// Looks a standard block up by its upper-case name.
     pub fn by_name(name: &str) -> Option<StdFb> {
@@ -126,19 +151,9 @@ impl StdFb {
         let b = |v: u64| v != 0;
         match self {
             StdFb::Ton => {
-                let (inp, pt) = (b(c[0]), c[1] as i64);
-                if !inp {
-                    c[2] = 0;
-                    c[3] = 0;
-                } else {
-                    if !b(c[5]) {
-                        c[4] = now as u64;
-                    }
-                    let et = now.wrapping_sub(c[4] as i64).min(pt).max(0);
-                    c[3] = et as u64;
-                    c[2] = (et >= pt) as u64;
+                if let Ok(c) = <&mut [u64; TIMER_CELLS]>::try_from(c) {
+                    ton(c, now);
                 }
-                c[5] = inp as u64;
             }
             StdFb::Tof => {
                 let (inp, pt) = (b(c[0]), c[1] as i64);

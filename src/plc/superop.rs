@@ -8,6 +8,7 @@
 //! Base-relative offsets are carried in 16 bits when the rule needs room, so an instruction
 //! stays 16 bytes; a cell further from its base keeps the unfused pair.
 
+use super::op::mod_magic;
 use super::peephole::{with_const, Rewrite};
 use super::vm::{Bin, Op};
 
@@ -103,6 +104,19 @@ fn block_call(w: &[Op]) -> Option<Op> {
         d2: short(d2)?,
         k,
     })
+}
+
+/// The rule of the sixth pass: a remainder by a constant of a cell of 16 bits or fewer,
+/// then an operation with a constant (`a MOD 7 = 0`), computes the remainder by
+/// multiplication ([`Op::PushModC`]): the divide is the slowest instruction of the scan.
+pub(super) fn fuse_mod(w: &[Op], _at: usize) -> Option<Rewrite> {
+    match *w {
+        [Op::PushLIC(Bin::Mod(kind), b, x, d, k), ..] if kind.bits() <= 16 && d >= 2 => {
+            let d = u16::try_from(d).ok().filter(|&d| d <= 32767)?;
+            Some(([Some(Op::PushModC(b, x, d, mod_magic(d), k)), None], 1))
+        }
+        _ => None,
+    }
 }
 
 /// The rule of the fifth pass, over the fourth's output: the first-order filter

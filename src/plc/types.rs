@@ -95,16 +95,15 @@ impl IntKind {
     /// overflow; the standard leaves overflow to the implementation).
     #[inline(always)]
     pub fn wrap(self, v: i64) -> i64 {
-        match self.bits() {
-            64 => v,
-            b => {
-                let sh = 64 - b;
-                if self.signed() {
-                    (v << sh) >> sh
-                } else {
-                    ((v as u64) << sh >> sh) as i64
-                }
-            }
+        // Branch-free (a shift pair by a per-kind amount, 0 for 64 bits): inlined into every
+        // fused integer instruction, where a branch on the kind would be a second dispatch.
+        let sh = 64 - self.bits();
+        let signed = (v << sh) >> sh;
+        let unsigned = ((v as u64) << sh >> sh) as i64;
+        if self.signed() {
+            signed
+        } else {
+            unsigned
         }
     }
     /// Smallest value.
@@ -233,6 +232,34 @@ pub fn common(a: Ty, b: Ty) -> Option<Ty> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The branch-free wrap is the value modulo 2^bits, read signed or unsigned, for every
+    /// kind (64-bit kinds unchanged).
+    #[test]
+    fn wrap_is_the_value_modulo_the_width() {
+        let vals = [
+            0i64, 1, -1, 127, 128, -129, 255, 256, 32_767, 32_768, -32_769, 65_535,
+        ];
+        let more = [
+            65_536,
+            1 << 31,
+            -(1 << 31) - 1,
+            (1 << 32) + 5,
+            i64::MIN,
+            i64::MAX,
+        ];
+        for k in IntKind::ALL {
+            for v in vals.iter().chain(&more).copied() {
+                let m = 1i128 << k.bits();
+                let mut r = (v as i128).rem_euclid(m);
+                if k.signed() && r >= m / 2 {
+                    r -= m;
+                }
+                let want = if k.bits() == 64 { v } else { r as i64 };
+                assert_eq!(k.wrap(v), want, "{k:?} {v}");
+            }
+        }
+    }
 
     #[test]
     fn wrap_is_twos_complement() {

@@ -6,6 +6,7 @@
 
 use super::op::*;
 pub use super::op::{BadCode, Bin, Cmp, Code, FaultKind, MathFn, Op, Shift};
+use super::stdfb::{ton, StdFb, TIMER_CELLS};
 use super::types::IntKind;
 
 /// The machine state of one scan, borrowed from the program's preallocated storage.
@@ -145,8 +146,17 @@ impl Vm<'_> {
                 } else {
                     $at as usize
                 };
-                let n = $fb.members().len();
-                $fb.exec(&mut mem[a..a + n], self.now);
+                if let StdFb::Ton = $fb {
+                    // The common timer without the jump on the block type (the conversion
+                    // cannot fail: the range is the array's length).
+                    if let Ok(c) = <&mut [u64; TIMER_CELLS]>::try_from(&mut mem[a..a + TIMER_CELLS])
+                    {
+                        ton(c, self.now);
+                    }
+                } else {
+                    let n = $fb.members().len();
+                    $fb.exec(&mut mem[a..a + n], self.now);
+                }
             }};
         }
         loop {
@@ -388,6 +398,10 @@ impl Vm<'_> {
                 Op::PushLIC(b1, b2, x, k1, k2) => {
                     let v = b1.apply(mem[base + x as usize], k1 as i64 as u64);
                     push!(b2.apply(v, k2 as i64 as u64))
+                }
+                Op::PushModC(b, x, d, m, k) => {
+                    let r = mod16(mem[base + x as usize] as i64, d, m);
+                    push!(b.apply(r as u64, k as i64 as u64))
                 }
                 Op::BinSLL(b1, b2, x, y, d) => {
                     let a = pop!();
