@@ -230,6 +230,11 @@ pub struct MotionConfig {
     /// run chord by chord.
     #[serde(default = "default_fit_arcs")]
     pub fit_arcs: bool,
+    /// Plan runs of tangent moves that nothing between them slows as one speed profile
+    /// (`motion::span`): the acceleration carries across the moves' ends. Off gives every
+    /// move its own speed-up and slow-down: for comparing plans.
+    #[serde(default = "default_fit_arcs")]
+    pub spans: bool,
 }
 
 fn default_servo_thread() -> String {
@@ -261,6 +266,7 @@ impl Default for MotionConfig {
             max_feed_override: default_max_feed_override(),
             probe_input: None,
             fit_arcs: default_fit_arcs(),
+            spans: default_fit_arcs(),
         }
     }
 }

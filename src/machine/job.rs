@@ -177,6 +177,7 @@ pub fn motion_config(cfg: &MachineConfig) -> MotionConfig {
     m.default_tolerance_mm = cfg.motion.g64_tolerance;
     m.max_feed_override = cfg.motion.max_feed_override;
     m.fit_arcs = cfg.motion.fit_arcs;
+    m.spans = cfg.motion.spans;
     m.kinematics = match cfg.machine.kinematics() {
         crate::config::Kinematics::Identity => KinematicsConfig::Identity,
         crate::config::Kinematics::Scara { link1_mm, link2_mm } => {

@@ -203,6 +203,9 @@ pub(super) fn digest(items: &[Item]) -> u64 {
                     s.curvature_per_mm,
                     s.heading_rad,
                     s.step_jerk_mm_s3,
+                    s.window.offset_s,
+                    s.window.full_s,
+                    s.window.dv_mm_s,
                 ] {
                     h.write_u64(v.to_bits());
                 }

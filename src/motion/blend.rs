@@ -152,6 +152,7 @@ mod tests {
                 heading_rad: 0.0,
                 step_jerk_mm_s3: 0.0,
                 line_marks: Default::default(),
+                window: Default::default(),
             };
             let end = seg.integrated_end_mm();
             assert!(

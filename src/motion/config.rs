@@ -104,6 +104,9 @@ pub struct MotionConfig {
     /// the G64 tolerance (issue 14, `motion::arcfit`; Cartesian kinematics only). False plans
     /// every chord with its own corner blend, as before.
     pub fit_arcs: bool,
+    /// Plan runs of tangent moves as one speed profile (issue 14, `motion::span`). False
+    /// gives every move its own S-curves, as before.
+    pub spans: bool,
 }
 
 impl Default for MotionConfig {
@@ -123,6 +126,7 @@ impl Default for MotionConfig {
             nominal_spindle_rpm: 0.0,
             kinematics: KinematicsConfig::Identity,
             fit_arcs: true,
+            spans: true,
         }
     }
 }

@@ -31,6 +31,8 @@ pub struct Limits {
     /// Whether dense gently turning chords are fitted into arcs ([`super::arcfit`]): on
     /// Cartesian machines (the arcs are planned against the axis limits of X and Y).
     pub fit_arcs: bool,
+    /// Whether runs of tangent moves are planned as one speed profile ([`super::span`]).
+    pub spans: bool,
     /// Tolerances at or below this (G61/G61.1's exact-path tolerance) keep their chords.
     pub exact_tolerance_mm: f64,
 }
@@ -55,6 +57,7 @@ impl Limits {
             max_override: cfg.max_feed_override,
             servo_period_s: cfg.servo_period_s,
             fit_arcs: cfg.fit_arcs && matches!(cfg.kinematics, KinematicsConfig::Identity),
+            spans: cfg.spans,
             exact_tolerance_mm: cfg.exact_path_tolerance_mm,
         }
     }
@@ -383,7 +386,7 @@ fn arc_accelerations(seg: &Segment) -> Option<(f64, f64)> {
         return None;
     }
     let (s0, s1) = (norm(&seg.v0_mm_s), norm(&seg.v1_mm_s));
-    let at = (s1 - s0).abs() * seg.shape().peak_rate();
+    let at = seg.tangential_acc_peak();
     Some((at, seg.curvature_per_mm.abs() * s0.max(s1).powi(2)))
 }
 

@@ -15,7 +15,8 @@ use super::line_marks::{LineMarks, MAX_MARKS};
 use super::merge::merge;
 use super::moves::{Junction, Move, MoveKind, Step};
 use super::profile::Tangential;
-use super::segment::{AuxItem, Item, Segment, SegmentKind};
+use super::segment::{AuxItem, Item, Segment, SegmentKind, Window};
+use super::span::{self, Transition};
 use super::PlanError;
 use crate::gcode::NUM_AXES;
 
@@ -136,6 +137,7 @@ impl Lookahead {
                     heading_rad: 0.0,
                     step_jerk_mm_s3: 0.0,
                     line_marks: LineMarks::NONE,
+                    window: Window::NONE,
                 }));
             }
         }
@@ -559,18 +561,57 @@ fn plan_run(
             c.max_speed(a.vcap_mm_s.min(b.vcap_mm_s), a.len_mm, b.len_mm, tol)
         })
         .collect();
-    // Move k must hold the blend halves at both ends plus its speed change:
+    // Runs of tangent moves that nothing between them slows are planned as one move (a
+    // span, see [`span`]): one speed profile, so the acceleration carries across their ends.
+    // Only in runs planned whole (a chunk boundary must fall at a move's end).
+    let groups: Vec<(usize, usize)> = if commit.is_none() && !continued && lim.spans {
+        let moves: Vec<span::SpanMove> = (0..n)
+            .map(|k| span::SpanMove {
+                vcap_mm_s: p[k].vcap_mm_s,
+                joins_next: corners[k].is_some_and(|c| c.is_straight())
+                    && p[k].mv.junction != Junction::ExactStop
+                    && kind_of(&p[k].mv) == kind_of(&p[k + 1].mv),
+                junction_cap_mm_s: jmax[k],
+            })
+            .collect();
+        span::groups(&moves)
+    } else {
+        (0..n).map(|k| (k, k)).collect()
+    };
+    let ng = groups.len();
+    let glen: Vec<f64> = groups
+        .iter()
+        .map(|&(a, b)| p[a..=b].iter().map(|m| m.len_mm).sum())
+        .collect();
+    let gtang: Vec<Tangential> = groups
+        .iter()
+        .map(|&(a, b)| span::tangential(p[a..=b].iter().map(|m| m.tang)))
+        .collect();
+    let gcorners: Vec<Option<Corner>> = groups.iter().map(|&(_, b)| corners[b]).collect();
+    let gjmax: Vec<f64> = groups.iter().map(|&(_, b)| jmax[b]).collect();
+
+    // Move (span) k must hold the blend halves at both ends plus its speed change:
     // g_k(a, b) = d_{k-1}(a) + d_k(b) + D_k(a, b) ≤ L_k, a and b the junction speeds.
     let half = |j: Option<usize>, v: f64| {
-        j.and_then(|j| corners[j])
+        j.and_then(|j| gcorners[j])
             .map_or(0.0, |c| c.half_length_mm(v))
     };
     let half_before = |k: usize, v: f64| match k.checked_sub(1) {
         Some(j) => half(Some(j), v),
         None => entry_corner.map_or(0.0, |c| c.half_length_mm(v)),
     };
+    // A span's blend halves must also stay within its first and last moves (the blend
+    // geometry runs along them); a single move's sum already ensures it.
+    let (first_len, last_len): (Vec<f64>, Vec<f64>) = groups
+        .iter()
+        .map(|&(a, b)| (p[a].len_mm, p[b].len_mm))
+        .unzip();
     let g = |k: usize, a: f64, b: f64| {
-        half_before(k, a) + half(Some(k), b) + p[k].tang.distance_mm(a, b)
+        let (h0, h1) = (half_before(k, a), half(Some(k), b));
+        if h0 > first_len[k] || h1 > last_len[k] {
+            return f64::INFINITY;
+        }
+        h0 + h1 + gtang[k].distance_mm(a, b)
     };
     let bisect = |mut lo: f64, mut hi: f64, ok: &dyn Fn(f64) -> bool| {
         for _ in 0..60 {
@@ -588,18 +629,18 @@ fn plan_run(
     };
     // Backward step over move k: highest entry speed a ≤ a_cap that can slow to b.
     let entry = |k: usize, a_cap: f64, b: f64| {
-        if a_cap <= b || g(k, a_cap, b) <= p[k].len_mm {
+        if a_cap <= b || g(k, a_cap, b) <= glen[k] {
             a_cap
         } else {
-            bisect(b, a_cap, &|a| g(k, a, b) <= p[k].len_mm)
+            bisect(b, a_cap, &|a| g(k, a, b) <= glen[k])
         }
     };
     // Forward step over move k: highest exit speed b ≤ b_cap reachable from a.
     let exit = |k: usize, a: f64, b_cap: f64| {
-        if b_cap <= a || g(k, a, b_cap) <= p[k].len_mm {
+        if b_cap <= a || g(k, a, b_cap) <= glen[k] {
             b_cap
         } else {
-            bisect(a, b_cap, &|b| g(k, a, b) <= p[k].len_mm)
+            bisect(a, b_cap, &|b| g(k, a, b) <= glen[k])
         }
     };
 
@@ -607,8 +648,8 @@ fn plan_run(
         let mut vj = jmax.to_vec();
         let mut base = 0;
         let mut v_start = v_entry;
-        while base < n {
-            let end = (base + window).min(n);
+        while base < ng {
+            let end = (base + window).min(ng);
             // Backward pass from a stop at the end of the window.
             vj[end - 1] = 0.0;
             for k in (base..end - 1).rev() {
@@ -620,7 +661,7 @@ fn plan_run(
                 vj[k] = exit(k, prev, vj[k]);
                 prev = vj[k];
             }
-            let commit = if end == n {
+            let commit = if end == ng {
                 end - base
             } else {
                 ((end - base) / 2).max(1)
@@ -635,13 +676,13 @@ fn plan_run(
     // committed earlier without a feasible exit. Verify every move and repair by lowering
     // the junction speeds around it until all fit (speeds only go down, so this ends: at
     // worst in exact stops, which always fit).
-    let mut jmax = jmax;
+    let mut jmax = gjmax;
     let mut vj = passes(&jmax);
     for round in 0.. {
         let mut bad = false;
-        for k in 0..n {
+        for k in 0..ng {
             let a = if k > 0 { vj[k - 1] } else { v_entry };
-            if g(k, a, vj[k]) > p[k].len_mm * (1.0 + 1e-12) + 1e-12 {
+            if g(k, a, vj[k]) > glen[k] * (1.0 + 1e-12) + 1e-12 {
                 bad = true;
                 if k == 0 && continued && round > 40 {
                     // Only a chunk's first move has a speed it cannot lower (the previous
@@ -666,22 +707,41 @@ fn plan_run(
         vj = passes(&jmax);
     }
     let emit = match commit {
-        Some(c) => p.iter().take_while(|m| m.last < c).count().min(n - 1),
-        None => n,
+        Some(c) => groups
+            .iter()
+            .take_while(|&&(_, b)| p[b].last < c)
+            .count()
+            .min(ng - 1),
+        None => ng,
     };
     for k in 0..emit {
         let v_in = if k > 0 { vj[k - 1] } else { v_entry };
-        let before = if k > 0 { corners[k - 1] } else { entry_corner };
-        let steps = [if k > 0 { dk[k - 1] } else { 0.0 }, dk[k]];
-        emit_move(&p, &corners, before, k, [v_in, vj[k]], steps, lim, out);
+        let before = if k > 0 { gcorners[k - 1] } else { entry_corner };
+        let (a, b) = groups[k];
+        let steps = [if a > 0 { dk[a - 1] } else { 0.0 }, dk[b]];
+        if a == b {
+            emit_move(&p, &corners, before, a, [v_in, vj[k]], steps, lim, out);
+        } else {
+            let sp = Span {
+                first: a,
+                last: b,
+                len_mm: glen[k],
+                tang: gtang[k],
+                vcap_mm_s: p[a..=b]
+                    .iter()
+                    .map(|m| m.vcap_mm_s)
+                    .fold(f64::INFINITY, f64::min),
+            };
+            emit_span(&p, &corners, &dk, before, &sp, [v_in, vj[k]], lim, out);
+        }
     }
     Ok(match (commit, emit) {
         (Some(_), e) if e > 0 => Some((
             Entry {
                 v_mm_s: vj[e - 1],
-                corner: corners[e - 1],
+                corner: gcorners[e - 1],
             },
-            p[e - 1].last + 1,
+            p[groups[e - 1].1].last + 1,
         )),
         _ => None,
     })
@@ -702,6 +762,209 @@ fn push(out: &mut Vec<Item>, lim: &Limits, mut s: Segment) {
     out.push(Item::Segment(s));
 }
 
+/// A run of tangent moves planned as one (see [`span`]).
+struct Span {
+    first: usize,
+    last: usize,
+    len_mm: f64,
+    tang: Tangential,
+    vcap_mm_s: f64,
+}
+
+/// Where a move's piece starting (ending) at distance `d` along it is, and its direction.
+fn move_point(m: &Prepared, d: f64) -> ([f64; NUM_AXES], [f64; NUM_AXES]) {
+    let mut q = m.mv.start_mm;
+    let mut u = m.u;
+    if m.curv != 0.0 {
+        let o = arcfit::offset(m.heading, m.curv, d);
+        q[0] += o[0];
+        q[1] += o[1];
+        let h = m.heading + m.curv * d;
+        u[0] = h.cos();
+        u[1] = h.sin();
+    } else {
+        for i in 0..NUM_AXES {
+            q[i] += m.u[i] * d;
+        }
+    }
+    (q, u)
+}
+
+/// Emits the span `sp` (moves `sp.first..=sp.last`, joined tangentially): one S-curve up,
+/// a cruise and one S-curve down over the whole span, cut at the moves' ends into windowed
+/// segments, each move's auxiliary items after its last piece, and the blend after the span.
+#[allow(clippy::too_many_arguments)]
+fn emit_span(
+    p: &[Prepared],
+    corners: &[Option<Corner>],
+    dk: &[f64],
+    before: Option<Corner>,
+    sp: &Span,
+    [v_in, v_out]: [f64; 2],
+    lim: &Limits,
+    out: &mut Vec<Item>,
+) {
+    let e = before.map_or(0.0, |c| c.half_length_mm(v_in));
+    let x = corners[sp.last].map_or(0.0, |c| c.half_length_mm(v_out));
+    let mid = (sp.len_mm - e - x).max(0.0);
+    let t = &sp.tang;
+    let fits = |vp: f64| t.distance_mm(v_in, vp) + t.distance_mm(vp, v_out) <= mid;
+    let lo0 = v_in.max(v_out);
+    let vp = if fits(sp.vcap_mm_s) {
+        sp.vcap_mm_s
+    } else if !fits(lo0) {
+        lo0
+    } else {
+        let (mut lo, mut hi) = (lo0, sp.vcap_mm_s);
+        for _ in 0..60 {
+            let c = 0.5 * (lo + hi);
+            if fits(c) {
+                lo = c;
+            } else {
+                hi = c;
+            }
+            if hi - lo <= 1e-9 * hi.max(1.0) {
+                break;
+            }
+        }
+        lo
+    };
+    let up = Transition::new(t, v_in, vp);
+    let down = Transition::new(t, vp, v_out);
+    let d_up = t.distance_mm(v_in, vp);
+    let d_down = t.distance_mm(vp, v_out);
+    let cruise = (mid - d_up - d_down).max(0.0);
+    // The profile's parts, in distance along the span from the first move's start.
+    let parts = [
+        (e, e + d_up, Some(up)),
+        (e + d_up, e + d_up + cruise, None),
+        (e + d_up + cruise, sp.len_mm - x, Some(down)),
+    ];
+    let step_jerk = |v: f64, dk: f64| v * v * dk / lim.servo_period_s;
+    let kind = kind_of(&p[sp.first].mv);
+    let mut c0 = 0.0;
+    for k in sp.first..=sp.last {
+        let m = &p[k];
+        let c1 = if k == sp.last {
+            sp.len_mm
+        } else {
+            c0 + m.len_mm
+        };
+        let lo = if k == sp.first { e } else { c0 };
+        let hi = if k == sp.last { sp.len_mm - x } else { c1 };
+        let (dk_in, dk_out) = (if k > 0 { dk[k - 1] } else { 0.0 }, dk[k]);
+        let first_piece = out.len();
+        for &(p0, p1, tr) in &parts {
+            let (a, b) = (lo.max(p0), hi.min(p1));
+            if b <= a {
+                continue;
+            }
+            // Speeds, times and window of this piece.
+            let (s0, s1, dur, jerk, window) = match tr {
+                None => (
+                    vp,
+                    vp,
+                    if vp > 0.0 { (b - a) / vp } else { 0.0 },
+                    0.0,
+                    Window::NONE,
+                ),
+                Some(tr) if a <= p0 && b >= p1 => (
+                    tr.s_start,
+                    tr.s_end,
+                    tr.shape.duration_s,
+                    tr.shape.jerk_s,
+                    Window::NONE,
+                ),
+                Some(tr) => {
+                    let ta = if a <= p0 { 0.0 } else { tr.time_at(a - p0) };
+                    let tb = if b >= p1 {
+                        tr.shape.duration_s
+                    } else {
+                        tr.time_at(b - p0)
+                    };
+                    (
+                        tr.speed(ta),
+                        tr.speed(tb),
+                        tb - ta,
+                        tr.shape.jerk_s,
+                        Window {
+                            offset_s: ta,
+                            full_s: tr.shape.duration_s,
+                            dv_mm_s: tr.s_end - tr.s_start,
+                        },
+                    )
+                }
+            };
+            let (from, done) = (a - c0, b - c0);
+            let (start, u0) = move_point(m, from);
+            let (end, u1) = move_point(m, done);
+            let mut step = 0.0f64;
+            if from <= 1e-12 {
+                step = step_jerk(s0, dk_in);
+            }
+            if done >= m.len_mm - 1e-9 {
+                step = step.max(step_jerk(s1, dk_out));
+            }
+            let len = b - a;
+            let before_marks = m.marks.iter().take_while(|&&q| q <= from).count();
+            let within: Vec<f64> = m.marks[before_marks..]
+                .iter()
+                .take_while(|&&q| q <= done)
+                .map(|q| if len > 0.0 { (q - from) / len } else { 0.0 })
+                .collect();
+            let seg = Segment {
+                start_mm: start,
+                end_mm: end,
+                v0_mm_s: u0.map(|c| c * s0),
+                v1_mm_s: u1.map(|c| c * s1),
+                duration_s: dur,
+                jerk_s: jerk,
+                kind,
+                line: m.mv.line + before_marks as u32,
+                length_mm: len,
+                move_rest_mm: (m.len_mm - done).max(0.0),
+                override_cap: 1.0,
+                end_override_cap: 1.0,
+                scale_rate_max: 0.0,
+                end_scale_rate_max: 0.0,
+                scale_jerk_max: 0.0,
+                brake_scale_jerk_max: 0.0,
+                next_scale_jerk_max: 0.0,
+                curvature_per_mm: m.curv,
+                heading_rad: m.heading + m.curv * from,
+                step_jerk_mm_s3: step,
+                line_marks: LineMarks::new(&within).unwrap_or_default(),
+                window: if dur > 0.0 { window } else { Window::NONE },
+            };
+            push(out, lim, seg);
+        }
+        // Each move's last piece ends exactly at its end (the blend's start for the last).
+        let mut end = m.mv.end_mm;
+        if k == sp.last {
+            for i in 0..NUM_AXES {
+                end[i] -= m.u[i] * x;
+            }
+        }
+        if out.len() > first_piece {
+            if let Some(Item::Segment(last)) = out.last_mut() {
+                last.end_mm = end;
+            }
+        }
+        out.extend(m.aux_after.iter().map(|a| Item::Aux(*a)));
+        c0 = c1;
+    }
+    let m = &p[sp.last];
+    if let Some(c) = corners[sp.last] {
+        if v_out > 0.0 && !c.is_straight() {
+            let mut corner_start = m.mv.end_mm;
+            for i in 0..NUM_AXES {
+                corner_start[i] -= m.u[i] * x;
+            }
+            emit_blend(p, sp.last, c, corner_start, v_out, x, lim, out);
+        }
+    }
+}
+
 /// Emits move `k` (S-curve up, cruise, S-curve down) and the blend at its end.
 #[allow(clippy::too_many_arguments)]
 fn emit_move(
@@ -715,24 +978,7 @@ fn emit_move(
     out: &mut Vec<Item>,
 ) {
     let m = &p[k];
-    // Where an arc's piece starting (ending) at arc length `d` is, and its direction.
-    let at = |d: f64| {
-        let mut q = m.mv.start_mm;
-        let mut u = m.u;
-        if m.curv != 0.0 {
-            let o = arcfit::offset(m.heading, m.curv, d);
-            q[0] += o[0];
-            q[1] += o[1];
-            let h = m.heading + m.curv * d;
-            u[0] = h.cos();
-            u[1] = h.sin();
-        } else {
-            for i in 0..NUM_AXES {
-                q[i] += m.u[i] * d;
-            }
-        }
-        (q, u)
-    };
+    let at = |d: f64| move_point(m, d);
     let step_jerk = |v: f64, dk: f64| v * v * dk / lim.servo_period_s;
     let e = before.map_or(0.0, |c| c.half_length_mm(v_in));
     let x = corners[k].map_or(0.0, |c| c.half_length_mm(v_out));
@@ -820,6 +1066,7 @@ fn emit_move(
             heading_rad: m.heading + m.curv * from,
             step_jerk_mm_s3: step,
             line_marks,
+            window: Window::NONE,
         };
         *pos = end;
         push(out, lim, seg);
@@ -861,40 +1108,58 @@ fn emit_move(
     out.extend(m.aux_after.iter().map(|a| Item::Aux(*a)));
     if let Some(c) = corners[k] {
         if v_out > 0.0 && !c.is_straight() {
-            let nb = &p[k + 1];
-            let sh = c.shape(v_out);
-            let mut blend_end = nb.mv.start_mm;
-            for i in 0..NUM_AXES {
-                blend_end[i] += nb.u[i] * x;
-            }
-            let seg = Segment {
-                start_mm: corner_start,
-                end_mm: blend_end,
-                v0_mm_s: m.u.map(|c| c * v_out),
-                v1_mm_s: nb.u.map(|c| c * v_out),
-                duration_s: sh.duration_s,
-                jerk_s: sh.jerk_s,
-                kind: if m.mv.kind == MoveKind::Rapid && nb.mv.kind == MoveKind::Rapid {
-                    SegmentKind::Rapid
-                } else {
-                    SegmentKind::Feed
-                },
-                line: nb.mv.line,
-                length_mm: v_out * sh.duration_s,
-                move_rest_mm: (nb.len_mm - x).max(0.0),
-                override_cap: 1.0,
-                end_override_cap: 1.0,
-                scale_rate_max: 0.0,
-                end_scale_rate_max: 0.0,
-                scale_jerk_max: 0.0,
-                brake_scale_jerk_max: 0.0,
-                next_scale_jerk_max: 0.0,
-                curvature_per_mm: 0.0,
-                heading_rad: 0.0,
-                step_jerk_mm_s3: 0.0,
-                line_marks: LineMarks::NONE,
-            };
-            push(out, lim, seg);
+            emit_blend(p, k, c, corner_start, v_out, x, lim, out);
         }
     }
+}
+
+/// Emits the corner blend after move `k`, from `corner_start` at speed `v_out` to `x` along
+/// the next move.
+#[allow(clippy::too_many_arguments)]
+fn emit_blend(
+    p: &[Prepared],
+    k: usize,
+    c: Corner,
+    corner_start: [f64; NUM_AXES],
+    v_out: f64,
+    x: f64,
+    lim: &Limits,
+    out: &mut Vec<Item>,
+) {
+    let m = &p[k];
+    let nb = &p[k + 1];
+    let sh = c.shape(v_out);
+    let mut blend_end = nb.mv.start_mm;
+    for i in 0..NUM_AXES {
+        blend_end[i] += nb.u[i] * x;
+    }
+    let seg = Segment {
+        start_mm: corner_start,
+        end_mm: blend_end,
+        v0_mm_s: m.u.map(|c| c * v_out),
+        v1_mm_s: nb.u.map(|c| c * v_out),
+        duration_s: sh.duration_s,
+        jerk_s: sh.jerk_s,
+        kind: if m.mv.kind == MoveKind::Rapid && nb.mv.kind == MoveKind::Rapid {
+            SegmentKind::Rapid
+        } else {
+            SegmentKind::Feed
+        },
+        line: nb.mv.line,
+        length_mm: v_out * sh.duration_s,
+        move_rest_mm: (nb.len_mm - x).max(0.0),
+        override_cap: 1.0,
+        end_override_cap: 1.0,
+        scale_rate_max: 0.0,
+        end_scale_rate_max: 0.0,
+        scale_jerk_max: 0.0,
+        brake_scale_jerk_max: 0.0,
+        next_scale_jerk_max: 0.0,
+        curvature_per_mm: 0.0,
+        heading_rad: 0.0,
+        step_jerk_mm_s3: 0.0,
+        line_marks: LineMarks::NONE,
+        window: Window::NONE,
+    };
+    push(out, lim, seg);
 }

@@ -88,6 +88,7 @@ pub mod moves;
 pub mod nurbs;
 pub mod profile;
 pub mod segment;
+pub mod span;
 pub mod spindle_lock;
 pub mod spindle_sync;
 pub mod stream;
@@ -105,7 +106,7 @@ pub use error::{KinematicsError, PlanError};
 pub use interpolator::{
     InterpOutput, InterpState, Interpolator, IterSource, SegmentSource, SliceSource,
 };
-pub use segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
+pub use segment::{AuxItem, AuxKind, Item, Segment, SegmentKind, Window};
 
 use crate::gcode::{Canon, NUM_AXES};
 

@@ -79,14 +79,120 @@ pub struct Segment {
     /// Where the segment passes the vertices of the source lines after `line` (an arc
     /// fitted over several G1 lines, issue 14): the reported line advances at each.
     pub line_marks: LineMarks,
+    /// Set when the segment is a piece of a longer speed transition (one S-curve across a
+    /// run of tangent moves, issue 14): the acceleration then carries across the segment's
+    /// ends instead of falling to zero at each of them. [`Window::NONE`] otherwise.
+    pub window: Window,
+}
+
+/// The part of a speed transition that one segment runs (see [`Segment::window`]): the
+/// segment's speed is `s0 + dv·(f(offset + t) − f(offset))` for `t` in `[0, duration]`,
+/// where `f` is the transition's shape (duration `full_s`, the segment's `jerk_s`) and `s0`
+/// the segment's start speed. Only straight pieces and arcs carry a window, never a blend.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Window {
+    /// Time into the whole transition at which the segment starts, s.
+    pub offset_s: f64,
+    /// Duration of the whole transition, s (0: no window).
+    pub full_s: f64,
+    /// Speed change of the whole transition, mm/s (signed).
+    pub dv_mm_s: f64,
+}
+
+impl Window {
+    /// Not a piece of a longer transition.
+    pub const NONE: Window = Window {
+        offset_s: 0.0,
+        full_s: 0.0,
+        dv_mm_s: 0.0,
+    };
+
+    /// True for a piece of a longer transition.
+    pub fn is_some(&self) -> bool {
+        self.full_s > 0.0
+    }
 }
 
 impl Segment {
-    /// The S-curve shape.
+    /// The S-curve shape (of the whole transition for a windowed piece).
     pub fn shape(&self) -> Shape {
         Shape {
-            duration_s: self.duration_s,
+            duration_s: if self.window.is_some() {
+                self.window.full_s
+            } else {
+                self.duration_s
+            },
             jerk_s: self.jerk_s,
+        }
+    }
+
+    /// Speed (mm/s) and distance travelled (mm) along a windowed piece at `t` (clamped).
+    fn window_speed_distance(&self, t_s: f64) -> (f64, f64) {
+        let w = &self.window;
+        let sh = self.shape();
+        let t = t_s.clamp(0.0, self.duration_s);
+        let (f0, cap_f0) = sh.eval(w.offset_s);
+        let (f, cap_f) = sh.eval(w.offset_s + t);
+        let s0 = norm(&self.v0_mm_s);
+        (
+            s0 + w.dv_mm_s * (f - f0),
+            s0 * t + w.dv_mm_s * (cap_f - cap_f0 - f0 * t),
+        )
+    }
+
+    /// Unit direction of a straight windowed piece.
+    fn window_direction(&self) -> [f64; NUM_AXES] {
+        let (s0, s1) = (norm(&self.v0_mm_s), norm(&self.v1_mm_s));
+        let (v, s) = if s1 >= s0 {
+            (&self.v1_mm_s, s1)
+        } else {
+            (&self.v0_mm_s, s0)
+        };
+        if s > 0.0 {
+            v.map(|c| c / s)
+        } else {
+            [0.0; NUM_AXES]
+        }
+    }
+
+    /// Pose of a windowed piece after `d_mm` along it.
+    fn window_pose(&self, d_mm: f64) -> [f64; NUM_AXES] {
+        if self.curvature_per_mm != 0.0 {
+            return self.arc_pose(d_mm);
+        }
+        let u = self.window_direction();
+        let mut p = self.start_mm;
+        for (p, u) in p.iter_mut().zip(u) {
+            *p += u * d_mm;
+        }
+        p
+    }
+
+    /// Path speed at time `t_s` into the segment, mm/s (the norm of the velocity).
+    pub fn speed_at(&self, t_s: f64) -> f64 {
+        if self.window.is_some() {
+            return self.window_speed_distance(t_s).0;
+        }
+        let (f, _) = self.shape().eval(t_s.clamp(0.0, self.duration_s.max(0.0)));
+        let mut v = [0.0; NUM_AXES];
+        for (i, v) in v.iter_mut().enumerate() {
+            *v = self.v0_mm_s[i] + (self.v1_mm_s[i] - self.v0_mm_s[i]) * f;
+        }
+        norm(&v)
+    }
+
+    /// Peak tangential acceleration of a windowed piece or an arc, mm/s² (the whole
+    /// transition's peak for a windowed piece: an upper bound on the piece's).
+    pub fn tangential_acc_peak(&self) -> f64 {
+        self.tangential_dv() * self.shape().peak_rate()
+    }
+
+    /// Speed change that scales the shape's rates along the path, mm/s.
+    fn tangential_dv(&self) -> f64 {
+        if self.window.is_some() {
+            self.window.dv_mm_s.abs()
+        } else {
+            (norm(&self.v1_mm_s) - norm(&self.v0_mm_s)).abs()
         }
     }
 
@@ -96,6 +202,9 @@ impl Segment {
             return self.end_mm;
         }
         let t = t_s.max(0.0);
+        if self.window.is_some() {
+            return self.window_pose(self.window_speed_distance(t).1);
+        }
         let (_, cap_f) = self.shape().eval(t);
         if self.curvature_per_mm != 0.0 {
             let (s0, s1) = (norm(&self.v0_mm_s), norm(&self.v1_mm_s));
@@ -119,6 +228,9 @@ impl Segment {
 
     /// End pose computed from the motion (equal to `end_mm` up to rounding).
     pub fn integrated_end_mm(&self) -> [f64; NUM_AXES] {
+        if self.window.is_some() {
+            return self.window_pose(self.window_speed_distance(self.duration_s).1);
+        }
         let h = 0.5 * self.duration_s;
         if self.curvature_per_mm != 0.0 {
             return self.arc_pose((norm(&self.v0_mm_s) + norm(&self.v1_mm_s)) * h);
@@ -146,6 +258,15 @@ impl Segment {
             return self.length_mm;
         }
         let t = t_s.clamp(0.0, self.duration_s);
+        if self.window.is_some() {
+            let full = self.window_speed_distance(self.duration_s).1;
+            let raw = self.window_speed_distance(t).1;
+            return if full > 0.0 {
+                (raw / full * self.length_mm).min(self.length_mm)
+            } else {
+                0.0
+            };
+        }
         let (_, cap_f) = self.shape().eval(t);
         let s0 = norm(&self.v0_mm_s);
         let s1 = norm(&self.v1_mm_s);
@@ -167,7 +288,11 @@ impl Segment {
         let mut out = [[0.0; 3]; NUM_AXES];
         if self.curvature_per_mm != 0.0 {
             let (s0, s1) = (norm(&self.v0_mm_s), norm(&self.v1_mm_s));
-            let (vm, dv, k) = (s0.max(s1), (s1 - s0).abs(), self.curvature_per_mm.abs());
+            let (vm, dv, k) = (
+                s0.max(s1),
+                self.tangential_dv(),
+                self.curvature_per_mm.abs(),
+            );
             let at = dv * r;
             let acc = at.hypot(k * vm * vm);
             let jerk = dv * j + k * k * vm * vm * vm + 3.0 * k * vm * at + self.step_jerk_mm_s3;
@@ -175,8 +300,12 @@ impl Segment {
             out[1] = [vm, acc, jerk];
             return out;
         }
+        let window_u = self.window.is_some().then(|| self.window_direction());
         for (i, o) in out.iter_mut().enumerate() {
-            let dv = (self.v1_mm_s[i] - self.v0_mm_s[i]).abs();
+            let dv = match window_u {
+                Some(u) => (u[i] * self.window.dv_mm_s).abs(),
+                None => (self.v1_mm_s[i] - self.v0_mm_s[i]).abs(),
+            };
             *o = [
                 self.v0_mm_s[i].abs().max(self.v1_mm_s[i].abs()),
                 dv * r,
@@ -380,10 +509,10 @@ mod tests {
     fn queue_items_are_copy_send_and_small() {
         realtime_safe::<Item>();
         realtime_safe::<AuxItem>();
-        // Fixed size, no heap: a ring of 4096 items is about 1.6 MiB (the arc fields of
-        // issue 14 added 24 bytes).
+        // Fixed size, no heap: a ring of 4096 items is about 1.7 MiB (the arc fields of
+        // issue 14 added 24 bytes, the span window 24 more).
         assert!(
-            std::mem::size_of::<Item>() <= 416,
+            std::mem::size_of::<Item>() <= 440,
             "{}",
             std::mem::size_of::<Item>()
         );

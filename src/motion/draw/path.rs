@@ -3,7 +3,7 @@
 //! where the machine starts and ends, and where the tool goes straight down into the work
 //! (a plunge, or a drill cycle's hole when the tool comes straight back up).
 
-use crate::motion::segment::{norm, Item, SegmentKind};
+use crate::motion::segment::{Item, SegmentKind};
 use crate::motion::Plan;
 
 /// Number of colour steps of the speed scale.
@@ -72,15 +72,9 @@ pub fn toolpath(plan: &Plan) -> Toolpath {
     for s in &segments {
         let rapid = s.kind == SegmentKind::Rapid;
         let n = ((s.length_mm / 0.5).ceil() as usize).clamp(1, 16);
-        let sh = s.shape();
         for i in 0..n {
             let t = s.duration_s * (i as f64 + 0.5) / n as f64;
-            let (f, _) = sh.eval(t);
-            let mut v = [0.0; crate::gcode::NUM_AXES];
-            for (a, v) in v.iter_mut().enumerate().take(3) {
-                *v = s.v0_mm_s[a] + (s.v1_mm_s[a] - s.v0_mm_s[a]) * f;
-            }
-            let speed = norm(&v);
+            let speed = s.speed_at(t);
             if !rapid {
                 vmax = vmax.max(speed);
             }
