@@ -35,7 +35,7 @@ pub struct MotionArgs {
     pub config: Option<PathBuf>,
     /// TOML file with motion settings applied on top (keys: max_vel_mm_s, max_acc_mm_s2,
     /// max_jerk_mm_s3, servo_period_s, default_tolerance_mm, lookahead_moves,
-    /// merge_fraction, override_reserve, min_mm, max_mm).
+    /// merge_fraction, override_reserve, fit_arcs, spans, min_mm, max_mm).
     #[arg(long = "motion")]
     pub motion_file: Option<PathBuf>,
     /// Most canonical commands to interpret (default 2,000,000, see
@@ -119,6 +119,10 @@ pub struct MotionOverrides {
     pub merge_fraction: Option<f64>,
     /// Override reserve.
     pub override_reserve: Option<f64>,
+    /// Fit dense chords into arcs (`[motion] fit_arcs`).
+    pub fit_arcs: Option<bool>,
+    /// Plan runs of tangent moves as one speed profile (`[motion] spans`).
+    pub spans: Option<bool>,
     /// X Y Z lower soft limit, mm.
     pub min_mm: Option<f64>,
     /// X Y Z upper soft limit, mm.
@@ -163,6 +167,8 @@ impl MotionArgs {
         cfg.lookahead_moves = o.lookahead_moves.unwrap_or(cfg.lookahead_moves);
         cfg.merge_fraction = o.merge_fraction.unwrap_or(cfg.merge_fraction);
         cfg.override_reserve = o.override_reserve.unwrap_or(cfg.override_reserve);
+        cfg.fit_arcs = o.fit_arcs.unwrap_or(cfg.fit_arcs);
+        cfg.spans = o.spans.unwrap_or(cfg.spans);
         cfg.validate()?;
         Ok(cfg)
     }
@@ -410,7 +416,8 @@ mod tests {
         let mut f = tempfile::NamedTempFile::new().unwrap();
         writeln!(
             f,
-            "max_vel_mm_s = 80.0\nmax_acc_mm_s2 = 1000.0\nservo_period_s = 0.0005"
+            "max_vel_mm_s = 80.0\nmax_acc_mm_s2 = 1000.0\nservo_period_s = 0.0005\n\
+             spans = false\nfit_arcs = false"
         )
         .unwrap();
         let args = MotionArgs {
@@ -423,6 +430,8 @@ mod tests {
         assert_eq!(cfg.axes[2].max_acc_mm_s2, 700.0);
         assert_eq!(cfg.axes[3], MotionConfig::default().axes[3]);
         assert_eq!(cfg.servo_period_s, 0.0005);
+        assert!(!cfg.spans && !cfg.fit_arcs);
+        assert!(MotionArgs::default().config().unwrap().spans);
     }
 
     #[test]
