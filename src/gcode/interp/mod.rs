@@ -18,6 +18,7 @@ mod ocode;
 mod persistent;
 mod polar;
 mod roughing;
+mod roughing_comp;
 mod roughing_geom;
 mod splines;
 mod state;
