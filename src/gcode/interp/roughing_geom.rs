@@ -289,7 +289,10 @@ pub(super) fn round_corners(els: &[El], rounds: &[f64]) -> Result<Vec<El>, Strin
     Ok(out)
 }
 
-/// Intersections of the full line or circle carrying `e` with the one carrying `f`.
+/// Where the offset `e` meets the offset `f` that follows it, as rs274 joins them: a line
+/// and an arc cross on the circle through the arc's end (its start may be a little off it
+/// when the profile was written with rounded numbers), both crossings; two arcs at the one
+/// crossing of their start circles rs274 takes.
 fn meet(e: &El, f: &El) -> Vec<Pt> {
     match (e.arc, f.arc) {
         (None, None) => {
@@ -303,7 +306,8 @@ fn meet(e: &El, f: &El) -> Vec<Pt> {
         }
         (None, Some((c, _))) | (Some((c, _)), None) => {
             let (l, circ) = if e.arc.is_none() { (e, f) } else { (f, e) };
-            let r = norm(sub(circ.a, c));
+            // rs274 meets the line with the circle through the arc's end.
+            let r = norm(sub(circ.b, c));
             let d = unit(sub(l.b, l.a));
             let w = sub(l.a, c);
             let bq = w[0] * d[0] + w[1] * d[1];
@@ -318,21 +322,22 @@ fn meet(e: &El, f: &El) -> Vec<Pt> {
         }
         (Some((c1, _)), Some((c2, _))) => {
             let (r1, r2) = (norm(sub(e.a, c1)), norm(sub(f.a, c2)));
-            let dv = sub(c2, c1);
+            let dv = sub(c1, c2);
             let dist = norm(dv);
             if dist < EPS {
                 return Vec::new();
             }
-            let a = (r1 * r1 - r2 * r2 + dist * dist) / (2.0 * dist);
-            let h2 = r1 * r1 - a * a;
             let gap = (dist - (r1 + r2)).max((r1 - r2).abs() - dist);
-            if h2 < -EPS && gap > TANGENT_TOL {
+            if gap > TANGENT_TOL {
                 return Vec::new();
             }
-            let h = h2.max(0.0).sqrt();
-            let m = add(c1, mul(dv, a / dist));
-            let n = mul(left(unit(dv)), h);
-            vec![add(m, n), sub(m, n)]
+            // rs274's one crossing: from the second centre toward the first, turned by the
+            // angle at the second centre, clockwise in (u, v) (counter-clockwise in its
+            // Z + iX frame); its cosine is not clamped, only its sine's argument.
+            let cos = (dist * dist + r2 * r2 - r1 * r1) / (2.0 * dist * r2);
+            let sin = (1.0 - (cos * cos).min(1.0)).sqrt();
+            let w = mul(dv, r2 / dist);
+            vec![add(c2, [w[1] * sin + w[0] * cos, w[1] * cos - w[0] * sin])]
         }
     }
 }
@@ -357,11 +362,13 @@ pub(super) fn offset(els: &[El], d: f64) -> Result<Vec<El>, String> {
                 let turn = cross(els[i - 1].tangent(q), e.tangent(q));
                 // A corner that turns outward by less than this (about 0.06°) is a tangent
                 // join written with rounded numbers: the offsets are joined where they meet
-                // (or nearly do), as rs274 does, rather than by a sliver of corner arc.
+                // (or nearly do), as rs274 does, rather than by a sliver of corner arc; of
+                // two crossings, the one nearer the second element's start (rs274's choice).
                 if turn > -1e-3 {
+                    let s = o.a;
                     let x = meet(prev, &o)
                         .into_iter()
-                        .min_by(|p1, p2| norm(sub(*p1, q)).total_cmp(&norm(sub(*p2, q))));
+                        .min_by(|p1, p2| norm(sub(*p1, s)).total_cmp(&norm(sub(*p2, s))));
                     let Some(x) = x else {
                         return Err("the offset profile does not close at an inside corner".into());
                     };
