@@ -20,6 +20,7 @@ mod polar;
 mod roughing;
 mod roughing_comp;
 mod roughing_geom;
+mod roughing_steps;
 mod splines;
 mod state;
 mod thread_cycle;
