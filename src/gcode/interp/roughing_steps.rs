@@ -170,7 +170,12 @@ fn meet(p: &mut El, n: &mut El) -> Result<(), String> {
             let ps = cmul((pa.0 - e.0, pa.1 - e.1), rot);
             let pe = cmul((pb.0 - e.0, pb.1 - e.1), rot);
             if ps.1 - pe.1 == 0.0 {
-                return Err("cannot intersect parallel lines of the offset profile".into());
+                return Err(
+                    "two consecutive lines of the profile are parallel: with an \
+                            allowance rs274 cannot join their offsets either (\"Cannot \
+                            intersect parallel lines\"); make them one line"
+                        .into(),
+                );
             }
             let f = ps.1 / (ps.1 - pe.1);
             let q = (ps.0 + f * (pe.0 - ps.0), ps.1 + f * (pe.1 - ps.1));
