@@ -555,7 +555,10 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         }
         cy.element(&e.piece(cur, e.b));
         cur = e.b;
-        let lip = els.get(i + 1).is_some_and(|n| geom::dips(n, e.b));
+        // A pocket starts where the contour turns down, not where a descent goes on into
+        // another element (a line into a groove arc): rs274 dives on through it.
+        let going_down = e.tangent(e.b)[0] < -geom::EPS;
+        let lip = !going_down && els.get(i + 1).is_some_and(|n| geom::dips(n, e.b));
         if !lip {
             i += 1;
             continue;
