@@ -8,15 +8,17 @@ Two uses (standard library only; needs `rs274` from linuxcnc-uspace on PATH):
       table, and prints `same`, `differs` (first differing call) or an acceptance mismatch.
 
   rs274diff.py random [--hytask BIN] [--seed N] [--count N] [--keep DIR] [--kind KIND]
-      generates random programs (see `gen_program`) and compares them the same way; the
-      programs that differ are written to DIR (default: a temporary directory) so that
-      they can be reduced and kept as corpus cases.
+      generates random programs (KIND mill, the default: see `gen_program`; KIND lathe:
+      G70/G71/G71.2 on rounded profiles, see `gen_lathe_program`) and compares them the
+      same way; the programs that differ are written to DIR (default: a temporary
+      directory) so that they can be reduced and kept as corpus cases.
 
 Not run by CI (a few thousand programs take minutes); the corpus programs it found are
 checked by `tests/gcode_differential.rs`. Traces are compared after dropping the
 sequence-number and N-word columns, as the Rust test does.
 """
 import argparse
+import math
 import os
 import random
 import re
@@ -182,6 +184,53 @@ def gen_program(seed):
     return "\n".join(lines) + "\n"
 
 
+def gen_lathe_program(seed):
+    """A G70, G71 or G71.2 cycle on a random outside profile (X rising, Z falling) of lines
+    and arcs whose numbers are rounded to 4 decimals, so that joins meant to be tangent
+    miss slightly, as in hand-written profiles; allowances from negative to 1, sometimes
+    several G70 passes. rs274 refuses about half of them (profiles that turn back); those
+    must be refused by hytask too."""
+    r = random.Random(seed)
+    x, z = round(r.uniform(0.5, 2), 3), 1.0
+    lines = ["G1 X%s Z%s" % (x, z)]
+    for _ in range(r.randint(3, 7)):
+        k = r.random()
+        if k < 0.5:
+            nx = round(x + r.choice([0, 0, r.uniform(0, 1.5)]), 4)
+            nz = round(z - r.uniform(0.3, 3), 4)
+            lines.append("G1 X%s Z%s" % (nx, nz))
+            x, z = nx, nz
+        elif k < 0.7:
+            x = round(x + r.uniform(0.2, 1.5), 4)
+            lines.append("G1 X%s" % x)
+        else:
+            rad = r.uniform(0.5, 3)
+            a0 = math.radians(r.uniform(0, 60))
+            a1 = math.radians(r.uniform(math.degrees(a0) + 10, 90))
+            if r.random() < 0.5:  # convex
+                cx, cz = x - rad * math.sin(a0), z - rad * math.cos(a0)
+                ex, ez, g = cx + rad * math.sin(a1), cz + rad * math.cos(a1), 3
+            else:  # a groove
+                cx, cz = x + rad * math.cos(a0), z - rad * math.sin(a0)
+                ex, ez, g = cx - rad * math.cos(a1), cz - rad * math.sin(a1), 2
+            ex, ez = round(ex, 4), round(ez, 4)
+            if ez < z - 0.01:
+                lines.append("G%d X%s Z%s I%s K%s"
+                             % (g, ex, ez, round(cx - x, 4), round(cz - z, 4)))
+                x, z = ex, ez
+    sx = round(x + 2, 2)
+    lines.append("G1 X%s" % round(x + 1, 3))
+    cyc = r.choice(["G70", "G71", "G71.2", "G70"])
+    if cyc == "G70":
+        d = round(r.uniform(-0.3, 1.0), 2)
+        e = round(r.uniform(0, d), 2) if d > 0 else 0
+        words = "D%s E%s P%d" % (d, e, r.randint(1, 3))
+    else:
+        words = "D%s I%s R0.3" % (round(r.uniform(-0.2, 0.6), 2), round(r.uniform(0.3, 1.2), 2))
+    return ("G18 G21 G90 F100\no1 sub\n%s\no1 endsub\nG0 X%s Z3\n%s Q1 X%s Z2 %s\n"
+            "G0 X%s\nM2\n" % ("\n".join(lines), sx, cyc, sx, words, sx + 2))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("mode", choices=["compare", "random"])
@@ -190,6 +239,8 @@ def main():
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--count", type=int, default=200)
     ap.add_argument("--keep")
+    ap.add_argument("--kind", choices=["mill", "lathe"], default="mill",
+                    help="mill: gen_program; lathe: gen_lathe_program (G70/G71 cycles)")
     a = ap.parse_intermixed_args()
     if a.mode == "compare":
         bad = 0
@@ -206,7 +257,7 @@ def main():
         for s in range(a.seed, a.seed + a.count):
             p = os.path.join(tmp, "random_%d.ngc" % s)
             with open(p, "w") as f:
-                f.write(gen_program(s))
+                f.write(gen_lathe_program(s) if a.kind == "lathe" else gen_program(s))
             d = compare(p, a.hytask)
             if d:
                 bad += 1

@@ -21,11 +21,18 @@ pub(crate) fn pose6(v: &[f64; 6]) -> Pose {
 impl Interp<'_> {
     /// End point of a move from the axis words (LinuxCNC `find_ends`).
     pub(crate) fn find_ends(&self, b: &Block) -> [f64; 6] {
-        let mut end = self.s.pos;
+        let mut from = self.s.pos;
         if self.comp.measures_from_program() {
             // With compensation on, moves are measured from the programmed point.
-            end[..3].copy_from_slice(&self.comp.prog);
+            from[..3].copy_from_slice(&self.comp.prog);
         }
+        self.find_ends_from(b, from)
+    }
+
+    /// End point of a move from the axis words, measured from `from` (the axes not named
+    /// keep its values).
+    pub(crate) fn find_ends_from(&self, b: &Block, from: [f64; 6]) -> [f64; 6] {
+        let mut end = from;
         let base = end;
         let g53 = b.gcode(0) == Some(530);
         if g53 && self.s.rotation != 0.0 {
@@ -102,7 +109,7 @@ impl Interp<'_> {
         }
     }
 
-    fn straight(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
+    pub(super) fn straight(&mut self, m: u16, b: &Block) -> Result<(), GcodeError> {
         if m == 10 {
             match self.s.feed_mode {
                 FeedMode::UnitsPerMinute | FeedMode::UnitsPerRevolution => {

@@ -13,6 +13,8 @@
 //! every pocket of the profile level by level from its lip; G71.1/G72.1 bridge pockets.
 //! G70: P passes (default 1) at allowances from D down to E (default 0 both).
 //! The calls match rs274 2.9's, including its zero-length feeds under G7x.1.
+//! With cutter radius compensation on, G71/G72 are refused and G70 runs its moves through
+//! the compensation (`roughing_comp.rs`), as rs274 does.
 
 use super::motion::pose6;
 use super::roughing_geom::{self as geom, El, Pt};
@@ -88,14 +90,21 @@ impl Interp<'_> {
             721 => "G72.1",
             _ => "G72.2",
         };
-        if self.s.plane != Plane::Xz {
-            return Err(self.err(col, format!("{name} requires the XZ plane (G18)")));
-        }
-        if self.comp.active() {
+        // rs274 refuses compensation (on, even with a zero radius) for G71/G72 only, in its
+        // words ("G71.0"); G70 runs through it (roughing_comp.rs).
+        let comp = self.comp.side.is_some();
+        if comp && m != 700 {
             return Err(self.err(
                 col,
-                format!("{name} cannot run with cutter radius compensation on (G41/G42)"),
+                format!(
+                    "G{}.{} cannot be used with cutter compensation enabled",
+                    m / 10,
+                    m % 10
+                ),
             ));
+        }
+        if self.s.plane != Plane::Xz {
+            return Err(self.err(col, format!("{name} requires the XZ plane (G18)")));
         }
         let Some(q) = b.get(b'q') else {
             return Err(self.err(
@@ -103,7 +112,11 @@ impl Interp<'_> {
                 format!("{name} requires a Q word (profile subroutine)"),
             ));
         };
-        let start = self.find_ends(b);
+        let start = if comp {
+            self.comp_cycle_start(b)
+        } else {
+            self.find_ends(b)
+        };
         let profile = self.read_profile(q, start, name, col)?;
         let (Some(first), Some(last), true) = (profile.first(), profile.last(), profile.len() > 2)
         else {
@@ -206,6 +219,12 @@ impl Interp<'_> {
             ));
         }
         let out = cy.out;
+        if comp {
+            let end = (last.0, last.1);
+            self.comp_cycle_moves(b, end, &out)?;
+            self.s.motion = m;
+            return Ok(());
+        }
         for c in out {
             self.emit(match c {
                 Move::Traverse(p) => CanonCmd::StraightTraverse(pose6(&p)),
@@ -368,7 +387,9 @@ impl Interp<'_> {
             return Ok(());
         }
         let p0 = self.s.pos;
-        let p = self.find_ends(&b);
+        // From the recorded point, also under compensation (whose programmed point is
+        // the cycle's, not the profile's).
+        let p = self.find_ends_from(&b, p0);
         let arc = match *motion {
             20 | 30 => {
                 let (i, k) = (b.get(b'i').unwrap_or(0.0), b.get(b'k').unwrap_or(0.0));
@@ -408,7 +429,7 @@ fn r_center(p0: [f64; 6], p: [f64; 6], r: f64, cw: bool) -> (f64, f64) {
 /// part, and the cycle is held in memory before it is emitted.
 const MAX_CYCLE_MOVES: usize = 1_000_000;
 
-enum Move {
+pub(super) enum Move {
     Traverse([f64; 6]),
     Feed([f64; 6]),
     Arc {
@@ -534,7 +555,10 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         }
         cy.element(&e.piece(cur, e.b));
         cur = e.b;
-        let lip = els.get(i + 1).is_some_and(|n| geom::dips(n, e.b));
+        // A pocket starts where the contour turns down, not where a descent goes on into
+        // another element (a line into a groove arc): rs274 dives on through it.
+        let going_down = e.tangent(e.b)[0] < -geom::EPS;
+        let lip = !going_down && els.get(i + 1).is_some_and(|n| geom::dips(n, e.b));
         if !lip {
             i += 1;
             continue;

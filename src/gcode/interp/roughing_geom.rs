@@ -10,12 +10,6 @@ pub(super) type Pt = [f64; 2];
 /// Coordinates closer than this are the same point.
 pub(super) const EPS: f64 = 1e-9;
 
-/// A line or circle this close to a circle touches it (at the point nearest to it, as
-/// rs274 joins them): a profile written with rounded numbers (`I1.73205` for √3, an arc end
-/// 3e-4 off its circle, as LinuxCNC's arc tolerance allows) makes elements meant to be
-/// tangent miss each other slightly, and their offsets must still join.
-const TANGENT_TOL: f64 = 1e-3;
-
 /// One element of a profile: a line, or an arc about `c` (counter-clockwise in the (u, v)
 /// plane when `ccw`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -289,98 +283,19 @@ pub(super) fn round_corners(els: &[El], rounds: &[f64]) -> Result<Vec<El>, Strin
     Ok(out)
 }
 
-/// Intersections of the full line or circle carrying `e` with the one carrying `f`.
-fn meet(e: &El, f: &El) -> Vec<Pt> {
-    match (e.arc, f.arc) {
-        (None, None) => {
-            let (d1, d2) = (sub(e.b, e.a), sub(f.b, f.a));
-            let den = cross(d1, d2);
-            if den.abs() < EPS {
-                return Vec::new();
-            }
-            let t = cross(sub(f.a, e.a), d2) / den;
-            vec![add(e.a, mul(d1, t))]
-        }
-        (None, Some((c, _))) | (Some((c, _)), None) => {
-            let (l, circ) = if e.arc.is_none() { (e, f) } else { (f, e) };
-            let r = norm(sub(circ.a, c));
-            let d = unit(sub(l.b, l.a));
-            let w = sub(l.a, c);
-            let bq = w[0] * d[0] + w[1] * d[1];
-            let disc = bq * bq - (w[0] * w[0] + w[1] * w[1] - r * r);
-            // Distance from the circle to the line when they miss.
-            let gap = (w[0] * w[0] + w[1] * w[1] - bq * bq).max(0.0).sqrt() - r;
-            if disc < -EPS && gap > TANGENT_TOL {
-                return Vec::new();
-            }
-            let s = disc.max(0.0).sqrt();
-            vec![add(l.a, mul(d, -bq + s)), add(l.a, mul(d, -bq - s))]
-        }
-        (Some((c1, _)), Some((c2, _))) => {
-            let (r1, r2) = (norm(sub(e.a, c1)), norm(sub(f.a, c2)));
-            let dv = sub(c2, c1);
-            let dist = norm(dv);
-            if dist < EPS {
-                return Vec::new();
-            }
-            let a = (r1 * r1 - r2 * r2 + dist * dist) / (2.0 * dist);
-            let h2 = r1 * r1 - a * a;
-            let gap = (dist - (r1 + r2)).max((r1 - r2).abs() - dist);
-            if h2 < -EPS && gap > TANGENT_TOL {
-                return Vec::new();
-            }
-            let h = h2.max(0.0).sqrt();
-            let m = add(c1, mul(dv, a / dist));
-            let n = mul(left(unit(dv)), h);
-            vec![add(m, n), sub(m, n)]
-        }
-    }
-}
-
-/// The profile shifted `d` toward its free (left) side: elements that no longer meet are
-/// trimmed to their crossing at inside corners, and joined by an arc of radius `d` about the
-/// programmed corner at outside corners.
+/// The profile shifted `d` toward its free (left) side, away from it when negative, as rs274
+/// shifts it (`roughing_steps.rs`): elements that no longer meet are trimmed to their
+/// crossing at inside corners, and joined by an arc about the corner at outside corners.
 pub(super) fn offset(els: &[El], d: f64) -> Result<Vec<El>, String> {
     if d == 0.0 {
         return Ok(els.to_vec());
     }
-    let mut out: Vec<El> = Vec::with_capacity(els.len() * 2);
-    for (i, e) in els.iter().enumerate() {
-        let Some(mut o) = e.offset(d) else {
-            return Err(format!(
-                "an arc of the profile is smaller than the finishing allowance D{d}"
-            ));
-        };
-        if let Some(prev) = out.last_mut() {
-            let q = e.a;
-            if !same(prev.b, o.a) {
-                let turn = cross(els[i - 1].tangent(q), e.tangent(q));
-                // A corner that turns outward by less than this (about 0.06°) is a tangent
-                // join written with rounded numbers: the offsets are joined where they meet
-                // (or nearly do), as rs274 does, rather than by a sliver of corner arc.
-                if turn > -1e-3 {
-                    let x = meet(prev, &o)
-                        .into_iter()
-                        .min_by(|p1, p2| norm(sub(*p1, q)).total_cmp(&norm(sub(*p2, q))));
-                    let Some(x) = x else {
-                        return Err("the offset profile does not close at an inside corner".into());
-                    };
-                    prev.b = x;
-                    o.a = x;
-                } else {
-                    let corner = El {
-                        a: prev.b,
-                        b: o.a,
-                        arc: Some((q, false)),
-                        whole: true,
-                    };
-                    out.push(corner);
-                }
-            }
-        }
-        out.push(o);
+    if els.iter().any(|e| e.offset(d).is_none()) {
+        return Err(format!(
+            "an arc of the profile is smaller than the finishing allowance D{d}"
+        ));
     }
-    Ok(out)
+    super::roughing_steps::offset(els, d)
 }
 
 /// Where the contour, walked from `from` on element `i`, first reaches `u >= level` (when
@@ -483,21 +398,6 @@ mod tests {
             },
         ];
         assert!(round_corners(&arc, &[0.5, 0.0]).is_err());
-    }
-
-    #[test]
-    fn a_line_that_just_misses_a_circle_meets_it_at_the_nearest_point() {
-        let circle = El {
-            a: [1.0, 0.0],
-            b: [0.0, 1.0],
-            arc: Some(([0.0, 0.0], true)),
-            whole: true,
-        };
-        let line = El::line([1.0002, -2.0], [1.0002, 2.0]);
-        let m = meet(&line, &circle);
-        assert!(m.iter().all(|p| same(*p, [1.0002, 0.0])), "{m:?}");
-        let far = El::line([1.01, -2.0], [1.01, 2.0]);
-        assert!(meet(&far, &circle).is_empty());
     }
 
     #[test]
