@@ -1,7 +1,8 @@
 //! Lookahead: junction speeds from blend geometry, then backward and forward passes over a
-//! window of moves (Klipper `toolhead.py` style), then emission of the time-parameterised
-//! segments: per move an S-curve speed-up, a cruise and a slow-down, and a blend segment at
-//! each junction that does not stop.
+//! window of moves (or spans of tangent moves, [`super::span`]; Klipper `toolhead.py` style),
+//! then emission of the time-parameterised segments (`motion::emit`): per move an S-curve
+//! speed-up, a cruise and a slow-down, and a blend segment at each junction that does not
+//! stop.
 //!
 //! Runs of moves are separated by barriers (dwell, or a command that needs motion stopped);
 //! a spindle speed change, synchronised I/O or coolant is *not* a barrier: it rides in the
@@ -9,6 +10,7 @@
 
 use super::arcfit::{self, V2};
 use super::blend::Corner;
+use super::emit::{emit_move, emit_span, kind_of, Span};
 use super::fit_choice;
 use super::limits::Limits;
 use super::line_marks::{LineMarks, MAX_MARKS};
@@ -16,30 +18,30 @@ use super::merge::merge;
 use super::moves::{Junction, Move, MoveKind, Step};
 use super::profile::Tangential;
 use super::segment::{AuxItem, Item, Segment, SegmentKind, Window};
-use super::span::{self, Transition};
+use super::span;
 use super::PlanError;
 use crate::gcode::NUM_AXES;
 
 /// A move with its derived data.
-struct Prepared {
-    mv: Move,
+pub(super) struct Prepared {
+    pub(super) mv: Move,
     /// Direction at the start (the direction of a line).
-    u: [f64; NUM_AXES],
+    pub(super) u: [f64; NUM_AXES],
     /// Direction at the end (differs from `u` on an arc).
-    u_out: [f64; NUM_AXES],
+    pub(super) u_out: [f64; NUM_AXES],
     /// Signed XY curvature, 1/mm (0 for a line), see [`arcfit`].
-    curv: f64,
+    pub(super) curv: f64,
     /// Heading at the start of an arc, rad.
-    heading: f64,
-    len_mm: f64,
-    vcap_mm_s: f64,
-    tang: Tangential,
-    aux_after: Vec<AuxItem>,
+    pub(super) heading: f64,
+    pub(super) len_mm: f64,
+    pub(super) vcap_mm_s: f64,
+    pub(super) tang: Tangential,
+    pub(super) aux_after: Vec<AuxItem>,
     /// Index of the last raw move merged into this one.
-    last: usize,
+    pub(super) last: usize,
     /// Arc lengths at which a fitted arc passes the vertices of the source lines after
     /// `mv.line` (ascending, at most `MAX_MARKS`; empty for a line).
-    marks: Vec<f64>,
+    pub(super) marks: Vec<f64>,
 }
 
 /// Moves of one run planned together before a chunk of them is committed (see
@@ -745,421 +747,4 @@ fn plan_run(
         )),
         _ => None,
     })
-}
-
-fn kind_of(m: &Move) -> SegmentKind {
-    match m.kind {
-        MoveKind::Rapid => SegmentKind::Rapid,
-        MoveKind::Feed => SegmentKind::Feed,
-    }
-}
-
-fn push(out: &mut Vec<Item>, lim: &Limits, mut s: Segment) {
-    if s.duration_s <= 0.0 {
-        return;
-    }
-    s.override_cap = lim.override_cap(&s);
-    out.push(Item::Segment(s));
-}
-
-/// A run of tangent moves planned as one (see [`span`]).
-struct Span {
-    first: usize,
-    last: usize,
-    len_mm: f64,
-    tang: Tangential,
-    vcap_mm_s: f64,
-}
-
-/// Where a move's piece starting (ending) at distance `d` along it is, and its direction.
-fn move_point(m: &Prepared, d: f64) -> ([f64; NUM_AXES], [f64; NUM_AXES]) {
-    let mut q = m.mv.start_mm;
-    let mut u = m.u;
-    if m.curv != 0.0 {
-        let o = arcfit::offset(m.heading, m.curv, d);
-        q[0] += o[0];
-        q[1] += o[1];
-        let h = m.heading + m.curv * d;
-        u[0] = h.cos();
-        u[1] = h.sin();
-    } else {
-        for i in 0..NUM_AXES {
-            q[i] += m.u[i] * d;
-        }
-    }
-    (q, u)
-}
-
-/// Emits the span `sp` (moves `sp.first..=sp.last`, joined tangentially): one S-curve up,
-/// a cruise and one S-curve down over the whole span, cut at the moves' ends into windowed
-/// segments, each move's auxiliary items after its last piece, and the blend after the span.
-#[allow(clippy::too_many_arguments)]
-fn emit_span(
-    p: &[Prepared],
-    corners: &[Option<Corner>],
-    dk: &[f64],
-    before: Option<Corner>,
-    sp: &Span,
-    [v_in, v_out]: [f64; 2],
-    lim: &Limits,
-    out: &mut Vec<Item>,
-) {
-    let e = before.map_or(0.0, |c| c.half_length_mm(v_in));
-    let x = corners[sp.last].map_or(0.0, |c| c.half_length_mm(v_out));
-    let mid = (sp.len_mm - e - x).max(0.0);
-    let t = &sp.tang;
-    let fits = |vp: f64| t.distance_mm(v_in, vp) + t.distance_mm(vp, v_out) <= mid;
-    let lo0 = v_in.max(v_out);
-    let vp = if fits(sp.vcap_mm_s) {
-        sp.vcap_mm_s
-    } else if !fits(lo0) {
-        lo0
-    } else {
-        let (mut lo, mut hi) = (lo0, sp.vcap_mm_s);
-        for _ in 0..60 {
-            let c = 0.5 * (lo + hi);
-            if fits(c) {
-                lo = c;
-            } else {
-                hi = c;
-            }
-            if hi - lo <= 1e-9 * hi.max(1.0) {
-                break;
-            }
-        }
-        lo
-    };
-    let up = Transition::new(t, v_in, vp);
-    let down = Transition::new(t, vp, v_out);
-    let d_up = t.distance_mm(v_in, vp);
-    let d_down = t.distance_mm(vp, v_out);
-    let cruise = (mid - d_up - d_down).max(0.0);
-    // The profile's parts, in distance along the span from the first move's start.
-    let parts = [
-        (e, e + d_up, Some(up)),
-        (e + d_up, e + d_up + cruise, None),
-        (e + d_up + cruise, sp.len_mm - x, Some(down)),
-    ];
-    let step_jerk = |v: f64, dk: f64| v * v * dk / lim.servo_period_s;
-    let kind = kind_of(&p[sp.first].mv);
-    let mut c0 = 0.0;
-    for k in sp.first..=sp.last {
-        let m = &p[k];
-        let c1 = if k == sp.last {
-            sp.len_mm
-        } else {
-            c0 + m.len_mm
-        };
-        let lo = if k == sp.first { e } else { c0 };
-        let hi = if k == sp.last { sp.len_mm - x } else { c1 };
-        let (dk_in, dk_out) = (if k > 0 { dk[k - 1] } else { 0.0 }, dk[k]);
-        let first_piece = out.len();
-        for &(p0, p1, tr) in &parts {
-            let (a, b) = (lo.max(p0), hi.min(p1));
-            if b <= a {
-                continue;
-            }
-            // Speeds, times and window of this piece.
-            let (s0, s1, dur, jerk, window) = match tr {
-                None => (
-                    vp,
-                    vp,
-                    if vp > 0.0 { (b - a) / vp } else { 0.0 },
-                    0.0,
-                    Window::NONE,
-                ),
-                Some(tr) if a <= p0 && b >= p1 => (
-                    tr.s_start,
-                    tr.s_end,
-                    tr.shape.duration_s,
-                    tr.shape.jerk_s,
-                    Window::NONE,
-                ),
-                Some(tr) => {
-                    let ta = if a <= p0 { 0.0 } else { tr.time_at(a - p0) };
-                    let tb = if b >= p1 {
-                        tr.shape.duration_s
-                    } else {
-                        tr.time_at(b - p0)
-                    };
-                    (
-                        tr.speed(ta),
-                        tr.speed(tb),
-                        tb - ta,
-                        tr.shape.jerk_s,
-                        Window {
-                            offset_s: ta,
-                            full_s: tr.shape.duration_s,
-                            dv_mm_s: tr.s_end - tr.s_start,
-                        },
-                    )
-                }
-            };
-            let (from, done) = (a - c0, b - c0);
-            let (start, u0) = move_point(m, from);
-            let (end, u1) = move_point(m, done);
-            let mut step = 0.0f64;
-            if from <= 1e-12 {
-                step = step_jerk(s0, dk_in);
-            }
-            if done >= m.len_mm - 1e-9 {
-                step = step.max(step_jerk(s1, dk_out));
-            }
-            let len = b - a;
-            let before_marks = m.marks.iter().take_while(|&&q| q <= from).count();
-            let within: Vec<f64> = m.marks[before_marks..]
-                .iter()
-                .take_while(|&&q| q <= done)
-                .map(|q| if len > 0.0 { (q - from) / len } else { 0.0 })
-                .collect();
-            let seg = Segment {
-                start_mm: start,
-                end_mm: end,
-                v0_mm_s: u0.map(|c| c * s0),
-                v1_mm_s: u1.map(|c| c * s1),
-                duration_s: dur,
-                jerk_s: jerk,
-                kind,
-                line: m.mv.line + before_marks as u32,
-                length_mm: len,
-                move_rest_mm: (m.len_mm - done).max(0.0),
-                override_cap: 1.0,
-                end_override_cap: 1.0,
-                scale_rate_max: 0.0,
-                end_scale_rate_max: 0.0,
-                scale_jerk_max: 0.0,
-                brake_scale_jerk_max: 0.0,
-                next_scale_jerk_max: 0.0,
-                curvature_per_mm: m.curv,
-                heading_rad: m.heading + m.curv * from,
-                step_jerk_mm_s3: step,
-                line_marks: LineMarks::new(&within).unwrap_or_default(),
-                window: if dur > 0.0 { window } else { Window::NONE },
-            };
-            push(out, lim, seg);
-        }
-        // Each move's last piece ends exactly at its end (the blend's start for the last).
-        let mut end = m.mv.end_mm;
-        if k == sp.last {
-            for i in 0..NUM_AXES {
-                end[i] -= m.u[i] * x;
-            }
-        }
-        if out.len() > first_piece {
-            if let Some(Item::Segment(last)) = out.last_mut() {
-                last.end_mm = end;
-            }
-        }
-        out.extend(m.aux_after.iter().map(|a| Item::Aux(*a)));
-        c0 = c1;
-    }
-    let m = &p[sp.last];
-    if let Some(c) = corners[sp.last] {
-        if v_out > 0.0 && !c.is_straight() {
-            let mut corner_start = m.mv.end_mm;
-            for i in 0..NUM_AXES {
-                corner_start[i] -= m.u[i] * x;
-            }
-            emit_blend(p, sp.last, c, corner_start, v_out, x, lim, out);
-        }
-    }
-}
-
-/// Emits move `k` (S-curve up, cruise, S-curve down) and the blend at its end.
-#[allow(clippy::too_many_arguments)]
-fn emit_move(
-    p: &[Prepared],
-    corners: &[Option<Corner>],
-    before: Option<Corner>,
-    k: usize,
-    [v_in, v_out]: [f64; 2],
-    [dk_in, dk_out]: [f64; 2],
-    lim: &Limits,
-    out: &mut Vec<Item>,
-) {
-    let m = &p[k];
-    let at = |d: f64| move_point(m, d);
-    let step_jerk = |v: f64, dk: f64| v * v * dk / lim.servo_period_s;
-    let e = before.map_or(0.0, |c| c.half_length_mm(v_in));
-    let x = corners[k].map_or(0.0, |c| c.half_length_mm(v_out));
-    let mid = (m.len_mm - e - x).max(0.0);
-    let kind = kind_of(&m.mv);
-    let t = &m.tang;
-    // Peak speed of the middle part.
-    let fits = |vp: f64| t.distance_mm(v_in, vp) + t.distance_mm(vp, v_out) <= mid;
-    let lo0 = v_in.max(v_out);
-    let vp = if fits(m.vcap_mm_s) {
-        m.vcap_mm_s
-    } else if !fits(lo0) {
-        lo0
-    } else {
-        let (mut lo, mut hi) = (lo0, m.vcap_mm_s);
-        for _ in 0..60 {
-            let c = 0.5 * (lo + hi);
-            if fits(c) {
-                lo = c;
-            } else {
-                hi = c;
-            }
-            if hi - lo <= 1e-9 * hi.max(1.0) {
-                break;
-            }
-        }
-        lo
-    };
-    let d_up = t.distance_mm(v_in, vp);
-    let d_down = t.distance_mm(vp, v_out);
-    let cruise = (mid - d_up - d_down).max(0.0);
-    let mut pos = m.mv.start_mm;
-    for i in 0..NUM_AXES {
-        pos[i] += m.u[i] * e;
-    }
-    let mut done = e;
-    let line = m.mv.line;
-    let first_piece = out.len();
-    let mut piece = |s0: f64,
-                     s1: f64,
-                     dur: f64,
-                     jerk: f64,
-                     len: f64,
-                     pos: &mut [f64; NUM_AXES],
-                     done: &mut f64| {
-        let from = *done;
-        *done += len;
-        let (end, u1) = at(*done);
-        let u0 = at(from).1;
-        let mut step = 0.0f64;
-        if from <= 1e-12 {
-            step = step_jerk(s0, dk_in);
-        }
-        if *done >= m.len_mm - 1e-9 {
-            step = step.max(step_jerk(s1, dk_out));
-        }
-        // Vertices passed before this piece advance its first line; those within it are
-        // its marks (at most MAX_MARKS per move, so `new` cannot refuse them).
-        let before = m.marks.iter().take_while(|&&x| x <= from).count();
-        let within: Vec<f64> = m.marks[before..]
-            .iter()
-            .take_while(|&&x| x <= *done)
-            .map(|x| if len > 0.0 { (x - from) / len } else { 0.0 })
-            .collect();
-        let line_marks = LineMarks::new(&within).unwrap_or_default();
-        let seg = Segment {
-            start_mm: *pos,
-            end_mm: end,
-            v0_mm_s: u0.map(|c| c * s0),
-            v1_mm_s: u1.map(|c| c * s1),
-            duration_s: dur,
-            jerk_s: jerk,
-            kind,
-            line: line + before as u32,
-            length_mm: len,
-            move_rest_mm: (m.len_mm - *done).max(0.0),
-            override_cap: 1.0,
-            end_override_cap: 1.0,
-            scale_rate_max: 0.0,
-            end_scale_rate_max: 0.0,
-            scale_jerk_max: 0.0,
-            brake_scale_jerk_max: 0.0,
-            next_scale_jerk_max: 0.0,
-            curvature_per_mm: m.curv,
-            heading_rad: m.heading + m.curv * from,
-            step_jerk_mm_s3: step,
-            line_marks,
-            window: Window::NONE,
-        };
-        *pos = end;
-        push(out, lim, seg);
-    };
-    let up = t.shape(v_in, vp);
-    piece(
-        v_in,
-        vp,
-        up.duration_s,
-        up.jerk_s,
-        d_up,
-        &mut pos,
-        &mut done,
-    );
-    if cruise > 0.0 && vp > 0.0 {
-        piece(vp, vp, cruise / vp, 0.0, cruise, &mut pos, &mut done);
-    }
-    let down = t.shape(vp, v_out);
-    piece(
-        vp,
-        v_out,
-        down.duration_s,
-        down.jerk_s,
-        d_down,
-        &mut pos,
-        &mut done,
-    );
-    // The blend starts from exact geometry, so rounding never accumulates.
-    let mut corner_start = m.mv.end_mm;
-    for i in 0..NUM_AXES {
-        corner_start[i] -= m.u[i] * x;
-    }
-    // The last piece ends exactly where the blend (or the next move) starts.
-    if out.len() > first_piece {
-        if let Some(Item::Segment(last)) = out.last_mut() {
-            last.end_mm = corner_start;
-        }
-    }
-    out.extend(m.aux_after.iter().map(|a| Item::Aux(*a)));
-    if let Some(c) = corners[k] {
-        if v_out > 0.0 && !c.is_straight() {
-            emit_blend(p, k, c, corner_start, v_out, x, lim, out);
-        }
-    }
-}
-
-/// Emits the corner blend after move `k`, from `corner_start` at speed `v_out` to `x` along
-/// the next move.
-#[allow(clippy::too_many_arguments)]
-fn emit_blend(
-    p: &[Prepared],
-    k: usize,
-    c: Corner,
-    corner_start: [f64; NUM_AXES],
-    v_out: f64,
-    x: f64,
-    lim: &Limits,
-    out: &mut Vec<Item>,
-) {
-    let m = &p[k];
-    let nb = &p[k + 1];
-    let sh = c.shape(v_out);
-    let mut blend_end = nb.mv.start_mm;
-    for i in 0..NUM_AXES {
-        blend_end[i] += nb.u[i] * x;
-    }
-    let seg = Segment {
-        start_mm: corner_start,
-        end_mm: blend_end,
-        v0_mm_s: m.u.map(|c| c * v_out),
-        v1_mm_s: nb.u.map(|c| c * v_out),
-        duration_s: sh.duration_s,
-        jerk_s: sh.jerk_s,
-        kind: if m.mv.kind == MoveKind::Rapid && nb.mv.kind == MoveKind::Rapid {
-            SegmentKind::Rapid
-        } else {
-            SegmentKind::Feed
-        },
-        line: nb.mv.line,
-        length_mm: v_out * sh.duration_s,
-        move_rest_mm: (nb.len_mm - x).max(0.0),
-        override_cap: 1.0,
-        end_override_cap: 1.0,
-        scale_rate_max: 0.0,
-        end_scale_rate_max: 0.0,
-        scale_jerk_max: 0.0,
-        brake_scale_jerk_max: 0.0,
-        next_scale_jerk_max: 0.0,
-        curvature_per_mm: 0.0,
-        heading_rad: 0.0,
-        step_jerk_mm_s3: 0.0,
-        line_marks: LineMarks::NONE,
-        window: Window::NONE,
-    };
-    push(out, lim, seg);
 }

@@ -75,6 +75,7 @@ pub mod bounds;
 pub mod config;
 pub mod css;
 pub mod draw;
+mod emit;
 mod error;
 pub mod fit_choice;
 pub mod from_canon;
