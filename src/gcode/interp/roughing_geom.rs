@@ -22,16 +22,16 @@ pub(super) struct El {
     pub whole: bool,
 }
 
-fn sub(p: Pt, q: Pt) -> Pt {
+pub(super) fn sub(p: Pt, q: Pt) -> Pt {
     [p[0] - q[0], p[1] - q[1]]
 }
-fn add(p: Pt, q: Pt) -> Pt {
+pub(super) fn add(p: Pt, q: Pt) -> Pt {
     [p[0] + q[0], p[1] + q[1]]
 }
-fn mul(p: Pt, k: f64) -> Pt {
+pub(super) fn mul(p: Pt, k: f64) -> Pt {
     [p[0] * k, p[1] * k]
 }
-fn norm(p: Pt) -> f64 {
+pub(super) fn norm(p: Pt) -> f64 {
     p[0].hypot(p[1])
 }
 fn cross(p: Pt, q: Pt) -> f64 {

@@ -15,20 +15,7 @@
 //! than 0.001 too, and the others are trimmed to where they meet ([`meet`]). At the end
 //! each joint is the middle of the two ends.
 
-use super::roughing_geom::{El, Pt};
-
-fn sub(p: Pt, q: Pt) -> Pt {
-    [p[0] - q[0], p[1] - q[1]]
-}
-fn add(p: Pt, q: Pt) -> Pt {
-    [p[0] + q[0], p[1] + q[1]]
-}
-fn mul(p: Pt, k: f64) -> Pt {
-    [p[0] * k, p[1] * k]
-}
-fn norm(p: Pt) -> f64 {
-    p[0].hypot(p[1])
-}
+use super::roughing_geom::{add, mul, norm, sub, El, Pt};
 
 /// rs274's size of an element, which bounds a step (twice it).
 fn size(e: &El) -> f64 {
