@@ -87,6 +87,77 @@ fn move_point(m: &Prepared, d: f64) -> ([f64; NUM_AXES], [f64; NUM_AXES]) {
     (q, u)
 }
 
+/// One piece of a move's profile: speeds, timing and where along the move it runs.
+struct Piece {
+    /// Where it starts (the previous piece's end).
+    start: [f64; NUM_AXES],
+    /// Speeds at its ends, mm/s.
+    s: [f64; 2],
+    duration_s: f64,
+    jerk_s: f64,
+    /// Distance along the move at its start and end, and its length, mm.
+    from: f64,
+    done: f64,
+    len: f64,
+    /// Curvature steps at the move's start and end, 1/mm.
+    dk: [f64; 2],
+    window: Window,
+}
+
+/// The segment of piece `pc` of move `m`: end pose and directions on the move, the jerk of
+/// a curvature step at the move's ends, and the source-line marks it passes.
+fn piece_segment(m: &Prepared, pc: &Piece, kind: SegmentKind, lim: &Limits) -> Segment {
+    let step_jerk = |v: f64, dk: f64| v * v * dk / lim.servo_period_s;
+    let (from, done) = (pc.from, pc.done);
+    let (end, u1) = move_point(m, done);
+    let u0 = move_point(m, from).1;
+    let mut step = 0.0f64;
+    if from <= 1e-12 {
+        step = step_jerk(pc.s[0], pc.dk[0]);
+    }
+    if done >= m.len_mm - 1e-9 {
+        step = step.max(step_jerk(pc.s[1], pc.dk[1]));
+    }
+    // Vertices passed before this piece advance its first line; those within it are its
+    // marks (at most MAX_MARKS per move, so `new` cannot refuse them).
+    let before = m.marks.iter().take_while(|&&q| q <= from).count();
+    let within: Vec<f64> = m.marks[before..]
+        .iter()
+        .take_while(|&&q| q <= done)
+        .map(|q| {
+            if pc.len > 0.0 {
+                (q - from) / pc.len
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    Segment {
+        start_mm: pc.start,
+        end_mm: end,
+        v0_mm_s: u0.map(|c| c * pc.s[0]),
+        v1_mm_s: u1.map(|c| c * pc.s[1]),
+        duration_s: pc.duration_s,
+        jerk_s: pc.jerk_s,
+        kind,
+        line: m.mv.line + before as u32,
+        length_mm: pc.len,
+        move_rest_mm: (m.len_mm - done).max(0.0),
+        override_cap: 1.0,
+        end_override_cap: 1.0,
+        scale_rate_max: 0.0,
+        end_scale_rate_max: 0.0,
+        scale_jerk_max: 0.0,
+        brake_scale_jerk_max: 0.0,
+        next_scale_jerk_max: 0.0,
+        curvature_per_mm: m.curv,
+        heading_rad: m.heading + m.curv * from,
+        step_jerk_mm_s3: step,
+        line_marks: LineMarks::new(&within).unwrap_or_default(),
+        window: pc.window,
+    }
+}
+
 /// Emits the span `sp` (moves `sp.first..=sp.last`, joined tangentially): one S-curve up,
 /// a cruise and one S-curve down over the whole span, cut at the moves' ends into windowed
 /// segments, each move's auxiliary items after its last piece, and the blend after the span.
@@ -117,7 +188,6 @@ pub(super) fn emit_span(
         (e + d_up, e + d_up + cruise, None),
         (e + d_up + cruise, sp.len_mm - x, Some(down)),
     ];
-    let step_jerk = |v: f64, dk: f64| v * v * dk / lim.servo_period_s;
     let kind = kind_of(&p[sp.first].mv);
     let mut c0 = 0.0;
     for k in sp.first..=sp.last {
@@ -173,47 +243,18 @@ pub(super) fn emit_span(
                 }
             };
             let (from, done) = (a - c0, b - c0);
-            let (start, u0) = move_point(m, from);
-            let (end, u1) = move_point(m, done);
-            let mut step = 0.0f64;
-            if from <= 1e-12 {
-                step = step_jerk(s0, dk_in);
-            }
-            if done >= m.len_mm - 1e-9 {
-                step = step.max(step_jerk(s1, dk_out));
-            }
-            let len = b - a;
-            let before_marks = m.marks.iter().take_while(|&&q| q <= from).count();
-            let within: Vec<f64> = m.marks[before_marks..]
-                .iter()
-                .take_while(|&&q| q <= done)
-                .map(|q| if len > 0.0 { (q - from) / len } else { 0.0 })
-                .collect();
-            let seg = Segment {
-                start_mm: start,
-                end_mm: end,
-                v0_mm_s: u0.map(|c| c * s0),
-                v1_mm_s: u1.map(|c| c * s1),
+            let pc = Piece {
+                start: move_point(m, from).0,
+                s: [s0, s1],
                 duration_s: dur,
                 jerk_s: jerk,
-                kind,
-                line: m.mv.line + before_marks as u32,
-                length_mm: len,
-                move_rest_mm: (m.len_mm - done).max(0.0),
-                override_cap: 1.0,
-                end_override_cap: 1.0,
-                scale_rate_max: 0.0,
-                end_scale_rate_max: 0.0,
-                scale_jerk_max: 0.0,
-                brake_scale_jerk_max: 0.0,
-                next_scale_jerk_max: 0.0,
-                curvature_per_mm: m.curv,
-                heading_rad: m.heading + m.curv * from,
-                step_jerk_mm_s3: step,
-                line_marks: LineMarks::new(&within).unwrap_or_default(),
+                from,
+                done,
+                len: b - a,
+                dk: [dk_in, dk_out],
                 window: if dur > 0.0 { window } else { Window::NONE },
             };
-            push(out, lim, seg);
+            push(out, lim, piece_segment(m, &pc, kind, lim));
         }
         // Each move's last piece ends exactly at its end (the blend's start for the last).
         let mut end = m.mv.end_mm;
@@ -255,8 +296,6 @@ pub(super) fn emit_move(
     out: &mut Vec<Item>,
 ) {
     let m = &p[k];
-    let at = |d: f64| move_point(m, d);
-    let step_jerk = |v: f64, dk: f64| v * v * dk / lim.servo_period_s;
     let e = before.map_or(0.0, |c| c.half_length_mm(v_in));
     let x = corners[k].map_or(0.0, |c| c.half_length_mm(v_out));
     let mid = (m.len_mm - e - x).max(0.0);
@@ -271,7 +310,6 @@ pub(super) fn emit_move(
         pos[i] += m.u[i] * e;
     }
     let mut done = e;
-    let line = m.mv.line;
     let first_piece = out.len();
     let mut piece = |s0: f64,
                      s1: f64,
@@ -282,49 +320,19 @@ pub(super) fn emit_move(
                      done: &mut f64| {
         let from = *done;
         *done += len;
-        let (end, u1) = at(*done);
-        let u0 = at(from).1;
-        let mut step = 0.0f64;
-        if from <= 1e-12 {
-            step = step_jerk(s0, dk_in);
-        }
-        if *done >= m.len_mm - 1e-9 {
-            step = step.max(step_jerk(s1, dk_out));
-        }
-        // Vertices passed before this piece advance its first line; those within it are
-        // its marks (at most MAX_MARKS per move, so `new` cannot refuse them).
-        let before = m.marks.iter().take_while(|&&x| x <= from).count();
-        let within: Vec<f64> = m.marks[before..]
-            .iter()
-            .take_while(|&&x| x <= *done)
-            .map(|x| if len > 0.0 { (x - from) / len } else { 0.0 })
-            .collect();
-        let line_marks = LineMarks::new(&within).unwrap_or_default();
-        let seg = Segment {
-            start_mm: *pos,
-            end_mm: end,
-            v0_mm_s: u0.map(|c| c * s0),
-            v1_mm_s: u1.map(|c| c * s1),
+        let pc = Piece {
+            start: *pos,
+            s: [s0, s1],
             duration_s: dur,
             jerk_s: jerk,
-            kind,
-            line: line + before as u32,
-            length_mm: len,
-            move_rest_mm: (m.len_mm - *done).max(0.0),
-            override_cap: 1.0,
-            end_override_cap: 1.0,
-            scale_rate_max: 0.0,
-            end_scale_rate_max: 0.0,
-            scale_jerk_max: 0.0,
-            brake_scale_jerk_max: 0.0,
-            next_scale_jerk_max: 0.0,
-            curvature_per_mm: m.curv,
-            heading_rad: m.heading + m.curv * from,
-            step_jerk_mm_s3: step,
-            line_marks,
+            from,
+            done: *done,
+            len,
+            dk: [dk_in, dk_out],
             window: Window::NONE,
         };
-        *pos = end;
+        let seg = piece_segment(m, &pc, kind, lim);
+        *pos = seg.end_mm;
         push(out, lim, seg);
     };
     let up = t.shape(v_in, vp);
