@@ -10,7 +10,7 @@ mod motion_util;
 mod gen;
 
 use hytask::gcode::{load_str, InterpOptions};
-use hytask::motion::trace::{self, distance_to_polyline_mm};
+use hytask::motion::trace;
 use hytask::motion::{plan, InterpState, Item, MotionConfig, Plan, Segment};
 use motion_util::*;
 
@@ -99,11 +99,7 @@ fn a_speed_up_along_fitted_arcs_is_one_s_curve() {
     );
     let tr = run(&p_on, &on);
     assert_within_limits(&tr, &on);
-    let dev = tr
-        .poses_mm
-        .iter()
-        .map(|q| distance_to_polyline_mm(q, &path))
-        .fold(0.0, f64::max);
+    let dev = max_deviation(&tr, &path);
     assert!(dev <= 0.01 + 1e-9, "deviation {dev} mm over G64 P0.01");
     assert_eq!(last(&tr), p_on.end_mm);
 }
@@ -130,6 +126,11 @@ fn windowed_segments_join_without_a_jump() {
             for (e, want) in end.iter().zip(&a.end_mm) {
                 assert!((e - want).abs() < 1e-6, "{a:?}");
             }
+            // The distance reported for distance-to-go covers the piece exactly.
+            assert!(
+                (a.travelled_mm(a.duration_s) - a.length_mm).abs() < 1e-9,
+                "{a:?}"
+            );
             // Speed along the piece rises or falls monotonically between its ends.
             let (s0, s1) = (a.speed_at(0.0), a.speed_at(a.duration_s));
             let mid = a.speed_at(0.5 * a.duration_s);
@@ -160,11 +161,7 @@ fn override_and_hold_on_a_span_stay_within_limits() {
     });
     assert!(held, "the hold did not stop");
     assert_within_limits(&tr, &cfg);
-    let dev = tr
-        .poses_mm
-        .iter()
-        .map(|q| distance_to_polyline_mm(q, &path))
-        .fold(0.0, f64::max);
+    let dev = max_deviation(&tr, &path);
     assert!(dev <= 0.01 + 1e-9, "deviation {dev} mm");
     assert_eq!(last(&tr), p.end_mm);
     // A hold requested anywhere in the speed-up stops within the limits (the plan without

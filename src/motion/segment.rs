@@ -259,13 +259,9 @@ impl Segment {
         }
         let t = t_s.clamp(0.0, self.duration_s);
         if self.window.is_some() {
-            let full = self.window_speed_distance(self.duration_s).1;
-            let raw = self.window_speed_distance(t).1;
-            return if full > 0.0 {
-                (raw / full * self.length_mm).min(self.length_mm)
-            } else {
-                0.0
-            };
+            // The piece was cut where the transition's distance reaches its length, so the
+            // distance is the travelled length (one evaluation per servo period, not two).
+            return self.window_speed_distance(t).1.clamp(0.0, self.length_mm);
         }
         let (_, cap_f) = self.shape().eval(t);
         let s0 = norm(&self.v0_mm_s);
