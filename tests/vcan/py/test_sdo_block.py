@@ -41,11 +41,13 @@ def with_drive(net):
         t = ["--iface", IFACE, "--timeout-ms", "5000"]
         rc, out = hytask("canopen", *t, "sdo-read", "--node", str(DRIVE), "0x2001", "--type", "hex")
         check(rc == 0 and bytes.fromhex(out) == value, "hytask master block upload of 2000 bytes")
-        req, resp = watch.take()
+        # the client's end-of-upload confirmation (0xA1) is the last frame
+        req, resp = watch.take(until=lambda req, _resp: 0xA1 in req)
         check(0xA4 in req and 0xA3 in req and 0x60 not in req, "hytask's upload was a block upload")
         text = "block download from hytask's master: " + "x" * 80
         rc, out = hytask("canopen", *t, "sdo-write", "--node", str(DRIVE), "0x2001", "0", text, "--type", "str")
-        req, resp = watch.take()
+        # the drive's end-of-download response (0xA1) is the last frame
+        req, resp = watch.take(until=lambda _req, resp: 0xA1 in resp)
         check(rc == 0 and 0xC6 in req and 0xA1 in resp, "hytask master block download (request 0xC6: CRC, size)")
         check(node.sdo.upload(0x2001, 0) == text.encode(), "the drive stored the block download")
     finally:

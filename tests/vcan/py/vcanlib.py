@@ -188,8 +188,20 @@ class SdoWatch:
         net.subscribe(0x600 + node, lambda _id, data, _ts: self.req.append(data[0]))
         net.subscribe(0x580 + node, lambda _id, data, _ts: self.resp.append(data[0]))
 
-    def take(self):
-        """(requests, responses) since the last call."""
+    def take(self, until=None):
+        """(requests, responses) since the last call.
+
+        When another process ends a transfer, its last frame can still be on its way
+        through python-can's receive thread when that process exits. `until(req, resp)`
+        names the frame that ends the transfer; it is waited for (up to 20 s, a guard,
+        never a timing assertion), so that it is neither missed here nor left over for
+        the next call or for python-canopen's own SDO client, which sees the same
+        responses."""
+        if until is not None:
+            try:
+                wait_for(lambda: until(self.req, self.resp), "the transfer's last SDO frame", guard=20.0)
+            except TimeoutError:
+                pass  # the caller's check reports what is missing
         r = (self.req, self.resp)
         self.req, self.resp = [], []
         return r
