@@ -393,6 +393,13 @@ fn emit_blend(
     let m = &p[k];
     let nb = &p[k + 1];
     let sh = c.shape(v_out);
+    // The blend passes the vertex halfway (it is symmetric at one speed): the incoming line
+    // is reported up to there, the next line after it, when they follow each other.
+    let last_in = m.mv.line + m.marks.len() as u32;
+    let (line, line_marks) = match LineMarks::new(&[0.5]) {
+        Some(half) if nb.mv.line == last_in + 1 => (last_in, half),
+        _ => (nb.mv.line, LineMarks::NONE),
+    };
     let mut blend_end = nb.mv.start_mm;
     for i in 0..NUM_AXES {
         blend_end[i] += nb.u[i] * x;
@@ -409,7 +416,7 @@ fn emit_blend(
         } else {
             SegmentKind::Feed
         },
-        line: nb.mv.line,
+        line,
         length_mm: v_out * sh.duration_s,
         move_rest_mm: (nb.len_mm - x).max(0.0),
         override_cap: 1.0,
@@ -422,7 +429,7 @@ fn emit_blend(
         curvature_per_mm: 0.0,
         heading_rad: 0.0,
         step_jerk_mm_s3: 0.0,
-        line_marks: LineMarks::NONE,
+        line_marks,
         window: Window::NONE,
     };
     push(out, lim, seg);
