@@ -309,3 +309,45 @@ fn fitting_does_not_plan_much_slower_than_the_chords() {
         assert_within_limits(&run(&p_on, &on), &on);
     }
 }
+
+/// A clean curve with a noisy stretch inside it (CAM points of a circle of radius 20 mm at
+/// 0.5 mm steps, and for 60 points in the middle fibre crossings alternating 0.094 / 0.006
+/// mm, all rounded to 1 µm): the chords around the fitted arcs' slow junctions stay chords,
+/// and the stretches between them are fitted again (`motion::fit_chains`), so the clean parts
+/// keep their arcs and the whole plans no slower than its chords (before, the chain was
+/// fitted whole and planned slower than the chords).
+#[test]
+fn a_noisy_stretch_inside_a_clean_curve_keeps_the_clean_arcs() {
+    let on = MotionConfig::default();
+    let off = MotionConfig {
+        fit_arcs: false,
+        ..MotionConfig::default()
+    };
+    let r: f64 = 20.0;
+    let mut s: f64 = 0.0;
+    let mut pts: Vec<V2> = Vec::new();
+    for i in 0..=160 {
+        if i > 0 {
+            s += if (50..110).contains(&i) {
+                [0.094, 0.006][i % 2]
+            } else {
+                0.5
+            };
+        }
+        let a = s / r;
+        pts.push([round(r * a.cos(), 3), round(r * a.sin(), 3)]);
+    }
+    let (g, path) = program(&pts, 3000.0, Some(0.01));
+    let p_on = plan(&g.canon, &on).unwrap();
+    let p_off = plan(&g.canon, &off).unwrap();
+    assert!(arc_segments(&p_on) > 0, "the clean parts are fitted");
+    assert!(
+        p_on.duration_s <= p_off.duration_s,
+        "{} s with arcs, {} s without",
+        p_on.duration_s,
+        p_off.duration_s
+    );
+    let tr = run(&p_on, &on);
+    assert_within_limits(&tr, &on);
+    assert!(max_deviation(&tr, &path) <= 0.01 + 1e-9);
+}

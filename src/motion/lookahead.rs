@@ -8,14 +8,13 @@
 //! a spindle speed change, synchronised I/O or coolant is *not* a barrier: it rides in the
 //! queue between the segments of the run and never flushes the lookahead.
 
-use super::arcfit::{self, V2};
 use super::blend::Corner;
 use super::emit::{emit_move, emit_span, kind_of, Span};
-use super::fit_choice;
+use super::fit_chains;
 use super::limits::Limits;
-use super::line_marks::{LineMarks, MAX_MARKS};
+use super::line_marks::LineMarks;
 use super::merge::merge;
-use super::moves::{Junction, Move, MoveKind, Step};
+use super::moves::{Junction, Move, Step};
 use super::profile::Tangential;
 use super::segment::{AuxItem, Item, Segment, SegmentKind, Window};
 use super::span;
@@ -217,11 +216,7 @@ fn prepare(moves: Vec<Move>, aux: Vec<Vec<AuxItem>>, lim: &Limits, fit: bool) ->
     let mut joinable: Vec<bool> = aux.iter().map(|a| a.is_empty()).collect();
     let mut fitted = Vec::new();
     if fit {
-        for (i, j) in find_chains(&moves, &joinable, lim.exact_tolerance_mm) {
-            if let Some(arcs) = fit_arcs(&moves, i, j, lim) {
-                fitted.push((i, j, arcs));
-            }
-        }
+        fitted = fit_chains::fitted_chains(&moves, &joinable, lim);
     }
     // A fitted chain's moves are not merged, nor are the moves next to it merged with
     // anything: the chain is tangent to their directions.
@@ -275,220 +270,6 @@ fn line_move(mv: Move, j: usize, aux: &mut [Option<Vec<AuxItem>>], lim: &Limits)
         marks: Vec::new(),
         last: j,
     }
-}
-
-/// Shortest run of chords worth fitting.
-const MIN_CHAIN: usize = 3;
-
-fn xy_only(m: &Move) -> bool {
-    (2..NUM_AXES).all(|i| m.end_mm[i] == m.start_mm[i])
-        && (m.end_mm[0] - m.start_mm[0]).hypot(m.end_mm[1] - m.start_mm[1]) > 1e-9
-}
-
-fn fittable(m: &Move, exact_mm: f64) -> bool {
-    m.kind == MoveKind::Feed
-        && m.arc_id == 0
-        && matches!(m.junction, Junction::Blend { tolerance_mm } if tolerance_mm > exact_mm)
-        && xy_only(m)
-}
-
-fn dir2(m: &Move) -> V2 {
-    let (dx, dy) = (m.end_mm[0] - m.start_mm[0], m.end_mm[1] - m.start_mm[1]);
-    let l = dx.hypot(dy);
-    [dx / l, dy / l]
-}
-
-/// Runs `(first, last)` of raw moves that may be fitted into arcs: XY feed chords with one
-/// feed and one blend tolerance, nothing queued between them, turning gently.
-fn find_chains(moves: &[Move], joinable: &[bool], exact_mm: f64) -> Vec<(usize, usize)> {
-    let turn = |k: usize| {
-        let (u, w) = (dir2(&moves[k]), dir2(&moves[k + 1]));
-        (u[0] * w[1] - u[1] * w[0]).atan2(u[0] * w[0] + u[1] * w[1])
-    };
-    let link = |k: usize| {
-        let (a, b) = (&moves[k], &moves[k + 1]);
-        joinable[k]
-            && fittable(a, exact_mm)
-            && fittable(b, exact_mm)
-            && a.feed_mm_s == b.feed_mm_s
-            && a.junction == b.junction
-            && turn(k).abs() <= arcfit::MAX_TURN_RAD
-    };
-    // A curve turns one way for many chords; a run whose turns flip at every vertex is a
-    // jitter around a line (naive CAM), which merging (G64 Q) straightens better.
-    let flips = |k: usize| {
-        let (a, b) = (turn(k - 1), turn(k));
-        a * b < 0.0 && a.abs().min(b.abs()) > FLIP_RAD
-    };
-    let mut out = Vec::new();
-    let mut i = 0;
-    while i + 1 < moves.len() {
-        if !link(i) {
-            i += 1;
-            continue;
-        }
-        let mut j = i + 1;
-        while j + 1 < moves.len() && link(j) && !flips(j) {
-            j += 1;
-        }
-        let len: f64 = moves[i..=j]
-            .iter()
-            .map(|m| (m.end_mm[0] - m.start_mm[0]).hypot(m.end_mm[1] - m.start_mm[1]))
-            .sum();
-        if j + 1 - i >= MIN_CHAIN && len >= MIN_MEAN_CHORD_MM * (j + 1 - i) as f64 {
-            out.push((i, j));
-        }
-        i = j + 1;
-    }
-    out
-}
-
-/// Shortest mean chord of a fitted run, mm. On shorter chords the arcs that keep the
-/// curvature steps small are only a few chords long, and as every move starts and ends its
-/// speed change at zero acceleration, speeding up over them crawls (10,000 chords of 0.02 mm
-/// on a sine: 1.24× the feed bound fitted, 1.08× merged); merging does better there.
-const MIN_MEAN_CHORD_MM: f64 = 0.05;
-
-/// Turning angle below which a change of turning direction counts as rounding noise, rad.
-const FLIP_RAD: f64 = 2e-3;
-
-/// The arcs fitted over raw moves `i..=j`, tangent to the raw move before and to the one
-/// after when they are XY moves joined by a blend and turning gently; `None` if the fit
-/// fails.
-fn fit_arcs(moves: &[Move], i: usize, j: usize, lim: &Limits) -> Option<Vec<Prepared>> {
-    let first = &moves[i];
-    let Junction::Blend { tolerance_mm } = first.junction else {
-        return None;
-    };
-    let gentle = |a: &Move, b: &Move| {
-        let (u, w) = (dir2(a), dir2(b));
-        matches!(a.junction, Junction::Blend { .. })
-            && xy_only(a)
-            && xy_only(b)
-            && (u[0] * w[1] - u[1] * w[0])
-                .atan2(u[0] * w[0] + u[1] * w[1])
-                .abs()
-                <= arcfit::MAX_TURN_RAD
-    };
-    let t_start = i
-        .checked_sub(1)
-        .map(|h| &moves[h])
-        .filter(|h| gentle(h, first))
-        .map(dir2);
-    let t_end = moves.get(j + 1).filter(|n| gentle(&moves[j], n)).map(dir2);
-    let mut pts: Vec<V2> = Vec::with_capacity(j - i + 2);
-    pts.push([first.start_mm[0], first.start_mm[1]]);
-    pts.extend(moves[i..=j].iter().map(|m| [m.end_mm[0], m.end_mm[1]]));
-    let dk_max = lim.step_budget_mm_s2() / (first.feed_mm_s * first.feed_mm_s);
-    // The reported line advances by one at each vertex mark (`LineMarks`): fit only runs of
-    // consecutive source lines.
-    if moves[i..=j].windows(2).any(|w| w[1].line != w[0].line + 1) {
-        return None;
-    }
-    let fitted = arcfit::fit_chain(&pts, t_start, t_end, tolerance_mm, dk_max)?;
-    let marked = arcfit::mark_vertices(&fitted, &pts, MAX_MARKS);
-    let mut out = Vec::with_capacity(marked.len());
-    let mut start = first.start_mm;
-    for arcfit::Marked {
-        fitted: f,
-        chord,
-        marks,
-    } in marked
-    {
-        let raw = &moves[i + f.vertex - 1];
-        let mut end = raw.end_mm;
-        if !f.ends_at_vertex {
-            let e = f.arc.end();
-            end[0] = e[0];
-            end[1] = e[1];
-        }
-        let (t0, t1) = (f.arc.tangent_at(0.0), f.arc.tangent_at(f.arc.length_mm));
-        let mut u = [0.0; NUM_AXES];
-        let mut u_out = [0.0; NUM_AXES];
-        u[..2].copy_from_slice(&t0);
-        u_out[..2].copy_from_slice(&t1);
-        let kappa = f.arc.curvature_per_mm;
-        let (vcap_mm_s, tang) = if kappa != 0.0 {
-            lim.arc(kappa, first.feed_mm_s)
-        } else {
-            (lim.vcap(&u).min(first.feed_mm_s), lim.tangential(&u))
-        };
-        let mv = Move {
-            start_mm: start,
-            end_mm: end,
-            junction: if f.ends_at_vertex {
-                raw.junction
-            } else {
-                first.junction
-            },
-            line: moves[(i + chord - 1).min(j)].line,
-            ..*first
-        };
-        start = end;
-        out.push(Prepared {
-            mv,
-            u,
-            u_out,
-            curv: kappa,
-            heading: f.arc.heading_rad,
-            len_mm: f.arc.length_mm,
-            vcap_mm_s,
-            tang,
-            aux_after: Vec::new(),
-            last: i + f.vertex - 1,
-            marks,
-        });
-    }
-    let ends = [t_start.is_some(), t_end.is_some()];
-    faster_than_chords(&out, &moves[i..=j], ends, lim).then_some(out)
-}
-
-/// True when the fitted chain `arcs` is estimated to run faster than the chords `raw` it
-/// replaces (see [`fit_choice`]): over noisy chords the curvature steps between the arcs can
-/// cap the speed far below the chords' blends.
-fn faster_than_chords(
-    arcs: &[Prepared],
-    raw: &[Move],
-    gentle_ends: [bool; 2],
-    lim: &Limits,
-) -> bool {
-    let piece = |p: &Prepared| fit_choice::Piece {
-        len_mm: p.len_mm,
-        cap_mm_s: p.vcap_mm_s,
-        tang: p.tang,
-    };
-    let fitted: Vec<_> = arcs.iter().map(piece).collect();
-    let fitted_j: Vec<f64> = arcs
-        .windows(2)
-        .map(|w| {
-            let cap = w[0].vcap_mm_s.min(w[1].vcap_mm_s);
-            let dk = (w[0].curv - w[1].curv).abs();
-            if dk > 0.0 {
-                cap.min((lim.step_budget_mm_s2() / dk).sqrt())
-            } else {
-                cap
-            }
-        })
-        .collect();
-    let (chords, chords_j) = fit_choice::chords(raw, lim);
-    // At the ends: a stop where the neighbour is not a gentle XY move, else the chords go on at
-    // their cap and the arcs at the curvature step to the (straight) neighbour.
-    let step = |curv: f64| (lim.step_budget_mm_s2() / curv.abs().max(1e-12)).sqrt();
-    let gentle = |g: bool, v: f64| if g { v } else { 0.0 };
-    let (Some(first), Some(last)) = (arcs.first(), arcs.last()) else {
-        return false;
-    };
-    let fit_ends = [
-        gentle(gentle_ends[0], step(first.curv)),
-        gentle(gentle_ends[1], step(last.curv)),
-    ];
-    let chord_ends = [
-        gentle(gentle_ends[0], f64::INFINITY),
-        gentle(gentle_ends[1], f64::INFINITY),
-    ];
-    // Only a clear loss refuses the fit (the estimate leaves out the chords' blend halves).
-    fit_choice::estimate_s(&fitted, &fitted_j, fit_ends)
-        <= (1.0 + fit_choice::MARGIN) * fit_choice::estimate_s(&chords, &chords_j, chord_ends)
 }
 
 /// Plans a run (or, with `commit` = `Some(c)`, a chunk of one: only the merged moves made of
