@@ -108,23 +108,41 @@ fn planner(c: &mut Criterion) {
     g.finish();
 }
 
+/// One servo period of the interpolator, side by side on the same run: the 10,000-chord plan
+/// (merged lines and corner blends), the 3,000-chord plan (fitted arcs in spans: windowed
+/// pieces of one speed profile, issue 14), and the same 3,000 chords with spans off (every
+/// arc its own S-curves), so the cost of the windows shows as a ratio.
 fn interpolator(c: &mut Criterion) {
     let cfg = MotionConfig::default();
-    let (_, canon) = cases().swap_remove(1);
-    let p = plan(&canon, &cfg).unwrap();
-    let periods = (p.duration_s / cfg.servo_period_s) as u64 + 1;
+    let no_spans = MotionConfig {
+        spans: false,
+        ..cfg.clone()
+    };
+    let [(_, fitted), (_, chords)]: [(&str, Vec<Canon>); 2] = cases().try_into().unwrap();
     let mut g = c.benchmark_group("interpolate");
     g.sample_size(20);
-    g.throughput(Throughput::Elements(periods));
-    g.bench_function("10000x0.02mm servo periods", |b| {
-        b.iter(|| {
-            let mut it = Interpolator::new(&cfg, p.start_mm);
-            let mut src = SliceSource::new(&p.items);
-            for _ in 0..periods {
-                black_box(it.step(&mut src));
-            }
-        })
-    });
+    for (name, canon, cfg) in [
+        ("10000x0.02mm servo periods", &chords, &cfg),
+        ("3000x0.1mm arcs, spans, servo periods", &fitted, &cfg),
+        (
+            "3000x0.1mm arcs, no spans, servo periods",
+            &fitted,
+            &no_spans,
+        ),
+    ] {
+        let p = plan(canon, cfg).unwrap();
+        let periods = (p.duration_s / cfg.servo_period_s) as u64 + 1;
+        g.throughput(Throughput::Elements(periods));
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let mut it = Interpolator::new(cfg, p.start_mm);
+                let mut src = SliceSource::new(&p.items);
+                for _ in 0..periods {
+                    black_box(it.step(&mut src));
+                }
+            })
+        });
+    }
     g.finish();
 }
 
