@@ -11,34 +11,8 @@ use super::lookahead::Prepared;
 use super::moves::{Move, MoveKind};
 use super::profile::Tangential;
 use super::segment::{Item, Segment, SegmentKind, Window};
-use super::span::Transition;
+use super::span::{cruise_speed, Profile};
 use crate::gcode::NUM_AXES;
-
-/// Peak (cruise) speed of a move or span whose middle part is `mid` mm long, entered at
-/// `v_in` and left at `v_out`: the highest speed ≤ `cap` from which both speed changes fit.
-fn cruise_speed(t: &Tangential, [v_in, v_out]: [f64; 2], cap: f64, mid: f64) -> f64 {
-    let fits = |vp: f64| t.distance_mm(v_in, vp) + t.distance_mm(vp, v_out) <= mid;
-    let lo0 = v_in.max(v_out);
-    if fits(cap) {
-        return cap;
-    }
-    if !fits(lo0) {
-        return lo0;
-    }
-    let (mut lo, mut hi) = (lo0, cap);
-    for _ in 0..60 {
-        let c = 0.5 * (lo + hi);
-        if fits(c) {
-            lo = c;
-        } else {
-            hi = c;
-        }
-        if hi - lo <= 1e-9 * hi.max(1.0) {
-            break;
-        }
-    }
-    lo
-}
 
 pub(super) fn kind_of(m: &Move) -> SegmentKind {
     match m.kind {
@@ -174,20 +148,12 @@ pub(super) fn emit_span(
 ) {
     let e = before.map_or(0.0, |c| c.half_length_mm(v_in));
     let x = corners[sp.last].map_or(0.0, |c| c.half_length_mm(v_out));
-    let mid = (sp.len_mm - e - x).max(0.0);
-    let t = &sp.tang;
-    let vp = cruise_speed(t, [v_in, v_out], sp.vcap_mm_s, mid);
-    let up = Transition::new(t, v_in, vp);
-    let down = Transition::new(t, vp, v_out);
-    let d_up = t.distance_mm(v_in, vp);
-    let d_down = t.distance_mm(vp, v_out);
-    let cruise = (mid - d_up - d_down).max(0.0);
-    // The profile's parts, in distance along the span from the first move's start.
-    let parts = [
-        (e, e + d_up, Some(up)),
-        (e + d_up, e + d_up + cruise, None),
-        (e + d_up + cruise, sp.len_mm - x, Some(down)),
-    ];
+    let profile = Profile::new(&sp.tang, [v_in, v_out], sp.vcap_mm_s, [e, sp.len_mm, x]);
+    let vp = profile.cruise_mm_s;
+    // The profile's parts, in distance along the span from the first move's start; the
+    // slow-down ends exactly where the exit blend starts.
+    let mut parts = profile.parts();
+    parts[2].1 = sp.len_mm - x;
     let kind = kind_of(&p[sp.first].mv);
     let mut c0 = 0.0;
     for k in sp.first..=sp.last {

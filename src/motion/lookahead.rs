@@ -346,21 +346,165 @@ fn plan_run(
         .collect();
     // Runs of tangent moves that nothing between them slows are planned as one move (a
     // span, see [`span`]): one speed profile, so the acceleration carries across their ends.
-    // Only in runs planned whole (a chunk boundary must fall at a move's end).
-    let groups: Vec<(usize, usize)> = if commit.is_none() && !continued && lim.spans {
-        let moves: Vec<span::SpanMove> = (0..n)
-            .map(|k| span::SpanMove {
-                vcap_mm_s: p[k].vcap_mm_s,
-                joins_next: corners[k].is_some_and(|c| c.is_straight())
-                    && p[k].mv.junction != Junction::ExactStop
-                    && kind_of(&p[k].mv) == kind_of(&p[k + 1].mv),
-                junction_cap_mm_s: jmax[k],
-            })
-            .collect();
-        span::groups(&moves)
-    } else {
-        (0..n).map(|k| (k, k)).collect()
+    // Only in runs planned whole (a chunk boundary must fall at a move's end). A span may
+    // first cross junctions capped below its moves; where its profile passes one too fast,
+    // that junction binds and the runs are grouped and planned again.
+    let can_span = commit.is_none() && !continued && lim.spans;
+    let mut binds = vec![false; n];
+    let ends = RunEnds {
+        v_entry,
+        entry_corner,
+        continued,
     };
+    let mut round = 0;
+    let (groups, sp) = loop {
+        if round == SPAN_ROUNDS {
+            binds.fill(true);
+        }
+        let groups: Vec<(usize, usize)> = if can_span {
+            let moves: Vec<span::SpanMove> = (0..n)
+                .map(|k| span::SpanMove {
+                    vcap_mm_s: p[k].vcap_mm_s,
+                    joins_next: corners[k].is_some_and(|c| c.is_straight())
+                        && p[k].mv.junction != Junction::ExactStop
+                        && kind_of(&p[k].mv) == kind_of(&p[k + 1].mv),
+                    junction_cap_mm_s: jmax[k],
+                    junction_binds: binds[k],
+                })
+                .collect();
+            span::groups(&moves)
+        } else {
+            (0..n).map(|k| (k, k)).collect()
+        };
+        let sp = group_speeds(&p, &corners, &jmax, &groups, &ends, window)?;
+        let too_fast = passed_too_fast(&p, &jmax, &groups, &sp, &ends);
+        if too_fast.is_empty() || round == SPAN_ROUNDS {
+            break (groups, sp);
+        }
+        for k in too_fast {
+            binds[k] = true;
+        }
+        round += 1;
+    };
+    let GroupSpeeds {
+        glen,
+        gtang,
+        gcorners,
+        vj,
+    } = sp;
+    let ng = groups.len();
+    let emit = match commit {
+        Some(c) => groups
+            .iter()
+            .take_while(|&&(_, b)| p[b].last < c)
+            .count()
+            .min(ng - 1),
+        None => ng,
+    };
+    for k in 0..emit {
+        let v_in = if k > 0 { vj[k - 1] } else { v_entry };
+        let before = if k > 0 { gcorners[k - 1] } else { entry_corner };
+        let (a, b) = groups[k];
+        let steps = [if a > 0 { dk[a - 1] } else { 0.0 }, dk[b]];
+        if a == b {
+            emit_move(&p, &corners, before, a, [v_in, vj[k]], steps, lim, out);
+        } else {
+            let sp = Span {
+                first: a,
+                last: b,
+                len_mm: glen[k],
+                tang: gtang[k],
+                vcap_mm_s: p[a..=b]
+                    .iter()
+                    .map(|m| m.vcap_mm_s)
+                    .fold(f64::INFINITY, f64::min),
+            };
+            emit_span(&p, &corners, &dk, before, &sp, [v_in, vj[k]], lim, out);
+        }
+    }
+    Ok(match (commit, emit) {
+        (Some(_), e) if e > 0 => Some((
+            Entry {
+                v_mm_s: vj[e - 1],
+                corner: gcorners[e - 1],
+            },
+            p[groups[e - 1].1].last + 1,
+        )),
+        _ => None,
+    })
+}
+
+/// How a run starts: its entry speed and the corner blend before it (a continued chunk).
+struct RunEnds {
+    v_entry: f64,
+    entry_corner: Option<Corner>,
+    continued: bool,
+}
+
+/// Rounds of grouping after which every junction a span crossed too fast binds.
+const SPAN_ROUNDS: usize = 6;
+
+/// Per group (a move or a span): its length, tangential limits, the corner after it, and the
+/// planned speed at its end.
+struct GroupSpeeds {
+    glen: Vec<f64>,
+    gtang: Vec<Tangential>,
+    gcorners: Vec<Option<Corner>>,
+    vj: Vec<f64>,
+}
+
+/// The junctions inside spans that the span's profile passes faster than their cap.
+fn passed_too_fast(
+    p: &[Prepared],
+    jmax: &[f64],
+    groups: &[(usize, usize)],
+    sp: &GroupSpeeds,
+    ends: &RunEnds,
+) -> Vec<usize> {
+    let mut out = Vec::new();
+    for (k, &(a, b)) in groups.iter().enumerate() {
+        if a == b {
+            continue;
+        }
+        let v_in = if k > 0 { sp.vj[k - 1] } else { ends.v_entry };
+        let before = if k > 0 {
+            sp.gcorners[k - 1]
+        } else {
+            ends.entry_corner
+        };
+        let e = before.map_or(0.0, |c| c.half_length_mm(v_in));
+        let x = sp.gcorners[k].map_or(0.0, |c| c.half_length_mm(sp.vj[k]));
+        let cap = p[a..=b]
+            .iter()
+            .map(|m| m.vcap_mm_s)
+            .fold(f64::INFINITY, f64::min);
+        let profile = span::Profile::new(&sp.gtang[k], [v_in, sp.vj[k]], cap, [e, sp.glen[k], x]);
+        let mut at = 0.0;
+        for m in a..b {
+            at += p[m].len_mm;
+            if profile.speed_at(at) > jmax[m] * (1.0 + 1e-9) {
+                out.push(m);
+            }
+        }
+    }
+    out
+}
+
+/// Plans the speeds at the ends of `groups` (backward and forward passes over the lookahead
+/// window, then a repair of moves whose entry a window shift left without a feasible exit).
+fn group_speeds(
+    p: &[Prepared],
+    corners: &[Option<Corner>],
+    jmax: &[f64],
+    groups: &[(usize, usize)],
+    ends: &RunEnds,
+    window: usize,
+) -> Result<GroupSpeeds, PlanError> {
+    let RunEnds {
+        v_entry,
+        entry_corner,
+        continued,
+    } = *ends;
     let ng = groups.len();
     let glen: Vec<f64> = groups
         .iter()
@@ -489,43 +633,10 @@ fn plan_run(
         }
         vj = passes(&jmax);
     }
-    let emit = match commit {
-        Some(c) => groups
-            .iter()
-            .take_while(|&&(_, b)| p[b].last < c)
-            .count()
-            .min(ng - 1),
-        None => ng,
-    };
-    for k in 0..emit {
-        let v_in = if k > 0 { vj[k - 1] } else { v_entry };
-        let before = if k > 0 { gcorners[k - 1] } else { entry_corner };
-        let (a, b) = groups[k];
-        let steps = [if a > 0 { dk[a - 1] } else { 0.0 }, dk[b]];
-        if a == b {
-            emit_move(&p, &corners, before, a, [v_in, vj[k]], steps, lim, out);
-        } else {
-            let sp = Span {
-                first: a,
-                last: b,
-                len_mm: glen[k],
-                tang: gtang[k],
-                vcap_mm_s: p[a..=b]
-                    .iter()
-                    .map(|m| m.vcap_mm_s)
-                    .fold(f64::INFINITY, f64::min),
-            };
-            emit_span(&p, &corners, &dk, before, &sp, [v_in, vj[k]], lim, out);
-        }
-    }
-    Ok(match (commit, emit) {
-        (Some(_), e) if e > 0 => Some((
-            Entry {
-                v_mm_s: vj[e - 1],
-                corner: gcorners[e - 1],
-            },
-            p[groups[e - 1].1].last + 1,
-        )),
-        _ => None,
+    Ok(GroupSpeeds {
+        glen,
+        gtang,
+        gcorners,
+        vj,
     })
 }

@@ -28,11 +28,17 @@ pub struct SpanMove {
     pub joins_next: bool,
     /// Speed cap at the junction after this move, mm/s.
     pub junction_cap_mm_s: f64,
+    /// The junction's cap is known to bind the run's profile: a span may cross it only if it
+    /// allows the run's cap. When false, a span may also cross a junction capped lower
+    /// (above 0): the caller checks that the span's profile passes it within its cap
+    /// ([`Profile::speed_at`]) and marks it binding where it does not.
+    pub junction_binds: bool,
 }
 
 /// Consecutive index ranges `(first, last)` covering `moves`: each is one move, or a run of
-/// moves joined tangentially whose junctions allow the run's own (lowest) speed cap and
-/// whose caps differ by at most [`CAP_SPREAD`].
+/// moves joined tangentially whose caps differ by at most [`CAP_SPREAD`] and whose
+/// junctions allow the run's own (lowest) speed cap or are not known to bind
+/// ([`SpanMove::junction_binds`]).
 pub fn groups(moves: &[SpanMove]) -> Vec<(usize, usize)> {
     let mut out = Vec::with_capacity(moves.len());
     let mut k = 0;
@@ -42,9 +48,10 @@ pub fn groups(moves: &[SpanMove]) -> Vec<(usize, usize)> {
         while k + 1 < moves.len() && moves[k].joins_next {
             let next = moves[k + 1].vcap_mm_s;
             let (nlo, nhi) = (lo.min(next), hi.max(next));
+            let cap = moves[k].junction_cap_mm_s;
             let fits = nlo > 0.0
                 && nlo >= (1.0 - CAP_SPREAD) * nhi
-                && moves[k].junction_cap_mm_s >= nlo * (1.0 - 1e-12);
+                && (cap >= nlo * (1.0 - 1e-12) || (!moves[k].junction_binds && cap > 0.0));
             if !fits {
                 break;
             }
@@ -69,6 +76,102 @@ pub fn tangential(limits: impl Iterator<Item = Tangential>) -> Tangential {
             jerk_mm_s3: a.jerk_mm_s3.min(b.jerk_mm_s3),
         },
     )
+}
+
+/// Peak (cruise) speed of a move or span whose middle part is `mid` mm long, entered at
+/// `v_in` and left at `v_out`: the highest speed ≤ `cap` from which both speed changes fit.
+pub fn cruise_speed(t: &Tangential, [v_in, v_out]: [f64; 2], cap: f64, mid: f64) -> f64 {
+    let fits = |vp: f64| t.distance_mm(v_in, vp) + t.distance_mm(vp, v_out) <= mid;
+    let lo0 = v_in.max(v_out);
+    if fits(cap) {
+        return cap;
+    }
+    if !fits(lo0) {
+        return lo0;
+    }
+    let (mut lo, mut hi) = (lo0, cap);
+    for _ in 0..60 {
+        let c = 0.5 * (lo + hi);
+        if fits(c) {
+            lo = c;
+        } else {
+            hi = c;
+        }
+        if hi - lo <= 1e-9 * hi.max(1.0) {
+            break;
+        }
+    }
+    lo
+}
+
+/// The speed profile of a span: a speed-up, a cruise and a slow-down between the blend
+/// halves at its ends, in distance from the start of its first move.
+#[derive(Debug, Clone, Copy)]
+pub struct Profile {
+    /// Where the speed-up starts (the end of the entry blend's half), mm.
+    pub start_mm: f64,
+    /// The speed-up.
+    pub up: Transition,
+    /// Its length, mm.
+    pub up_mm: f64,
+    /// Cruise speed, mm/s.
+    pub cruise_mm_s: f64,
+    /// Cruise length, mm.
+    pub cruise_mm: f64,
+    /// The slow-down.
+    pub down: Transition,
+    /// Its length, mm.
+    pub down_mm: f64,
+}
+
+impl Profile {
+    /// The profile over `len_mm`, entered at `v_in` after a blend half of `entry_mm` and left
+    /// at `v_out` before one of `exit_mm`, at most at `cap`.
+    pub fn new(
+        t: &Tangential,
+        [v_in, v_out]: [f64; 2],
+        cap: f64,
+        [entry_mm, len_mm, exit_mm]: [f64; 3],
+    ) -> Self {
+        let mid = (len_mm - entry_mm - exit_mm).max(0.0);
+        let vp = cruise_speed(t, [v_in, v_out], cap, mid);
+        let (up_mm, down_mm) = (t.distance_mm(v_in, vp), t.distance_mm(vp, v_out));
+        Profile {
+            start_mm: entry_mm,
+            up: Transition::new(t, v_in, vp),
+            up_mm,
+            cruise_mm_s: vp,
+            cruise_mm: (mid - up_mm - down_mm).max(0.0),
+            down: Transition::new(t, vp, v_out),
+            down_mm,
+        }
+    }
+
+    /// Its parts `(from, to, transition)` in distance along the span (`None`: the cruise).
+    pub fn parts(&self) -> [(f64, f64, Option<Transition>); 3] {
+        let (a, b) = (self.start_mm, self.start_mm + self.up_mm);
+        let c = b + self.cruise_mm;
+        [
+            (a, b, Some(self.up)),
+            (b, c, None),
+            (c, c + self.down_mm, Some(self.down)),
+        ]
+    }
+
+    /// Speed at distance `x_mm` along the span, mm/s (the entry speed before the speed-up,
+    /// the exit speed after the slow-down).
+    pub fn speed_at(&self, x_mm: f64) -> f64 {
+        let [(a, b, _), (_, c, _), _] = self.parts();
+        if x_mm <= a {
+            self.up.s_start
+        } else if x_mm < b {
+            self.up.speed(self.up.time_at(x_mm - a))
+        } else if x_mm <= c {
+            self.cruise_mm_s
+        } else {
+            self.down.speed(self.down.time_at(x_mm - c))
+        }
+    }
 }
 
 /// One S-curve speed change along a path, `s(t) = s_start + (s_end − s_start)·f(t)`.
@@ -138,6 +241,7 @@ mod tests {
             vcap_mm_s: vcap,
             joins_next: joins,
             junction_cap_mm_s: cap,
+            junction_binds: true,
         }
     }
 
@@ -196,4 +300,44 @@ mod tests {
             }
         }
     }
+    #[test]
+    fn a_junction_not_known_to_bind_is_crossed() {
+        let mut m = [
+            mv(50.0, true, 30.0),
+            mv(50.0, true, 50.0),
+            mv(50.0, false, 0.0),
+        ];
+        m[0].junction_binds = false;
+        assert_eq!(groups(&m), vec![(0, 2)]);
+        // A stop is never crossed.
+        m[0].junction_cap_mm_s = 0.0;
+        assert_eq!(groups(&m), vec![(0, 0), (1, 2)]);
+    }
+
+    #[test]
+    fn the_profile_speeds_up_cruises_and_slows_down() {
+        let t = Tangential {
+            acc_mm_s2: 400.0,
+            jerk_mm_s3: 40_000.0,
+        };
+        let p = Profile::new(&t, [5.0, 10.0], 50.0, [0.5, 20.0, 0.2]);
+        assert_eq!(p.cruise_mm_s, 50.0);
+        assert!(p.cruise_mm > 0.0);
+        assert_eq!(p.speed_at(0.0), 5.0);
+        assert_eq!(p.speed_at(0.5), 5.0);
+        let mid = 0.5 + p.up_mm + 0.5 * p.cruise_mm;
+        assert_eq!(p.speed_at(mid), 50.0);
+        assert!((p.speed_at(20.0 - 0.2) - 10.0).abs() < 1e-6);
+        // Rising through the speed-up, falling through the slow-down.
+        let (a, b) = (p.speed_at(0.5 + 0.3 * p.up_mm), p.speed_at(0.5 + 0.6 * p.up_mm));
+        assert!(5.0 < a && a < b && b < 50.0, "{a} {b}");
+        let end = 20.0 - 0.2;
+        let (c, d) = (p.speed_at(end - 0.6 * p.down_mm), p.speed_at(end - 0.3 * p.down_mm));
+        assert!(50.0 > c && c > d && d > 10.0, "{c} {d}");
+        // Too short for the cap: the peak is lower and the two changes meet.
+        let q = Profile::new(&t, [0.0, 0.0], 50.0, [0.0, 1.0, 0.0]);
+        assert!(q.cruise_mm_s < 50.0 && q.cruise_mm < 1e-6);
+        assert!((q.up_mm + q.down_mm - 1.0).abs() < 1e-6);
+    }
+
 }
