@@ -12,7 +12,7 @@ use super::blend::Corner;
 use super::emit::{emit_move, emit_span, kind_of, Span};
 use super::fit_chains;
 use super::limits::Limits;
-use super::line_marks::LineMarks;
+use super::line_marks::{LineMarks, MAX_MARKS};
 use super::merge::merge;
 use super::moves::{Junction, Move, Step};
 use super::profile::Tangential;
@@ -38,8 +38,8 @@ pub(super) struct Prepared {
     pub(super) aux_after: Vec<AuxItem>,
     /// Index of the last raw move merged into this one.
     pub(super) last: usize,
-    /// Arc lengths at which a fitted arc passes the vertices of the source lines after
-    /// `mv.line` (ascending, at most `MAX_MARKS`; empty for a line).
+    /// Arc lengths at which a fitted arc or a merged line passes the vertices of the source
+    /// lines after `mv.line` (ascending, at most `MAX_MARKS`; empty for one source line).
     pub(super) marks: Vec<f64>,
 }
 
@@ -233,8 +233,12 @@ fn prepare(moves: Vec<Move>, aux: Vec<Vec<AuxItem>>, lim: &Limits, fit: bool) ->
                 return;
             }
             let (merged, last_index) = merge(moves[from..to].to_vec(), &joinable[from..to]);
+            let mut first = from;
             for (mv, j) in merged.into_iter().zip(last_index) {
-                out.push(line_move(mv, from + j, aux, lim));
+                let mut line = line_move(mv, from + j, aux, lim);
+                line.marks = merged_marks(&line, &moves[first..=from + j]);
+                out.push(line);
+                first = from + j + 1;
             }
         };
     let mut next = 0;
@@ -248,6 +252,26 @@ fn prepare(moves: Vec<Move>, aux: Vec<Vec<AuxItem>>, lim: &Limits, fit: bool) ->
     }
     lines(next, moves.len(), &mut out, &mut aux);
     out
+}
+
+/// Where the merged line `line` passes the vertices between its raw moves `raw`, in
+/// distance from its start: the reported line advances at each, as along a fitted arc
+/// ([`LineMarks`]). None when the raw moves' lines do not follow each other or there are more
+/// vertices than a segment can mark (the merged line then reports its first line throughout).
+fn merged_marks(line: &Prepared, raw: &[Move]) -> Vec<f64> {
+    let consecutive = raw.windows(2).all(|w| w[1].line == w[0].line + 1);
+    if raw.len() < 2 || raw.len() > MAX_MARKS + 1 || !consecutive || line.len_mm <= 0.0 {
+        return Vec::new();
+    }
+    raw[..raw.len() - 1]
+        .iter()
+        .map(|m| {
+            let along: f64 = (0..NUM_AXES)
+                .map(|i| (m.end_mm[i] - line.mv.start_mm[i]) * line.u[i])
+                .sum();
+            along.clamp(0.0, line.len_mm)
+        })
+        .collect()
 }
 
 /// A straight (possibly merged) move whose last raw move is `j`.

@@ -329,15 +329,20 @@ mod tests {
         assert_eq!(p.speed_at(mid), 50.0);
         assert!((p.speed_at(20.0 - 0.2) - 10.0).abs() < 1e-6);
         // Rising through the speed-up, falling through the slow-down.
-        let (a, b) = (p.speed_at(0.5 + 0.3 * p.up_mm), p.speed_at(0.5 + 0.6 * p.up_mm));
+        let (a, b) = (
+            p.speed_at(0.5 + 0.3 * p.up_mm),
+            p.speed_at(0.5 + 0.6 * p.up_mm),
+        );
         assert!(5.0 < a && a < b && b < 50.0, "{a} {b}");
         let end = 20.0 - 0.2;
-        let (c, d) = (p.speed_at(end - 0.6 * p.down_mm), p.speed_at(end - 0.3 * p.down_mm));
+        let (c, d) = (
+            p.speed_at(end - 0.6 * p.down_mm),
+            p.speed_at(end - 0.3 * p.down_mm),
+        );
         assert!(50.0 > c && c > d && d > 10.0, "{c} {d}");
         // Too short for the cap: the peak is lower and the two changes meet.
         let q = Profile::new(&t, [0.0, 0.0], 50.0, [0.0, 1.0, 0.0]);
         assert!(q.cruise_mm_s < 50.0 && q.cruise_mm < 1e-6);
         assert!((q.up_mm + q.down_mm - 1.0).abs() < 1e-6);
     }
-
 }
