@@ -129,9 +129,9 @@ fn end_speeds(first: &[Prepared], last: &[Prepared], gentle: [bool; 2], lim: &Li
 
 /// Estimated time of chords `raw` as lines.
 fn estimate_chords(raw: &[Move], gentle: [bool; 2], lim: &Limits) -> f64 {
-    let (p, jn) = fit_choice::chords(raw, lim);
+    let (p, jn, blend_s) = fit_choice::chords(raw, lim);
     let end = |g: bool| if g { f64::INFINITY } else { 0.0 };
-    fit_choice::estimate_s(&p, &jn, [end(gentle[0]), end(gentle[1])])
+    fit_choice::estimate_s(&p, &jn, [end(gentle[0]), end(gentle[1])]) + blend_s
 }
 
 /// Estimated time of raw moves `i..=j` planned as the fitted stretches `split` (in order)
@@ -146,6 +146,7 @@ fn estimate_split(
 ) -> f64 {
     let mut pieces = Vec::new();
     let mut junctions = Vec::new();
+    let mut blend_s = 0.0;
     // Curvature at the end of what is already in `pieces` (0 after chords).
     let mut prev_curv: Option<f64> = None;
     let mut push = |p: Vec<fit_choice::Piece>, jn: Vec<f64>, curv: (f64, f64)| {
@@ -159,7 +160,8 @@ fn estimate_split(
     let mut next = i;
     for (a, b, arcs) in split {
         if *a > next {
-            let (p, jn) = fit_choice::chords(&moves[next..*a], lim);
+            let (p, jn, b) = fit_choice::chords(&moves[next..*a], lim);
+            blend_s += b;
             push(p, jn, (0.0, 0.0));
         }
         let (p, jn) = arc_pieces(arcs, lim);
@@ -171,7 +173,8 @@ fn estimate_split(
         next = b + 1;
     }
     if next <= j {
-        let (p, jn) = fit_choice::chords(&moves[next..=j], lim);
+        let (p, jn, b) = fit_choice::chords(&moves[next..=j], lim);
+        blend_s += b;
         push(p, jn, (0.0, 0.0));
     }
     let first_curv = split.first().filter(|s| s.0 == i).and_then(|s| s.2.first());
@@ -182,7 +185,7 @@ fn estimate_split(
         (true, None) => f64::INFINITY,
     };
     let ends = [end(gentle[0], first_curv), end(gentle[1], last_curv)];
-    fit_choice::estimate_s(&pieces, &junctions, ends)
+    fit_choice::estimate_s(&pieces, &junctions, ends) + blend_s
 }
 
 /// Which raw moves of `i..=j` (flags indexed from `i`) stay chords because a junction of the
@@ -433,7 +436,7 @@ fn faster_than_chords(
             }
         })
         .collect();
-    let (chords, chords_j) = fit_choice::chords(raw, lim);
+    let (chords, chords_j, blend_s) = fit_choice::chords(raw, lim);
     // At the ends: a stop where the neighbour is not a gentle XY move, else the chords go on at
     // their cap and the arcs at the curvature step to the (straight) neighbour.
     let step = |curv: f64| (lim.step_budget_mm_s2() / curv.abs().max(1e-12)).sqrt();
@@ -451,5 +454,6 @@ fn faster_than_chords(
     ];
     // Only a clear loss refuses the fit (the estimate leaves out the chords' blend halves).
     fit_choice::estimate_s(&fitted, &fitted_j, fit_ends)
-        <= (1.0 + fit_choice::MARGIN) * fit_choice::estimate_s(&chords, &chords_j, chord_ends)
+        <= (1.0 + fit_choice::MARGIN)
+            * (fit_choice::estimate_s(&chords, &chords_j, chord_ends) + blend_s)
 }
