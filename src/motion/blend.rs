@@ -71,6 +71,18 @@ impl Corner {
     /// Highest junction speed ≤ `cap` whose blend fits in half of each adjacent move and
     /// stays within `tolerance_mm`.
     pub fn max_speed(&self, cap_mm_s: f64, len_a_mm: f64, len_b_mm: f64, tolerance_mm: f64) -> f64 {
+        self.max_speed_within(cap_mm_s, [len_a_mm, len_b_mm], tolerance_mm, 1e-9)
+    }
+
+    /// [`Self::max_speed`] found to `rel` of the cap (the answer always fits): estimates
+    /// (`motion::fit_choice`) need far fewer bisection steps than the plan itself.
+    pub fn max_speed_within(
+        &self,
+        cap_mm_s: f64,
+        [len_a_mm, len_b_mm]: [f64; 2],
+        tolerance_mm: f64,
+        rel: f64,
+    ) -> f64 {
         if self.is_straight() {
             return cap_mm_s;
         }
@@ -87,7 +99,7 @@ impl Corner {
             } else {
                 hi = mid;
             }
-            if hi - lo <= 1e-9 * hi.max(1.0) {
+            if hi - lo <= rel * hi.max(1.0) {
                 break;
             }
         }

@@ -30,6 +30,9 @@ pub(super) fn fitted_chains(
 /// How many times a stretch is split again at its slow junctions.
 const MAX_SPLITS: usize = 2;
 
+/// Least share of a stretch's estimated time a split must be able to gain to be tried.
+const MIN_SPLIT_GAIN: f64 = 0.02;
+
 /// A junction between two fitted arcs is slow when the curvature step there caps the speed
 /// below this share of the two arcs' own caps.
 const SLOW_JUNCTION: f64 = 0.9;
@@ -47,13 +50,30 @@ fn fit_stretch(
     let Some(arcs) = fit_arcs_raw(moves, i, j, lim) else {
         return;
     };
-    let cut = if splits > 0 {
+    let ends = gentle_ends(moves, i, j);
+    // The fit is kept unless clearly slower than its chords (see `fit_choice::MARGIN`).
+    let (pieces, junctions) = arc_pieces(&arcs, lim);
+    let fit_ends = end_speeds(&arcs, &arcs, ends, lim);
+    let fit_s = fit_choice::estimate_s(&pieces, &junctions, fit_ends);
+    let chords_s = estimate_chords(&moves[i..=j], ends, lim);
+    let whole = fit_s <= (1.0 + fit_choice::MARGIN) * chords_s;
+    let whole_s = if whole { fit_s } else { chords_s };
+    // A split is tried only where it could gain: not even the fit with its slow junctions
+    // at the arcs' caps would run much faster than the choice so far (the common case on
+    // clean curves, whose fitting then costs no more than before).
+    let worth_splitting = splits > 0 && {
+        let healed: Vec<f64> = arcs
+            .windows(2)
+            .zip(&junctions)
+            .map(|(w, &v)| v.max(w[0].vcap_mm_s.min(w[1].vcap_mm_s)))
+            .collect();
+        fit_choice::estimate_s(&pieces, &healed, fit_ends) < (1.0 - MIN_SPLIT_GAIN) * whole_s
+    };
+    let cut = if worth_splitting {
         split_at_slow_junctions(&arcs, moves, i, j, lim)
     } else {
         Vec::new()
     };
-    let ends = gentle_ends(moves, i, j);
-    let whole = faster_than_chords(&arcs, &moves[i..=j], ends, lim);
     if cut.is_empty() {
         if whole {
             out.push((i, j, arcs));
@@ -74,12 +94,6 @@ fn fit_stretch(
     // Keep the split only where it is estimated faster than the whole fit: on a clean fit
     // whose arcs differ in curvature (programmed arcs cut into chords and fitted back), the
     // chords around a junction can be far slower than the junction.
-    let whole_s = if whole {
-        let (p, jn) = arc_pieces(&arcs, lim);
-        fit_choice::estimate_s(&p, &jn, end_speeds(&arcs, &arcs, ends, lim))
-    } else {
-        estimate_chords(&moves[i..=j], ends, lim)
-    };
     if estimate_split(moves, i, j, &split, ends, lim) < whole_s {
         out.append(&mut split);
     } else if whole {
@@ -407,53 +421,4 @@ fn fit_arcs_raw(moves: &[Move], i: usize, j: usize, lim: &Limits) -> Option<Vec<
         });
     }
     Some(out)
-}
-
-/// True when the fitted chain `arcs` is estimated to run faster than the chords `raw` it
-/// replaces (see [`fit_choice`]): over noisy chords the curvature steps between the arcs can
-/// cap the speed far below the chords' blends.
-fn faster_than_chords(
-    arcs: &[Prepared],
-    raw: &[Move],
-    gentle_ends: [bool; 2],
-    lim: &Limits,
-) -> bool {
-    let piece = |p: &Prepared| fit_choice::Piece {
-        len_mm: p.len_mm,
-        cap_mm_s: p.vcap_mm_s,
-        tang: p.tang,
-    };
-    let fitted: Vec<_> = arcs.iter().map(piece).collect();
-    let fitted_j: Vec<f64> = arcs
-        .windows(2)
-        .map(|w| {
-            let cap = w[0].vcap_mm_s.min(w[1].vcap_mm_s);
-            let dk = (w[0].curv - w[1].curv).abs();
-            if dk > 0.0 {
-                cap.min((lim.step_budget_mm_s2() / dk).sqrt())
-            } else {
-                cap
-            }
-        })
-        .collect();
-    let (chords, chords_j, blend_s) = fit_choice::chords(raw, lim);
-    // At the ends: a stop where the neighbour is not a gentle XY move, else the chords go on at
-    // their cap and the arcs at the curvature step to the (straight) neighbour.
-    let step = |curv: f64| (lim.step_budget_mm_s2() / curv.abs().max(1e-12)).sqrt();
-    let gentle = |g: bool, v: f64| if g { v } else { 0.0 };
-    let (Some(first), Some(last)) = (arcs.first(), arcs.last()) else {
-        return false;
-    };
-    let fit_ends = [
-        gentle(gentle_ends[0], step(first.curv)),
-        gentle(gentle_ends[1], step(last.curv)),
-    ];
-    let chord_ends = [
-        gentle(gentle_ends[0], f64::INFINITY),
-        gentle(gentle_ends[1], f64::INFINITY),
-    ];
-    // Only a clear loss refuses the fit (the estimate leaves out the chords' blend halves).
-    fit_choice::estimate_s(&fitted, &fitted_j, fit_ends)
-        <= (1.0 + fit_choice::MARGIN)
-            * (fit_choice::estimate_s(&chords, &chords_j, chord_ends) + blend_s)
 }

@@ -35,21 +35,9 @@ pub struct Piece {
     pub tang: Tangential,
 }
 
-/// Highest speed ≤ `cap` reachable from `v0` within `dist` (coarse: 1e-3 relative).
+/// Highest speed ≤ `cap` reachable from `v0` within `dist`.
 fn reach(t: &Tangential, v0: f64, dist: f64, cap: f64) -> f64 {
-    if cap <= v0 || t.distance_mm(v0, cap) <= dist {
-        return cap.max(0.0);
-    }
-    let (mut lo, mut hi) = (v0, cap);
-    while hi - lo > 1e-3 * hi.max(1.0) {
-        let mid = 0.5 * (lo + hi);
-        if t.distance_mm(v0, mid) <= dist {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    lo
+    t.reach_mm_s(v0, dist, cap).max(0.0)
 }
 
 /// Estimated time, s, to run `pieces`, entered at most at `ends[0]` and left at most at
@@ -137,7 +125,7 @@ pub fn chords(raw: &[Move], lim: &Limits) -> (Vec<Piece>, Vec<f64>, f64) {
             let cap = lim.vcap(&ua).min(lim.vcap(&ub)).min(w[0].feed_mm_s);
             let (la, lb) = (w[0].feed_length_mm(), w[1].feed_length_mm());
             let corner = Corner::new(&ua, &ub, lim);
-            let v = corner.max_speed(cap, la, lb, tolerance_mm);
+            let v = corner.max_speed_within(cap, [la, lb], tolerance_mm, 1e-4);
             // The blend takes half its length from each chord: what is left for the chords'
             // own speed changes (at the junction's cap, the longest blend it allows).
             let half = corner.half_length_mm(v);
