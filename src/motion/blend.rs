@@ -11,7 +11,7 @@ use super::limits::Limits;
 /// may tile the chords completely; the lookahead passes then lower junction speeds (which
 /// shortens the blends) wherever a move needs straight room to change speed.
 pub const BLEND_ROOM_FRACTION: f64 = 0.5;
-use super::profile::Shape;
+use super::profile::{bisect_max, Shape};
 use crate::gcode::NUM_AXES;
 
 /// Geometry of one junction, independent of speed.
@@ -91,19 +91,7 @@ impl Corner {
         if ok(cap_mm_s) {
             return cap_mm_s;
         }
-        let (mut lo, mut hi) = (0.0, cap_mm_s);
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if ok(mid) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-            if hi - lo <= rel * hi.max(1.0) {
-                break;
-            }
-        }
-        lo
+        bisect_max(0.0, cap_mm_s, rel, ok)
     }
 }
 

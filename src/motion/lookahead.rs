@@ -15,7 +15,7 @@ use super::limits::Limits;
 use super::line_marks::{LineMarks, MAX_MARKS};
 use super::merge::merge;
 use super::moves::{Junction, Move, Step};
-use super::profile::Tangential;
+use super::profile::{bisect_max, Tangential};
 use super::segment::{AuxItem, Item, Segment, SegmentKind, Window};
 use super::span;
 use super::PlanError;
@@ -564,20 +564,7 @@ fn group_speeds(
         }
         h0 + h1 + gtang[k].distance_mm(a, b)
     };
-    let bisect = |mut lo: f64, mut hi: f64, ok: &dyn Fn(f64) -> bool| {
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if ok(mid) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-            if hi - lo <= 1e-9 * hi.max(1.0) {
-                break;
-            }
-        }
-        lo
-    };
+    let bisect = |lo: f64, hi: f64, ok: &dyn Fn(f64) -> bool| bisect_max(lo, hi, 1e-9, ok);
     // Backward step over move k: highest entry speed a ≤ a_cap that can slow to b.
     let entry = |k: usize, a_cap: f64, b: f64| {
         if a_cap <= b || g(k, a_cap, b) <= glen[k] {

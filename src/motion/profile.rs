@@ -88,6 +88,25 @@ impl Shape {
     }
 }
 
+/// Largest `x` in `[lo, hi]` with `ok(x)`, for `ok` true at `lo` and monotone (true below
+/// some value, false above): bisection to `rel` of `hi` (at least of 1), at most 60 steps.
+/// The answer always satisfies `ok` (it is `lo` if nothing above it does). Every speed
+/// search of the planner (cruise peaks, junction speeds, blend speeds) uses it.
+pub fn bisect_max(mut lo: f64, mut hi: f64, rel: f64, ok: impl Fn(f64) -> bool) -> f64 {
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if ok(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= rel * hi.max(1.0) {
+            break;
+        }
+    }
+    lo
+}
+
 /// 1D transition bounds along a straight move: tangential acceleration and jerk.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Tangential {

@@ -10,7 +10,7 @@
 //! cut at the moves' ends into windowed segments ([`super::segment::Window`]) so the
 //! acceleration carries across.
 
-use super::profile::{Shape, Tangential};
+use super::profile::{bisect_max, Shape, Tangential};
 
 /// Most by which the speed caps of the moves in one span may differ, relative: only
 /// rounding. A span runs at its slowest move's cap, so joining moves of different caps
@@ -89,19 +89,7 @@ pub fn cruise_speed(t: &Tangential, [v_in, v_out]: [f64; 2], cap: f64, mid: f64)
     if !fits(lo0) {
         return lo0;
     }
-    let (mut lo, mut hi) = (lo0, cap);
-    for _ in 0..60 {
-        let c = 0.5 * (lo + hi);
-        if fits(c) {
-            lo = c;
-        } else {
-            hi = c;
-        }
-        if hi - lo <= 1e-9 * hi.max(1.0) {
-            break;
-        }
-    }
-    lo
+    bisect_max(lo0, cap, 1e-9, fits)
 }
 
 /// The speed profile of a span: a speed-up, a cruise and a slow-down between the blend
