@@ -26,6 +26,7 @@ pub mod canon_fmt;
 pub mod expr;
 pub mod ini;
 mod interp;
+pub mod ldouble;
 pub mod lexer;
 pub mod modal;
 pub mod params;
