@@ -506,7 +506,9 @@ impl Interp<'_> {
             self.p.numbered[crate::gcode::params::g5x_base(9) + i]
                 * super::motion::lin(i, self.s.k_mp())
         });
-        let spindle_tool = self.s.tool == n;
+        // rs274 copies the edit to the spindle (pocket 0) when the slot is its current pocket,
+        // which is also the start pocket before any M6 (`InterpOptions::start_pocket`).
+        let spindle_tool = slot == self.s.tool_slot;
         // L10 under an XY rotation (`G10 L2 … R`): the X/Y offsets that put the program
         // position at (X, Y) through the rotation, both set when either is given, as rs274
         // computes them. An axis not given keeps the program position the tool would have
@@ -585,6 +587,7 @@ impl Interp<'_> {
             // The spindle's copy (LinuxCNC's pocket 0) changes too: a G43 without H
             // after this uses the new offsets.
             self.s.spindle_tool = Some(t.clone());
+            self.s.tool = t.number;
             self.emit(entry(0))?;
             // #5401-#5410 mirror the spindle's entry, so they show the edit at once.
             self.load_tool_params(false);

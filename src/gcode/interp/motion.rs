@@ -311,6 +311,10 @@ impl Interp<'_> {
                             self.tools.at_slot(slot).cloned()
                         }
                     }
+                    // In the block of an M6/M61 the change is still in progress and rs274
+                    // reads the new tool's own table entry (its `toolchange_flag`); on later
+                    // lines the spindle's copy, which M61 does not update.
+                    None if self.s.synch_pending => self.tools.at_slot(self.s.tool_slot).cloned(),
                     None => self.s.spindle_tool.clone(),
                 };
                 if let Some(t) = entry {
