@@ -384,8 +384,12 @@ impl Interp<'_> {
             return self.emit(CanonCmd::Message(body.to_string()));
         }
         if lower.starts_with("debug,") {
+            // substituted (and its parameter reads checked) even when #5599 silences it
             let body = self.substitute(&text[skip + 6..]);
-            return self.emit(CanonCmd::Message(body));
+            if self.p.numbered[crate::gcode::params::DEBUG_FLAG] > 0.0 {
+                return self.emit(CanonCmd::Message(body));
+            }
+            return Ok(());
         }
         if lower.starts_with("print,") {
             let body = self.substitute(&text[skip + 6..]);
