@@ -182,6 +182,45 @@ pub fn trig_deg(f: Trig, x: f64) -> f64 {
     v.hi + v.lo
 }
 
+/// `a + k * M_PIl` in extended (the product rounded first, as C does), not yet stored.
+fn ext_add_pi(a: f64, k: f64) -> Dd {
+    let kp = round_ext(mul(dd(k), PI_L));
+    round_ext(add(dd(a), kp))
+}
+
+/// The extended `x` stored to double (the second rounding of an x87 result).
+fn store(x: Dd) -> f64 {
+    let x = two_sum(x.hi, x.lo);
+    x.hi
+}
+
+/// rs274's `a + k * M_PIl` stored to a double (angle arithmetic in cutter compensation
+/// and arcs: `theta + 2 * M_PIl`, `beta - M_PI_2l` with k = -0.5).
+pub fn add_pi(a: f64, k: f64) -> f64 {
+    store(ext_add_pi(a, k))
+}
+
+/// rs274's `a + k * M_PIl + b` (left to right, both sums extended) stored to a double.
+pub fn add_pi_then(a: f64, k: f64, b: f64) -> f64 {
+    store(round_ext(add(ext_add_pi(a, k), dd(b))))
+}
+
+/// rs274's `(a + M_PIl) / 2.0` stored to a double (half an inside corner).
+pub fn half_add_pi(a: f64) -> f64 {
+    let s = ext_add_pi(a, 1.0);
+    store(Dd {
+        hi: s.hi / 2.0,
+        lo: s.lo / 2.0,
+    })
+}
+
+/// rs274's `r * sin(beta - M_PI_2l)` stored to a double: the argument is extended, so C++
+/// takes `sinl`, and the product is extended too (a cutter compensation corner).
+pub fn mul_sin_minus_half_pi(r: f64, beta: f64) -> f64 {
+    let (s, _) = sin_cos(ext_add_pi(beta, -0.5));
+    store(round_ext(mul(dd(r), round_ext(s))))
+}
+
 /// rs274's `(r * 180.0) / M_PIl`: radians to degrees, the product in double, the quotient
 /// in extended, then stored to double.
 pub fn rad2deg(r: f64) -> f64 {
@@ -222,6 +261,16 @@ mod tests {
                 "{f:?}({x}) = {got:e}, want {want:e}"
             );
         }
+    }
+
+    /// g++ on x86-64: `double t = a + 2 * M_PIl;` and friends, printf `%.17g`.
+    #[test]
+    fn pi_sums_match_x87() {
+        // the double sums give 3.7831853071795862, -1.4707963267948965, 3.4415926535897929
+        assert_eq!(add_pi(-2.5, 2.0), 3.7831853071795867);
+        assert_eq!(add_pi(0.1, -0.5), -1.4707963267948967);
+        assert_eq!(half_add_pi(-0.3), 1.4207963267948966);
+        assert_eq!(add_pi_then(1.0, 1.0, -0.7), 3.4415926535897934);
     }
 
     #[test]

@@ -9,7 +9,7 @@ use super::Interp;
 use crate::gcode::canon::{CanonCmd, FeedMode, LengthUnits, Plane};
 use crate::gcode::modal::Block;
 use crate::gcode::GcodeError;
-use std::f64::consts::{FRAC_PI_2, PI, SQRT_2};
+use std::f64::consts::{PI, SQRT_2};
 
 /// Tolerance for R-format arcs (LinuxCNC `RADIUS_TOLERANCE_INCH`).
 const RADIUS_TOLERANCE_INCH: f64 = 0.00005;
@@ -25,18 +25,9 @@ const CENTER_TOL_MM: f64 = 2.0 * 0.01 * SQRT_2;
 const SPIRAL_RELATIVE_TOLERANCE: f64 = 0.001;
 /// `TINY` of arc_data_r.
 const TINY: f64 = 1e-12;
-/// Low part of pi/2 (pi/2 = FRAC_PI_2 + PI_2_LO): LinuxCNC subtracts `M_PI_2l`, a long
-/// double, so the sum is rounded once; this reproduces that rounding in doubles.
-const PI_2_LO: f64 = 6.123_233_995_736_766e-17;
-
-/// `a + s * pi/2` rounded once (as x87 long double arithmetic would, then stored to double).
+/// `a + s * M_PI_2l` as rs274 computes it (extended sum, then stored to double).
 pub(super) fn add_half_pi(a: f64, sign: f64) -> f64 {
-    let hi = sign * FRAC_PI_2;
-    let s = a + hi;
-    // two-sum error of a + hi
-    let bb = s - a;
-    let err = (a - (s - bb)) + (hi - bb);
-    s + (err + sign * PI_2_LO)
+    crate::gcode::ldouble::add_pi(a, 0.5 * sign)
 }
 
 /// Which axes (indices into X Y Z A B C) form the plane: first, second, normal.
@@ -312,6 +303,7 @@ impl Interp<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::FRAC_PI_2;
 
     #[test]
     fn half_pi_sum_rounds_once() {
