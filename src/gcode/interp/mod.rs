@@ -15,6 +15,7 @@ mod lathe;
 mod mcodes;
 mod motion;
 mod ocode;
+mod param_comment;
 mod persistent;
 mod polar;
 mod roughing;
