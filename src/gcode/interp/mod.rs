@@ -410,6 +410,36 @@ impl<'a> Interp<'a> {
         }
     }
 
+    /// An error on another line than the current one: rs274 names the line its search for a
+    /// subroutine stopped at (the definition it found, or the end of the file).
+    pub(crate) fn err_at(
+        &self,
+        file: usize,
+        line: usize,
+        message: impl Into<String>,
+    ) -> GcodeError {
+        GcodeError {
+            file: self
+                .files
+                .get(file)
+                .map_or_else(|| self.loc.file.to_string(), |s| s.name.to_string()),
+            line: u32::try_from(line + 1).unwrap_or(u32::MAX),
+            col: 1,
+            message: message.into(),
+        }
+    }
+
+    /// The line (0-based) where rs274's forward search of file `f` ends: its closing `%`,
+    /// else its last line.
+    pub(crate) fn search_end_line(&self, f: usize) -> usize {
+        let src = &self.files[f];
+        if src.closed {
+            src.end
+        } else {
+            src.end.saturating_sub(1)
+        }
+    }
+
     /// Runs the program in `text` to its end.
     pub(crate) fn run(&mut self, name: &str, text: String) -> Result<(), GcodeError> {
         self.load(name, text)?;
