@@ -55,6 +55,7 @@ fn options() -> InterpOptions {
     InterpOptions {
         tool_table: Some(corpus().join("tool.tbl")),
         machine_units: LengthUnits::Inches,
+        start_pocket: hytask::gcode::RS274_START_POCKET,
         ..InterpOptions::default()
     }
 }

@@ -61,7 +61,11 @@ impl InterpArgs {
         };
         let base = match &machine {
             Some(m) => crate::machine::job::interp_options(m),
-            None => InterpOptions::default(),
+            // no machine: rs274's standalone canon, whose traces these commands reproduce
+            None => InterpOptions {
+                start_pocket: crate::gcode::RS274_START_POCKET,
+                ..InterpOptions::default()
+            },
         };
         let mut subroutine_path = self.subroutine_path.clone();
         let mut ini = base.ini.clone();

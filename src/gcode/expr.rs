@@ -1,6 +1,8 @@
 //! Expressions: `[ ]` arithmetic, parameter references and the unary functions of
 //! LinuxCNC, with its precedence, its fuzzy `EQ`/`NE` and its error messages.
 
+use super::ldouble::{rad2deg, trig_deg, Trig};
+
 /// Binary operators, LinuxCNC spelling in the doc of each.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BinOp {
@@ -181,31 +183,6 @@ pub fn eval(e: &Expr, src: &dyn ParamSource) -> Result<f64, String> {
     }
 }
 
-/// pi as a double-double (high part is `f64::consts::PI`).
-const PI_LO: f64 = 1.224_646_799_147_353_2e-16;
-
-/// `x * pi / 180` rounded once. LinuxCNC computes it in long double (`M_PIl`), so the
-/// double result is (almost always) the correctly rounded one; `f64::to_radians` is not,
-/// and the difference shows at tan(90°) and friends.
-pub fn deg2rad(x: f64) -> f64 {
-    use std::f64::consts::PI;
-    let p = x * PI;
-    let e = x.mul_add(PI, -p) + x * PI_LO;
-    let q = p / 180.0;
-    let rem = (-q).mul_add(180.0, p) + e;
-    q + rem / 180.0
-}
-
-/// `r * 180 / pi` rounded once (see [`deg2rad`]).
-pub fn rad2deg(r: f64) -> f64 {
-    use std::f64::consts::PI;
-    let t = r * 180.0;
-    let te = r.mul_add(180.0, -t);
-    let q = t / PI;
-    let rem = (-q).mul_add(PI, t) + te - q * PI_LO;
-    q + rem / PI
-}
-
 /// LinuxCNC refuses a calculation whose result is not a finite number.
 fn finite(v: f64) -> Result<f64, String> {
     if v.is_nan() {
@@ -232,7 +209,7 @@ fn call(f: Func, v: f64) -> Result<f64, String> {
             }
             rad2deg(v.asin())
         }
-        Func::Cos => deg2rad(v).cos(),
+        Func::Cos => trig_deg(Trig::Cos, v),
         Func::Exp => v.exp(),
         Func::Fix => v.floor(),
         Func::Fup => v.ceil(),
@@ -251,14 +228,14 @@ fn call(f: Func, v: f64) -> Result<f64, String> {
                 -2_147_483_648.0
             }
         }
-        Func::Sin => deg2rad(v).sin(),
+        Func::Sin => trig_deg(Trig::Sin, v),
         Func::Sqrt => {
             if v < 0.0 {
                 return Err("Negative argument to sqrt".into());
             }
             v.sqrt()
         }
-        Func::Tan => deg2rad(v).tan(),
+        Func::Tan => trig_deg(Trig::Tan, v),
     })
 }
 

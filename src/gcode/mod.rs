@@ -26,6 +26,7 @@ pub mod canon_fmt;
 pub mod expr;
 pub mod ini;
 mod interp;
+pub mod ldouble;
 pub mod lexer;
 pub mod modal;
 pub mod params;
@@ -117,12 +118,23 @@ pub struct InterpOptions {
     pub parameters: Option<Arc<VarFile>>,
     /// Values of `#<_ini[section]name>` (see [`IniValues`]).
     pub ini: Arc<IniValues>,
+    /// The tool table slot the interpreter takes as its current pocket at start (LinuxCNC's
+    /// `GET_EXTERNAL_TOOL_SLOT`) while the spindle is still empty: 0 on a machine. rs274's
+    /// standalone canon says 1 ([`RS274_START_POCKET`]), so a `G10 L1`/`L10`/`L11` that
+    /// edits the table's first tool before any M6 also loads it into the spindle (prints
+    /// `SET_TOOL_TABLE_ENTRY(0, …)`) and `#<_current_pocket>` starts at 1; the differential
+    /// runs (`hytask gcode canon` without a machine) set it to compare traces byte for byte.
+    pub start_pocket: usize,
     /// Resource limits.
     pub limits: Limits,
     /// Set from another thread to stop the run (job preparation cancelled or out of time):
     /// polled every [`CANCEL_POLL_BLOCKS`] blocks, then the run ends with an error.
     pub cancel: Option<Arc<std::sync::atomic::AtomicBool>>,
 }
+
+/// [`InterpOptions::start_pocket`] of rs274's standalone canon (its simulated tool changer
+/// starts at slot 1).
+pub const RS274_START_POCKET: usize = 1;
 
 /// Blocks executed between two polls of [`InterpOptions::cancel`].
 pub const CANCEL_POLL_BLOCKS: u64 = 4096;
@@ -141,6 +153,7 @@ impl Default for InterpOptions {
             user_mcodes: Vec::new(),
             parameters: None,
             ini: Arc::default(),
+            start_pocket: 0,
             limits: Limits::default(),
             cancel: None,
         }

@@ -28,6 +28,8 @@ pub const TOOL_NUMBER: usize = 5400;
 pub const TOOL_BASE: usize = 5401;
 /// Current position X … W in the active coordinate system.
 pub const POS_BASE: usize = 5420;
+/// `(DEBUG,…)` prints only while this is above 0; rs274 sets it to 1 at start.
+pub const DEBUG_FLAG: usize = 5599;
 
 /// Base parameter of work offset `index` (1 = G54 … 9 = G59.3).
 pub fn g5x_base(index: u8) -> usize {
@@ -49,6 +51,7 @@ impl Default for Params {
     fn default() -> Self {
         let mut numbered = vec![0.0; NUM_PARAMS];
         numbered[COORD_INDEX] = 1.0;
+        numbered[DEBUG_FLAG] = 1.0;
         Params {
             numbered,
             globals: HashMap::new(),

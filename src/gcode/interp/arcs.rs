@@ -9,7 +9,7 @@ use super::Interp;
 use crate::gcode::canon::{CanonCmd, FeedMode, LengthUnits, Plane};
 use crate::gcode::modal::Block;
 use crate::gcode::GcodeError;
-use std::f64::consts::{FRAC_PI_2, PI, SQRT_2};
+use std::f64::consts::{PI, SQRT_2};
 
 /// Tolerance for R-format arcs (LinuxCNC `RADIUS_TOLERANCE_INCH`).
 const RADIUS_TOLERANCE_INCH: f64 = 0.00005;
@@ -25,18 +25,34 @@ const CENTER_TOL_MM: f64 = 2.0 * 0.01 * SQRT_2;
 const SPIRAL_RELATIVE_TOLERANCE: f64 = 0.001;
 /// `TINY` of arc_data_r.
 const TINY: f64 = 1e-12;
-/// Low part of pi/2 (pi/2 = FRAC_PI_2 + PI_2_LO): LinuxCNC subtracts `M_PI_2l`, a long
-/// double, so the sum is rounded once; this reproduces that rounding in doubles.
-const PI_2_LO: f64 = 6.123_233_995_736_766e-17;
-
-/// `a + s * pi/2` rounded once (as x87 long double arithmetic would, then stored to double).
+/// `a + s * M_PI_2l` as rs274 computes it (extended sum, then stored to double).
 pub(super) fn add_half_pi(a: f64, sign: f64) -> f64 {
-    let hi = sign * FRAC_PI_2;
-    let s = a + hi;
-    // two-sum error of a + hi
-    let bb = s - a;
-    let err = (a - (s - bb)) + (hi - bb);
-    s + (err + sign * PI_2_LO)
+    crate::gcode::ldouble::add_pi(a, 0.5 * sign)
+}
+
+/// C's `%.4g` (rs274 prints an arc's radius error so): four significant digits, fixed
+/// notation for exponents -4 to 3, trailing zeros dropped.
+fn c_fmt_g4(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let e = format!("{v:.3e}");
+    let (mant, exp) = e.split_once('e').unwrap_or((&e, "0"));
+    let x: i32 = exp.parse().unwrap_or(0);
+    let trim = |s: &str| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    if (-4..4).contains(&x) {
+        let decimals = usize::try_from(3 - x).unwrap_or(0);
+        trim(&format!("{v:.decimals$}"))
+    } else {
+        let sign = if x < 0 { '-' } else { '+' };
+        format!("{}e{sign}{:02}", trim(mant), x.abs())
+    }
 }
 
 /// Which axes (indices into X Y Z A B C) form the plane: first, second, normal.
@@ -266,8 +282,9 @@ pub(super) fn arc_data_ijk(
     if abs_err > spiral_abs * 100.0 || (rel_err > SPIRAL_RELATIVE_TOLERANCE && abs_err > spiral_abs)
     {
         return Err(format!(
-            "Radius to end of arc differs from radius to start: {} abs_err={abs_err:.4e} rel_err={:.4}%",
+            "Radius to end of arc differs from radius to start: {} abs_err={} rel_err={:.4}%",
             where_(),
+            c_fmt_g4(abs_err),
             rel_err * 100.0
         ));
     }
@@ -312,6 +329,21 @@ impl Interp<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    #[test]
+    fn radius_error_prints_as_c_g4() {
+        // rs274's messages for LinuxCNC's bad-arc tests
+        assert_eq!(c_fmt_g4(0.285_67), "0.2857");
+        assert_eq!(c_fmt_g4(2.856_7), "2.857");
+        assert_eq!(c_fmt_g4(0.3), "0.3");
+        assert_eq!(c_fmt_g4(3.0), "3");
+        assert_eq!(c_fmt_g4(0.002_856_7), "0.002857");
+        assert_eq!(c_fmt_g4(1.0), "1");
+        assert_eq!(c_fmt_g4(12345.0), "1.234e+04");
+        assert_eq!(c_fmt_g4(0.000_012_34), "1.234e-05");
+        assert_eq!(c_fmt_g4(9999.6), "1e+04");
+    }
 
     #[test]
     fn half_pi_sum_rounds_once() {

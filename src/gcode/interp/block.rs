@@ -9,17 +9,6 @@ use crate::gcode::modal::Block;
 use crate::gcode::parser::Line;
 use crate::gcode::GcodeError;
 
-/// A `(DEBUG,…)` value: `%f`, `-0` shown as `0`, and `######` when it does not fit
-/// LinuxCNC's 29-character field.
-fn push_debug_value(out: &mut String, v: f64) {
-    let s = format!("{:.6}", v + 0.0);
-    if s.len() > 29 {
-        out.push_str("######");
-    } else {
-        out.push_str(&s);
-    }
-}
-
 /// Group-0 codes that consume axis words.
 fn g0_uses_axes(g: u16) -> bool {
     matches!(g, 100 | 280 | 300 | 520 | 920)
@@ -384,8 +373,12 @@ impl Interp<'_> {
             return self.emit(CanonCmd::Message(body.to_string()));
         }
         if lower.starts_with("debug,") {
+            // substituted (and its parameter reads checked) even when #5599 silences it
             let body = self.substitute(&text[skip + 6..]);
-            return self.emit(CanonCmd::Message(body));
+            if self.p.numbered[crate::gcode::params::DEBUG_FLAG] > 0.0 {
+                return self.emit(CanonCmd::Message(body));
+            }
+            return Ok(());
         }
         if lower.starts_with("print,") {
             let body = self.substitute(&text[skip + 6..]);
@@ -419,56 +412,6 @@ impl Interp<'_> {
             return None;
         };
         Some(CanonCmd::Log { kind, text })
-    }
-
-    /// `(DEBUG,…)`/`(PRINT,…)` text with `#n` and `#<name>` replaced by `%f` values, and
-    /// `######` for unknown names, as LinuxCNC prints them.
-    fn substitute(&self, text: &str) -> String {
-        use crate::gcode::expr::ParamSource;
-        let bytes = text.as_bytes();
-        let mut out = String::new();
-        let mut i = 0;
-        while i < bytes.len() {
-            if bytes[i] == b'#' {
-                if bytes.get(i + 1) == Some(&b'<') {
-                    if let Some(end) = text[i + 2..].find('>') {
-                        let name: String = text[i + 2..i + 2 + end]
-                            .chars()
-                            .filter(|c| !c.is_whitespace())
-                            .map(|c| c.to_ascii_lowercase())
-                            .collect();
-                        match ParamSource::named(self, &name) {
-                            // LinuxCNC prints -0 as 0 here.
-                            Some(v) => push_debug_value(&mut out, v),
-                            None => out.push_str("######"),
-                        }
-                        i += 2 + end + 1;
-                        continue;
-                    }
-                } else {
-                    let digits: String = text[i + 1..]
-                        .chars()
-                        .take_while(|c| c.is_ascii_digit())
-                        .collect();
-                    if !digits.is_empty() {
-                        let v = digits
-                            .parse::<f64>()
-                            .ok()
-                            .and_then(|n| ParamSource::numbered(self, n).ok());
-                        match v {
-                            Some(v) => push_debug_value(&mut out, v),
-                            None => out.push_str("######"),
-                        }
-                        i += 1 + digits.len();
-                        continue;
-                    }
-                }
-            }
-            let ch = text[i..].chars().next().unwrap_or(' ');
-            out.push(ch);
-            i += ch.len_utf8();
-        }
-        out
     }
 
     /// G98 (`old_z`) or G99.

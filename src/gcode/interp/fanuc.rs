@@ -100,7 +100,7 @@ impl Interp<'_> {
         if repeats <= 0 {
             return Ok(());
         }
-        let start = self.numbered_program(&label, col)?;
+        let start = self.numbered_program(&label)?;
         if self.frames.len() >= self.opts.limits.max_call_depth {
             return Err(self.err(
                 col,
@@ -127,25 +127,36 @@ impl Interp<'_> {
     }
 
     /// Where numbered program `label` starts, in any loaded file.
-    fn numbered_program(&self, label: &str, col: u32) -> Result<(usize, usize), GcodeError> {
-        let mut is_sub = false;
+    ///
+    /// Errors are where rs274's search stops: at an `O… sub` definition of the label (the
+    /// wrong kind), else at the end of the calling file.
+    fn numbered_program(&self, label: &str) -> Result<(usize, usize), GcodeError> {
+        let mut sub_def = None;
         for (fi, src) in self.files.iter().enumerate() {
             for &l in src.by_label.get(label).map(Vec::as_slice).unwrap_or(&[]) {
                 match src.olines.get(&l).map(|o| o.kind) {
                     Some(OKind::ProgramNumber) => return Ok((fi, l)),
-                    Some(OKind::Sub) => is_sub = true,
+                    Some(OKind::Sub) => sub_def = sub_def.or(Some((fi, l))),
                     _ => {}
                 }
             }
         }
-        Err(self.err(
-            col,
-            if is_sub {
-                "'O.... sub' subroutine must be called with 'O.... call'".to_string()
-            } else {
-                format!("Unable to find subprogram O{label} called by M98 P{label}")
-            },
-        ))
+        let call = self.loc.line;
+        Err(match sub_def {
+            Some((fi, l)) => self.err_at(
+                fi,
+                l,
+                format!("'O.... sub' subroutine must be called with 'O.... call' (O{label} is called by M98 P{label} at line {call})"),
+            ),
+            None => {
+                let f = self.pc.0;
+                self.err_at(
+                    f,
+                    self.search_end_line(f),
+                    format!("Failed to find subprogram O{label} before the end of the file (called by M98 P{label} at line {call})"),
+                )
+            }
+        })
     }
 
     /// `M99` in an `M98` call: runs the subprogram again while repeats are left, else

@@ -498,15 +498,18 @@ impl Interp<'_> {
                 format!("Tool {n} not found in the tool table (G10 L{l})"),
             )
         })?;
-        let k = self.s.units.mm_per_unit() / self.s.machine_units.mm_per_unit();
+        // to the table's machine units and back, rounded as rs274's conversions
+        let (to_user, to_prog) = self.s.unit_conversions();
         const AX: &[u8; 6] = b"xyzabc";
         // L11 measures against G59.3 (system 9), whatever system is active; its stored
         // offset is in machine units.
         let g593: [f64; 6] = std::array::from_fn(|i| {
-            self.p.numbered[crate::gcode::params::g5x_base(9) + i]
-                * super::motion::lin(i, self.s.k_mp())
+            self.s
+                .user_len(i, self.p.numbered[crate::gcode::params::g5x_base(9) + i])
         });
-        let spindle_tool = self.s.tool == n;
+        // rs274 copies the edit to the spindle (pocket 0) when the slot is its current pocket,
+        // which is also the start pocket before any M6 (`InterpOptions::start_pocket`).
+        let spindle_tool = slot == self.s.tool_slot;
         // L10 under an XY rotation (`G10 L2 … R`): the X/Y offsets that put the program
         // position at (X, Y) through the rotation, both set when either is given, as rs274
         // computes them. An axis not given keeps the program position the tool would have
@@ -515,7 +518,7 @@ impl Interp<'_> {
         let table_xy = self
             .tools
             .at_slot(slot)
-            .map(|t| [t.offset[0] / k, t.offset[1] / k]);
+            .map(|t| [to_prog(t.offset[0]), to_prog(t.offset[1])]);
         let rotated_xy =
             (l == 10 && self.s.rotation != 0.0 && (b.has(b'x') || b.has(b'y'))).then(|| {
                 let s = &self.s;
@@ -527,7 +530,7 @@ impl Interp<'_> {
                 let vx = b.get(b'x').map_or(px, |v| v + s.g92[0]);
                 let vy = b.get(b'y').map_or(py, |v| v + s.g92[1]);
                 let (rx, ry) = super::frame::rotate(vx, vy, s.rotation);
-                [(m[0] - s.g5x[0] - rx) * k, (m[1] - s.g5x[1] - ry) * k]
+                [to_user(m[0] - s.g5x[0] - rx), to_user(m[1] - s.g5x[1] - ry)]
             });
         let Some(t) = self.tools.tools.get_mut(slot - 1) else {
             return Err(self.err(col, "Tool table slot out of range"));
@@ -541,9 +544,9 @@ impl Interp<'_> {
             }
             if let Some(v) = b.get(c) {
                 let lin = i < 3;
-                let kk = if lin { k } else { 1.0 };
+                let conv = |x: f64| if lin { to_user(x) } else { x };
                 t.offset[i] = match l {
-                    1 => v * kk,
+                    1 => conv(v),
                     _ => {
                         // L10/L11: offset such that the current position becomes v.
                         let cur_machine =
@@ -553,13 +556,13 @@ impl Interp<'_> {
                         } else {
                             cur_machine - g593[i]
                         };
-                        (base - v) * kk
+                        conv(base - v)
                     }
                 };
             }
         }
         if let Some(r) = b.get(b'r') {
-            t.diameter = 2.0 * r * k;
+            t.diameter = to_user(r) * 2.0;
         }
         if let Some(i) = b.get(b'i') {
             t.front_angle = i;
@@ -585,6 +588,7 @@ impl Interp<'_> {
             // The spindle's copy (LinuxCNC's pocket 0) changes too: a G43 without H
             // after this uses the new offsets.
             self.s.spindle_tool = Some(t.clone());
+            self.s.tool = t.number;
             self.emit(entry(0))?;
             // #5401-#5410 mirror the spindle's entry, so they show the edit at once.
             self.load_tool_params(false);

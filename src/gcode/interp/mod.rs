@@ -15,6 +15,7 @@ mod lathe;
 mod mcodes;
 mod motion;
 mod ocode;
+mod param_comment;
 mod persistent;
 mod polar;
 mod roughing;
@@ -406,6 +407,36 @@ impl<'a> Interp<'a> {
             line: self.loc.line.max(1),
             col,
             message: message.into(),
+        }
+    }
+
+    /// An error on another line than the current one: rs274 names the line its search for a
+    /// subroutine stopped at (the definition it found, or the end of the file).
+    pub(crate) fn err_at(
+        &self,
+        file: usize,
+        line: usize,
+        message: impl Into<String>,
+    ) -> GcodeError {
+        GcodeError {
+            file: self
+                .files
+                .get(file)
+                .map_or_else(|| self.loc.file.to_string(), |s| s.name.to_string()),
+            line: u32::try_from(line + 1).unwrap_or(u32::MAX),
+            col: 1,
+            message: message.into(),
+        }
+    }
+
+    /// The line (0-based) where rs274's forward search of file `f` ends: its closing `%`,
+    /// else its last line.
+    pub(crate) fn search_end_line(&self, f: usize) -> usize {
+        let src = &self.files[f];
+        if src.closed {
+            src.end
+        } else {
+            src.end.saturating_sub(1)
         }
     }
 

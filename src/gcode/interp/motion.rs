@@ -285,7 +285,6 @@ impl Interp<'_> {
         let mut off: Pose = [0.0; 9];
         match g {
             430 => {
-                let k = self.s.k_mp();
                 let entry = match b.get(b'h') {
                     Some(h) => {
                         if h < 0.0 || h.fract() != 0.0 {
@@ -311,11 +310,15 @@ impl Interp<'_> {
                             self.tools.at_slot(slot).cloned()
                         }
                     }
+                    // In the block of an M6/M61 the change is still in progress and rs274
+                    // reads the new tool's own table entry (its `toolchange_flag`); on later
+                    // lines the spindle's copy, which M61 does not update.
+                    None if self.s.synch_pending => self.tools.at_slot(self.s.tool_slot).cloned(),
                     None => self.s.spindle_tool.clone(),
                 };
                 if let Some(t) = entry {
                     for (i, (o, v)) in off.iter_mut().zip(t.offset.iter()).enumerate() {
-                        *o = v * lin9(i, k);
+                        *o = self.s.user_len(i, *v);
                     }
                 }
             }
@@ -368,11 +371,10 @@ impl Interp<'_> {
                     })?;
                     self.tools.at_slot(slot).cloned()
                 };
-                let k = self.s.k_mp();
                 off = self.s.tool_offset;
                 if let Some(t) = entry {
                     for (i, (o, v)) in off.iter_mut().zip(t.offset.iter()).enumerate() {
-                        *o += v * lin9(i, k);
+                        *o += self.s.user_len(i, *v);
                     }
                 }
             }
@@ -397,10 +399,9 @@ impl Interp<'_> {
     pub(super) fn restore_tool_offset_mode(&mut self, active: bool) -> Result<(), GcodeError> {
         let mut off: Pose = [0.0; 9];
         if active {
-            let k = self.s.k_mp();
             if let Some(t) = &self.s.spindle_tool {
                 for (i, (o, v)) in off.iter_mut().zip(t.offset.iter()).enumerate() {
-                    *o = v * lin9(i, k);
+                    *o = self.s.user_len(i, *v);
                 }
             }
         }
@@ -410,10 +411,9 @@ impl Interp<'_> {
 
     pub(super) fn load_g5x(&self, index: u8) -> ([f64; 6], f64) {
         let base = g5x_base(index);
-        let k = self.s.k_mp();
         let mut o = [0.0; 6];
         for (i, v) in o.iter_mut().enumerate() {
-            *v = self.p.numbered[base + i] * lin(i, k);
+            *v = self.s.user_len(i, self.p.numbered[base + i]);
         }
         (o, self.p.numbered[base + 9])
     }
@@ -477,7 +477,6 @@ impl Interp<'_> {
                 } else {
                     params::G30_BASE
                 };
-                let k = 1.0 / self.s.k_mp();
                 let m = if self.s.rotation != 0.0 {
                     self.machine_of_program(&self.s.pos, true)
                 } else {
@@ -486,18 +485,17 @@ impl Interp<'_> {
                     })
                 };
                 for (i, v) in m.iter().enumerate() {
-                    self.p.numbered[base + i] = v * lin(i, k);
+                    self.p.numbered[base + i] = self.s.prog_len(i, *v);
                 }
                 Ok(())
             }
             520 => {
                 // G52: local offset, kept in the G92 offset as LinuxCNC does.
-                let k = 1.0 / self.s.k_mp();
                 for (i, &c) in AXES.iter().enumerate() {
                     if let Some(v) = b.get(c) {
                         self.s.pos[i] += self.s.g92[i] - v;
                         self.s.g92[i] = v;
-                        self.p.numbered[params::G92_BASE + i] = v * lin(i, k);
+                        self.p.numbered[params::G92_BASE + i] = self.s.prog_len(i, v);
                     }
                 }
                 self.p.numbered[params::G92_ENABLED] = 1.0;
@@ -514,9 +512,8 @@ impl Interp<'_> {
                         self.s.g92[i] = new;
                     }
                 }
-                let k = 1.0 / self.s.k_mp();
                 for i in 0..6 {
-                    self.p.numbered[params::G92_BASE + i] = self.s.g92[i] * lin(i, k);
+                    self.p.numbered[params::G92_BASE + i] = self.s.prog_len(i, self.s.g92[i]);
                 }
                 self.p.numbered[params::G92_ENABLED] = 1.0;
                 self.emit(CanonCmd::SetG92Offset(pose6(&self.s.g92)))
@@ -543,7 +540,7 @@ impl Interp<'_> {
     /// G92.3: the offsets stored in #5211… applied again.
     pub(super) fn g92_apply_stored(&mut self) -> Result<(), GcodeError> {
         for i in 0..6 {
-            let v = self.p.numbered[params::G92_BASE + i] * lin(i, self.s.k_mp());
+            let v = self.s.user_len(i, self.p.numbered[params::G92_BASE + i]);
             self.s.pos[i] += self.s.g92[i] - v;
             self.s.g92[i] = v;
         }
@@ -563,11 +560,11 @@ impl Interp<'_> {
         self.s.pos = mid;
         let any = b.has_axis();
         let mut end = mid;
-        let k = self.s.k_mp();
         // The stored home is a machine position: seen through a rotated frame, X and Y of
         // the home both depend on the rotation (LinuxCNC then moves the named axes to it).
         let home_prog = (self.s.rotation != 0.0).then(|| {
-            let h: [f64; 6] = std::array::from_fn(|i| self.p.numbered[base + i] * lin(i, k));
+            let h: [f64; 6] =
+                std::array::from_fn(|i| self.s.user_len(i, self.p.numbered[base + i]));
             self.program_of_machine(&h, true)
         });
         for (i, &c) in AXES.iter().enumerate() {
@@ -575,7 +572,7 @@ impl Interp<'_> {
                 end[i] = match home_prog {
                     Some(h) => h[i],
                     None => {
-                        self.p.numbered[base + i] * lin(i, k)
+                        self.s.user_len(i, self.p.numbered[base + i])
                             - self.s.g5x[i]
                             - self.s.g92[i]
                             - self.s.tool_offset[i]
@@ -625,7 +622,6 @@ impl Interp<'_> {
                     )?;
                 }
                 let base = g5x_base(index);
-                let to_param = lin(0, 1.0 / self.s.k_mp());
                 let target_rot = self.p.numbered[base + 9];
                 let rotated = l == 20 && (target_rot != 0.0 || self.s.rotation != 0.0);
                 for (i, &c) in AXES.iter().enumerate() {
@@ -635,7 +631,7 @@ impl Interp<'_> {
                         } else {
                             self.s.pos[i] + self.s.g5x[i] - v
                         };
-                        self.p.numbered[base + i] = prog * lin(i, to_param);
+                        self.p.numbered[base + i] = self.s.prog_len(i, prog);
                     }
                 }
                 if rotated && (b.has(b'x') || b.has(b'y')) {
@@ -645,8 +641,8 @@ impl Interp<'_> {
                     let m = self.machine_of_program(&self.s.pos, false);
                     let want = |c: u8, i: usize| b.get(c).unwrap_or(self.s.pos[i]) + self.s.g92[i];
                     let (wx, wy) = frame::rotate(want(b'x', 0), want(b'y', 1), target_rot);
-                    self.p.numbered[base] = (m[0] - wx) * to_param;
-                    self.p.numbered[base + 1] = (m[1] - wy) * to_param;
+                    self.p.numbered[base] = self.s.prog_len(0, m[0] - wx);
+                    self.p.numbered[base + 1] = self.s.prog_len(1, m[1] - wy);
                 }
                 if let Some(r) = b.get(b'r') {
                     self.p.numbered[base + 9] = r;
@@ -678,26 +674,48 @@ fn fmt_g(m: u16) -> String {
 }
 
 impl super::Settings {
-    /// Factor from machine units (stored parameters, tool table) to program units.
-    pub(crate) fn k_mp(&self) -> f64 {
-        self.machine_units.mm_per_unit() / self.units.mm_per_unit()
+    /// A length in machine units (tool table, stored offsets) in program units, rounded as
+    /// rs274's `USER_TO_PROGRAM_LEN`: divided by the machine's units per mm, then by the
+    /// program's mm per unit. rs274's standalone canon gives 0.03937007874016 per mm for an
+    /// inch machine (not 1/25.4), which moves the last bits of converted values.
+    pub(crate) fn user_to_prog(&self, v: f64) -> f64 {
+        v / ext_units_per_mm(self.machine_units) / self.units.mm_per_unit()
+    }
+
+    /// Axis `i`'s (X Y Z A B C [U V W]) stored value in program units: lengths converted
+    /// as [`Self::user_to_prog`], angles (A B C) as they are.
+    pub(crate) fn user_len(&self, i: usize, v: f64) -> f64 {
+        if (3..6).contains(&i) {
+            v
+        } else {
+            self.user_to_prog(v)
+        }
+    }
+
+    /// The inverse of [`Self::user_len`] (rs274's `PROGRAM_TO_USER_LEN` for lengths).
+    pub(crate) fn prog_len(&self, i: usize, v: f64) -> f64 {
+        if (3..6).contains(&i) {
+            v
+        } else {
+            v * self.units.mm_per_unit() * ext_units_per_mm(self.machine_units)
+        }
+    }
+
+    /// rs274's `PROGRAM_TO_USER_LEN` and `USER_TO_PROGRAM_LEN` for the units now in force,
+    /// as plain functions (to use while the tool table is borrowed).
+    pub(crate) fn unit_conversions(&self) -> (impl Fn(f64) -> f64, impl Fn(f64) -> f64) {
+        let (pm, ext) = (
+            self.units.mm_per_unit(),
+            ext_units_per_mm(self.machine_units),
+        );
+        (move |v: f64| v * pm * ext, move |v: f64| v / ext / pm)
     }
 }
 
-/// Like [`lin`] for a 9-axis pose: X Y Z and U V W are linear, A B C rotary.
-pub(crate) fn lin9(i: usize, k: f64) -> f64 {
-    if (3..6).contains(&i) {
-        1.0
-    } else {
-        k
-    }
-}
-
-/// Scale factor for axis `i` between unit systems: linear axes scale, rotary do not.
-pub(crate) fn lin(i: usize, k: f64) -> f64 {
-    if i < 3 {
-        k
-    } else {
-        1.0
+/// rs274's `GET_EXTERNAL_LENGTH_UNITS` (machine units per mm) for the machine units.
+fn ext_units_per_mm(u: crate::gcode::canon::LengthUnits) -> f64 {
+    match u {
+        crate::gcode::canon::LengthUnits::Inches => 0.039_370_078_740_16,
+        crate::gcode::canon::LengthUnits::Millimeters => 1.0,
     }
 }

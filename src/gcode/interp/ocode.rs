@@ -157,6 +157,14 @@ impl Interp<'_> {
         let missing = |me: &Self, what: &str| me.err(o.col, format!("o<{label}> {what}"));
         match o.kind {
             OKind::Sub => {
+                if self.subs.get(&label) == Some(&(f, l)) {
+                    // a call found this definition ahead of the program, which now runs
+                    // into it (or passes it a second time): rs274 refuses that
+                    return Err(self.err(
+                        o.col,
+                        format!("Subroutine o<{label}> found in illegal location: the program runs into a definition it has already read (end the main program with M2 or M30 before its subroutines)"),
+                    ));
+                }
                 self.subs.insert(label.clone(), (f, l));
                 let end = self
                     .find_next(f, l, &label, &[OKind::EndSub])
@@ -232,6 +240,7 @@ impl Interp<'_> {
                         ),
                     ));
                 }
+                let call = self.loc.line;
                 let target = match self.subs.get(&label).copied() {
                     Some(t) => t,
                     None => {
@@ -248,24 +257,42 @@ impl Interp<'_> {
                                 }
                             }
                         }
-                        let numbered = self.files.iter().any(|src| {
-                            src.by_label.get(&label).is_some_and(|ls| {
-                                ls.iter().any(|x| {
-                                    src.olines.get(x).map(|o| o.kind) == Some(OKind::ProgramNumber)
-                                })
+                        let numbered = self.files.iter().enumerate().find_map(|(fi, src)| {
+                            src.by_label.get(&label).and_then(|ls| {
+                                ls.iter()
+                                    .find(|x| {
+                                        src.olines.get(x).map(|o| o.kind)
+                                            == Some(OKind::ProgramNumber)
+                                    })
+                                    .map(|&l| (fi, l))
                             })
                         });
-                        match found {
-                            Some(t) => t,
-                            None if numbered => {
-                                return Err(self.err(
-                                    o.col,
-                                    "Fanuc 'O....' subroutine must be called with 'M98'",
+                        match (found, numbered) {
+                            (Some(t), _) => {
+                                // rs274 registers the definition its search found, so the
+                                // program must not run into it later (see OKind::Sub)
+                                self.subs.insert(label.clone(), t);
+                                t
+                            }
+                            // rs274 stops at the numbered program its search finds
+                            (None, Some((fi, l))) => {
+                                return Err(self.err_at(
+                                    fi,
+                                    l,
+                                    format!("Fanuc 'O....' subroutine must be called with 'M98' (O{label} is called by 'O{label} call' at line {call})"),
                                 ))
                             }
-                            None => self.load_sub_file(&label)?.ok_or_else(|| {
-                                self.err(o.col, format!("Unable to find subroutine o<{label}>: not defined and no file {label}.ngc on the subroutine path"))
-                            })?,
+                            (None, None) => match self.load_sub_file(&label)? {
+                                Some(t) => t,
+                                None => {
+                                    let f = self.pc.0;
+                                    return Err(self.err_at(
+                                        f,
+                                        self.search_end_line(f),
+                                        format!("Failed to find subroutine o<{label}> before the end of the file, nor a file {label}.ngc on the subroutine path (called at line {call})"),
+                                    ));
+                                }
+                            },
                         }
                     }
                 };

@@ -1,6 +1,5 @@
 //! The var file at the start and end of a run (see [`crate::gcode::varfile`]).
 
-use super::motion::lin;
 use super::{GcodeError, Interp};
 use crate::gcode::expr::ParamSource;
 use crate::gcode::params::{COORD_INDEX, G92_BASE, G92_ENABLED};
@@ -33,9 +32,8 @@ impl Interp<'_> {
         self.s.rotation = rot;
         self.s.origin_index = index;
         if self.p.numbered[G92_ENABLED] == 1.0 {
-            let k = self.s.k_mp();
             for i in 0..6 {
-                self.s.g92[i] = self.p.numbered[G92_BASE + i] * lin(i, k);
+                self.s.g92[i] = self.s.user_len(i, self.p.numbered[G92_BASE + i]);
             }
         }
         for i in 0..6 {

@@ -12,19 +12,34 @@ use crate::gcode::canon::Plane;
 use crate::gcode::modal::{Block, POLAR_A, POLAR_R};
 use crate::gcode::GcodeError;
 
+/// LinuxCNC's `D2R`: `deg * (M_PI / 180.)`, the constant rounded first.
+fn d2r(deg: f64) -> f64 {
+    const RAD_PER_DEG: f64 = std::f64::consts::PI / 180.0;
+    deg * RAD_PER_DEG
+}
+
 /// The point the polar words of `b` name, seen from the current point (`cx`, `cy`).
+///
+/// In G91 rs274 applies the distance and the angle as two steps, each from the point the
+/// one before left (distance first: its angle is re-measured with `atan2` for the angle
+/// step); doing both at once rounds differently and turns some zeros' signs.
 pub(super) fn polar_point(b: &Block, absolute: bool, cx: f64, cy: f64) -> (f64, f64) {
-    let (mut r, mut t) = (cx.hypot(cy), cy.atan2(cx));
-    // `deg * PI / 180` as LinuxCNC's D2R rounds it (see frame::rotate).
-    let angle = b.get(POLAR_A).map(|d| d * std::f64::consts::PI / 180.0);
+    let (dist, angle) = (b.get(POLAR_R), b.get(POLAR_A).map(d2r));
     if absolute {
-        r = b.get(POLAR_R).unwrap_or(r);
-        t = angle.unwrap_or(t);
-    } else {
-        r += b.get(POLAR_R).unwrap_or(0.0);
-        t += angle.unwrap_or(0.0);
+        let r = dist.unwrap_or_else(|| cx.hypot(cy));
+        let t = angle.unwrap_or_else(|| cy.atan2(cx));
+        return (r * t.cos(), r * t.sin());
     }
-    (r * t.cos(), r * t.sin())
+    let (mut x, mut y) = (cx, cy);
+    if let Some(d) = dist {
+        let (r, t) = (y.hypot(x) + d, y.atan2(x));
+        (x, y) = (r * t.cos(), r * t.sin());
+    }
+    if let Some(a) = angle {
+        let (r, t) = (y.hypot(x), y.atan2(x) + a);
+        (x, y) = (r * t.cos(), r * t.sin());
+    }
+    (x, y)
 }
 
 impl Interp<'_> {

@@ -549,7 +549,12 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
     let mut cur = els[0].a;
     while i < els.len() {
         let e = els[i];
-        let fed_to_start = !pockets && e.whole && geom::same(cur, e.a);
+        // rs274's climb_only: a line climbs unless its end is below its start, compared
+        // without tolerance (one ending 7e-15 lower is not climbing); a climbing one is fed
+        // to from where the tool is (a zero-length feed at its start), one that is not
+        // climbing only drawn.
+        let sinking_line = e.arc.is_none() && e.b[0] < e.a[0];
+        let fed_to_start = !pockets && e.whole && !sinking_line && geom::same(cur, e.a);
         if fed_to_start {
             cy.feed(e.a);
         }

@@ -153,7 +153,7 @@ impl Settings {
             adaptive_feed: false,
             feed_hold: true,
             tool: 0,
-            tool_slot: 0,
+            tool_slot: opts.start_pocket,
             spindle_tool: None,
             selected: None,
             cycle_start_z: 0.0,

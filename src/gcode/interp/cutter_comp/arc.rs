@@ -7,6 +7,7 @@ use super::{
 };
 use crate::gcode::canon::CanonCmd;
 use crate::gcode::interp::Interp;
+use crate::gcode::ldouble::{add_pi, add_pi_then, mul_sin_minus_half_pi};
 use crate::gcode::GcodeError;
 use std::f64::consts::PI;
 
@@ -101,9 +102,9 @@ impl Interp<'_> {
             alpha - theta
         };
         if beta > 1.5 * PI {
-            beta -= 2.0 * PI;
+            beta = add_pi(beta, -2.0);
         } else if beta < -std::f64::consts::FRAC_PI_2 {
-            beta += 2.0 * PI;
+            beta = add_pi(beta, 2.0);
         }
         let cutting_inside = (side == Side::Left && !spec.cw) || (side == Side::Right && spec.cw);
         let gamma = if cutting_inside {
@@ -115,7 +116,7 @@ impl Interp<'_> {
             }
             (ceny - ey).atan2(cenx - ex)
         } else {
-            delta += PI;
+            delta = add_pi(delta, 1.0);
             (ey - ceny).atan2(ex - cenx)
         };
         let (nx, ny) = (ex + radius * gamma.cos(), ey + radius * gamma.sin());
@@ -134,7 +135,7 @@ impl Interp<'_> {
             // concave corner
             let (mx, my) = match self.front_arc() {
                 None => {
-                    let ccy = arc_radius * add_half_pi(beta, -1.0).sin();
+                    let ccy = mul_sin_minus_half_pi(arc_radius, beta);
                     let (dist, ang) = if inside(side, turn) {
                         let dist = arc_radius - radius;
                         let l = (ccy + radius) / dist;
@@ -158,9 +159,9 @@ impl Interp<'_> {
                         (
                             dist,
                             if turn > 0 {
-                                theta + PI - l.asin()
+                                add_pi_then(theta, 1.0, -l.asin())
                             } else {
-                                theta + PI + l.asin()
+                                add_pi_then(theta, 1.0, l.asin())
                             },
                         )
                     };

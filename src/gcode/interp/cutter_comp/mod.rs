@@ -328,7 +328,7 @@ impl Interp<'_> {
                     format!("G{name} with lathe tool, but plane is not G18"),
                 ));
             }
-            (dia * self.s.k_mp() / 2.0, orientation)
+            (self.s.user_to_prog(dia) / 2.0, orientation)
         };
         if radius < 0.0 {
             radius = -radius;
@@ -360,6 +360,9 @@ impl Interp<'_> {
             let (a1, a2, _) = self.comp_plane()?;
             let (cx, cy) = (self.s.pos[a1], self.s.pos[a2]);
             self.move_endpoint_and_flush(cx, cy)?;
+            // rs274 dequeues once more here, which leaves no valid endpoint: the next
+            // entry move's held arc is not checked against where this pass ended
+            self.dequeue()?;
             let mut tool = [0.0; 3];
             tool.copy_from_slice(&self.s.pos[..3]);
             self.s.pos[..3].copy_from_slice(&self.comp.prog);
@@ -486,6 +489,11 @@ impl Interp<'_> {
             return Ok(());
         }
         let (ep, valid) = (self.comp.endpoint, self.comp.endpoint_valid);
+        // rs274's allowance for a held arc's sweep growing: 0.001 in, 0.0254 mm
+        let sweep_tol = match self.s.units {
+            crate::gcode::canon::LengthUnits::Inches => 0.001,
+            crate::gcode::canon::LengthUnits::Millimeters => 0.0254,
+        };
         let mut err = None;
         for (_, it) in &mut self.comp.queue {
             match it {
@@ -502,7 +510,7 @@ impl Interp<'_> {
                     if (r1 - r2).abs() > 0.01 {
                         // rs274 reports this as a bug of its own; it refuses the program too.
                         err = Some("Cutter compensation cannot join these moves: the corner point is off the compensated arc (mismatched radii)");
-                    } else if *sweep != 0.0 && valid && l2.abs() > sweep.abs() + 0.001 {
+                    } else if *sweep != 0.0 && valid && l2.abs() > sweep.abs() + sweep_tol {
                         err = Some("Arc move in concave corner cannot be reached by the tool without gouging");
                     }
                     *end = (x, y);

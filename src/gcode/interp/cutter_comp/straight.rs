@@ -3,6 +3,7 @@
 
 use super::{add_half_pi, corner_arc, inside, Item, Side, SMALL};
 use crate::gcode::interp::Interp;
+use crate::gcode::ldouble::{add_pi, half_add_pi};
 use crate::gcode::modal::Block;
 use crate::gcode::GcodeError;
 use std::f64::consts::PI;
@@ -67,7 +68,7 @@ impl Interp<'_> {
             let mut alpha = (py - opy).atan2(px - opx);
             let (beta, gamma) = if side == Side::Left {
                 if theta < alpha {
-                    theta += 2.0 * PI;
+                    theta = add_pi(theta, 2.0);
                 }
                 (
                     add_half_pi(theta - alpha, -1.0),
@@ -75,7 +76,7 @@ impl Interp<'_> {
                 )
             } else {
                 if alpha < theta {
-                    alpha += 2.0 * PI;
+                    alpha = add_pi(alpha, 2.0);
                 }
                 (
                     add_half_pi(alpha - theta, -1.0),
@@ -114,7 +115,7 @@ impl Interp<'_> {
                 let (mx, my) = match front {
                     None => {
                         // line -> line: back along the held move to the intersection
-                        let halfcorner = (beta + PI) / 2.0;
+                        let halfcorner = half_add_pi(beta);
                         if halfcorner == 0.0 {
                             return Err(self.err(
                                 self.loc.col,
@@ -149,7 +150,7 @@ impl Interp<'_> {
                         } else {
                             l.acos()
                         };
-                        let ang = a + th + PI;
+                        let ang = add_pi(a + th, 1.0);
                         (pcen.0 + oldrad * ang.cos(), pcen.1 + oldrad * ang.sin())
                     }
                 };
