@@ -132,6 +132,27 @@ fn piece_segment(m: &Prepared, pc: &Piece, kind: SegmentKind, lim: &Limits) -> S
     }
 }
 
+/// Where the blend after move `m` starts: `x` mm before its end, along its exit direction
+/// (exact geometry, so rounding never accumulates from piece to piece).
+fn blend_start(m: &Prepared, x: f64) -> [f64; NUM_AXES] {
+    let mut p = m.mv.end_mm;
+    for i in 0..NUM_AXES {
+        p[i] -= m.u[i] * x;
+    }
+    p
+}
+
+/// Ends move `m`'s pieces (those pushed after `first_piece`) exactly at `end`, then queues
+/// the move's auxiliary items.
+fn close_move(out: &mut Vec<Item>, first_piece: usize, end: [f64; NUM_AXES], m: &Prepared) {
+    if out.len() > first_piece {
+        if let Some(Item::Segment(last)) = out.last_mut() {
+            last.end_mm = end;
+        }
+    }
+    out.extend(m.aux_after.iter().map(|a| Item::Aux(*a)));
+}
+
 /// Emits the span `sp` (moves `sp.first..=sp.last`, joined tangentially): one S-curve up,
 /// a cruise and one S-curve down over the whole span, cut at the moves' ends into windowed
 /// segments, each move's auxiliary items after its last piece, and the blend after the span.
@@ -223,27 +244,17 @@ pub(super) fn emit_span(
             push(out, lim, piece_segment(m, &pc, kind, lim));
         }
         // Each move's last piece ends exactly at its end (the blend's start for the last).
-        let mut end = m.mv.end_mm;
-        if k == sp.last {
-            for i in 0..NUM_AXES {
-                end[i] -= m.u[i] * x;
-            }
-        }
-        if out.len() > first_piece {
-            if let Some(Item::Segment(last)) = out.last_mut() {
-                last.end_mm = end;
-            }
-        }
-        out.extend(m.aux_after.iter().map(|a| Item::Aux(*a)));
+        let end = if k == sp.last {
+            blend_start(m, x)
+        } else {
+            m.mv.end_mm
+        };
+        close_move(out, first_piece, end, m);
         c0 = c1;
     }
-    let m = &p[sp.last];
     if let Some(c) = corners[sp.last] {
         if v_out > 0.0 && !c.is_straight() {
-            let mut corner_start = m.mv.end_mm;
-            for i in 0..NUM_AXES {
-                corner_start[i] -= m.u[i] * x;
-            }
+            let corner_start = blend_start(&p[sp.last], x);
             emit_blend(p, sp.last, c, corner_start, v_out, x, lim, out);
         }
     }
@@ -324,18 +335,10 @@ pub(super) fn emit_move(
         &mut pos,
         &mut done,
     );
-    // The blend starts from exact geometry, so rounding never accumulates.
-    let mut corner_start = m.mv.end_mm;
-    for i in 0..NUM_AXES {
-        corner_start[i] -= m.u[i] * x;
-    }
-    // The last piece ends exactly where the blend (or the next move) starts.
-    if out.len() > first_piece {
-        if let Some(Item::Segment(last)) = out.last_mut() {
-            last.end_mm = corner_start;
-        }
-    }
-    out.extend(m.aux_after.iter().map(|a| Item::Aux(*a)));
+    // The blend starts from exact geometry, so rounding never accumulates; the last piece
+    // ends exactly there (or where the next move starts).
+    let corner_start = blend_start(m, x);
+    close_move(out, first_piece, corner_start, m);
     if let Some(c) = corners[k] {
         if v_out > 0.0 && !c.is_straight() {
             emit_blend(p, k, c, corner_start, v_out, x, lim, out);
