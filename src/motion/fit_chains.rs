@@ -53,7 +53,10 @@ fn fit_stretch(
     let ends = gentle_ends(moves, i, j);
     // The fit is kept unless clearly slower than its chords (see `fit_choice::MARGIN`).
     let (pieces, junctions) = arc_pieces(&arcs, lim);
-    let fit_ends = end_speeds(&arcs, &arcs, ends, lim);
+    let fit_ends = [
+        end_speed(ends[0], arcs.first(), lim),
+        end_speed(ends[1], arcs.last(), lim),
+    ];
     let fit_s = fit_choice::estimate_s(&pieces, &junctions, fit_ends);
     let chords_s = estimate_chords(&moves[i..=j], ends, lim);
     let whole = fit_s <= (1.0 + fit_choice::MARGIN) * chords_s;
@@ -131,21 +134,25 @@ fn step_speed(dk: f64, lim: &Limits) -> f64 {
     }
 }
 
-/// End speeds of a fitted stretch from `first` to `last`: a stop where the neighbour is not
-/// a gentle XY move, else the curvature step to the (straight) neighbour.
-fn end_speeds(first: &[Prepared], last: &[Prepared], gentle: [bool; 2], lim: &Limits) -> [f64; 2] {
-    let at = |g: bool, p: Option<&Prepared>| match (g, p) {
+/// Speed allowed at one end of a stretch: a stop where the neighbour is not a gentle XY move,
+/// else the curvature step to the (straight) neighbour when the stretch ends in the arc
+/// `arc`, and no limit when it ends in a chord (`None`).
+fn end_speed(gentle: bool, arc: Option<&Prepared>, lim: &Limits) -> f64 {
+    match (gentle, arc) {
+        (false, _) => 0.0,
         (true, Some(p)) => step_speed(p.curv, lim),
-        _ => 0.0,
-    };
-    [at(gentle[0], first.first()), at(gentle[1], last.last())]
+        (true, None) => f64::INFINITY,
+    }
 }
 
 /// Estimated time of chords `raw` as lines.
 fn estimate_chords(raw: &[Move], gentle: [bool; 2], lim: &Limits) -> f64 {
     let (p, jn, blend_s) = fit_choice::chords(raw, lim);
-    let end = |g: bool| if g { f64::INFINITY } else { 0.0 };
-    fit_choice::estimate_s(&p, &jn, [end(gentle[0]), end(gentle[1])]) + blend_s
+    let ends = [
+        end_speed(gentle[0], None, lim),
+        end_speed(gentle[1], None, lim),
+    ];
+    fit_choice::estimate_s(&p, &jn, ends) + blend_s
 }
 
 /// Estimated time of raw moves `i..=j` planned as the fitted stretches `split` (in order)
@@ -193,12 +200,10 @@ fn estimate_split(
     }
     let first_curv = split.first().filter(|s| s.0 == i).and_then(|s| s.2.first());
     let last_curv = split.last().filter(|s| s.1 == j).and_then(|s| s.2.last());
-    let end = |g: bool, p: Option<&Prepared>| match (g, p) {
-        (false, _) => 0.0,
-        (true, Some(p)) => step_speed(p.curv, lim),
-        (true, None) => f64::INFINITY,
-    };
-    let ends = [end(gentle[0], first_curv), end(gentle[1], last_curv)];
+    let ends = [
+        end_speed(gentle[0], first_curv, lim),
+        end_speed(gentle[1], last_curv, lim),
+    ];
     fit_choice::estimate_s(&pieces, &junctions, ends) + blend_s
 }
 
@@ -258,14 +263,16 @@ fn gentle_ends(moves: &[Move], i: usize, j: usize) -> [bool; 2] {
 
 /// Two XY moves joined by a blend that turn gently enough to be fitted across.
 fn gentle(a: &Move, b: &Move) -> bool {
-    let (u, w) = (dir2(a), dir2(b));
     matches!(a.junction, Junction::Blend { .. })
         && xy_only(a)
         && xy_only(b)
-        && (u[0] * w[1] - u[1] * w[0])
-            .atan2(u[0] * w[0] + u[1] * w[1])
-            .abs()
-            <= arcfit::MAX_TURN_RAD
+        && turn(a, b).abs() <= arcfit::MAX_TURN_RAD
+}
+
+/// Signed turning angle from XY move `a` to XY move `b`, rad (> 0 turns left).
+fn turn(a: &Move, b: &Move) -> f64 {
+    let (u, w) = (dir2(a), dir2(b));
+    (u[0] * w[1] - u[1] * w[0]).atan2(u[0] * w[0] + u[1] * w[1])
 }
 
 /// Shortest run of chords worth fitting.
@@ -292,10 +299,7 @@ fn dir2(m: &Move) -> V2 {
 /// Runs `(first, last)` of raw moves that may be fitted into arcs: XY feed chords with one
 /// feed and one blend tolerance, nothing queued between them, turning gently.
 fn find_chains(moves: &[Move], joinable: &[bool], exact_mm: f64) -> Vec<(usize, usize)> {
-    let turn = |k: usize| {
-        let (u, w) = (dir2(&moves[k]), dir2(&moves[k + 1]));
-        (u[0] * w[1] - u[1] * w[0]).atan2(u[0] * w[0] + u[1] * w[1])
-    };
+    let turn = |k: usize| turn(&moves[k], &moves[k + 1]);
     let link = |k: usize| {
         let (a, b) = (&moves[k], &moves[k + 1]);
         joinable[k]
