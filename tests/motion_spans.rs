@@ -174,3 +174,52 @@ fn override_and_hold_on_a_span_stay_within_limits() {
         assert!(s.peak_ratio <= 1.0 + LIMIT_TOL, "{s:?}");
     }
 }
+
+/// Spans cross junctions capped below their cruise when their profile passes them slower
+/// (`lookahead::group_speeds`): on the benchmark sine, some speed transition runs on across a
+/// curvature step `Δκ` at which its top speed `v` would step the acceleration by `v²·|Δκ|`
+/// more than any step budget allows (at most half the planning jerk over one servo period),
+/// so the junction caps below the span's cruise; the trace stays within every limit, and the
+/// windowed pieces pass every such junction with `v²·|Δκ|` within that bound.
+#[test]
+fn a_span_crosses_a_junction_it_passes_below_the_junction_cap() {
+    let cfg = MotionConfig::default();
+    let prog = load_str("sine.ngc", &gen::sine(3000, 0.1), &InterpOptions::default()).unwrap();
+    let p = plan(&prog.canon, &cfg).unwrap();
+    let speed = |v: &[f64; 9]| v.iter().map(|c| c * c).sum::<f64>().sqrt();
+    // Upper bound of the step budget: half of the planning jerk over one servo period.
+    let budget =
+        0.5 * (1.0 - cfg.override_reserve) * cfg.axes[0].max_jerk_mm_s3 * cfg.servo_period_s;
+    let segs = segments(&p);
+    let mut crossed = 0;
+    // Speed at the start of the transition the current pieces belong to.
+    let mut s_start = 0.0;
+    for w in segs.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if a.window.full_s > 0.0 && a.window.offset_s == 0.0 {
+            s_start = speed(&a.v0_mm_s);
+        }
+        let same_transition = a.window.full_s > 0.0
+            && a.window.full_s == b.window.full_s
+            && a.window.dv_mm_s == b.window.dv_mm_s
+            && (b.window.offset_s - (a.window.offset_s + a.duration_s)).abs() < 1e-9;
+        let dk = (a.curvature_per_mm - b.curvature_per_mm).abs();
+        if !same_transition || dk == 0.0 {
+            continue;
+        }
+        let at_junction = speed(&a.v1_mm_s);
+        let top = s_start.max(s_start + a.window.dv_mm_s);
+        assert!(
+            at_junction * at_junction * dk <= budget * (1.0 + 1e-9),
+            "a span passes a curvature step too fast: {at_junction} mm/s at {dk} 1/mm"
+        );
+        if top * top * dk > budget {
+            crossed += 1;
+        }
+    }
+    assert!(
+        crossed > 0,
+        "no span crossed a junction capped below its cruise"
+    );
+    assert_within_limits(&trace::run_all(&p, &cfg), &cfg);
+}
