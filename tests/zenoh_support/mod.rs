@@ -12,14 +12,31 @@ use std::time::{Duration, Instant};
 use zenoh::Wait;
 
 /// A TCP port that was free a moment ago, for a Zenoh endpoint given in a config file.
-/// The port is released before the daemon binds it, so another process could take it in
-/// between; the window is short and ports come from the kernel's ephemeral range.
+///
+/// The port is released before the session binds it, so it must not come from the
+/// kernel's ephemeral range (`ip_local_port_range`, 32768-60999 by default): every outgoing
+/// connection of a parallel test draws its source port from that range and could take it
+/// in between (stop 25's CI lost a test to exactly that). Ports are handed out from
+/// 20000-32767 instead, starting at an offset drawn from the process id so that two test
+/// binaries running at once rarely probe the same ones, and each is probed with a bind.
 pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
+    use std::sync::atomic::{AtomicU32, Ordering};
+    const FIRST: u32 = 20000;
+    const COUNT: u32 = 32768 - FIRST;
+    static NEXT: AtomicU32 = AtomicU32::new(u32::MAX);
+    let _ = NEXT.compare_exchange(
+        u32::MAX,
+        std::process::id().wrapping_mul(7919) % COUNT,
+        Ordering::Relaxed,
+        Ordering::Relaxed,
+    );
+    for _ in 0..COUNT {
+        let port = (FIRST + NEXT.fetch_add(1, Ordering::Relaxed) % COUNT) as u16;
+        if std::net::TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            return port;
+        }
+    }
+    panic!("no free TCP port in {FIRST}..32768 on loopback");
 }
 
 /// A `[zenoh]` table exporting as `key` on a fresh loopback endpoint, with the TOML lines
