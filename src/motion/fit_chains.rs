@@ -59,7 +59,11 @@ fn fit_stretch(
     ];
     let fit_s = fit_choice::estimate_s(&pieces, &junctions, fit_ends);
     let chords_s = estimate_chords(&moves[i..=j], ends, lim);
-    let whole = fit_s <= (1.0 + fit_choice::MARGIN) * chords_s;
+    let whole = if j + 1 - i >= MARGIN_CHAIN {
+        fit_s <= (1.0 + fit_choice::MARGIN) * chords_s
+    } else {
+        fit_s < (1.0 - SHORT_CHAIN_GAIN) * chords_s
+    };
     let whole_s = if whole { fit_s } else { chords_s };
     // A split is tried only where it could gain: not even the fit with its slow junctions
     // at the arcs' caps would run much faster than the choice so far (the common case on
@@ -274,6 +278,17 @@ fn turn(a: &Move, b: &Move) -> f64 {
     let (u, w) = (dir2(a), dir2(b));
     (u[0] * w[1] - u[1] * w[0]).atan2(u[0] * w[0] + u[1] * w[1])
 }
+
+/// Shortest run of chords given the estimate's margin ([`fit_choice::MARGIN`]). Shorter runs,
+/// a few chords between rounding-noise flips as in opencamlib's waterlines, are fitted only
+/// where the estimate gains [`SHORT_CHAIN_GAIN`]: the estimate sees the run alone, but a
+/// fitted run also keeps its neighbours from being merged and meets them with curvature
+/// steps. Fitted within the margin, the dome waterline's short runs planned 13.9 s against
+/// 13.1 s as chords; one run estimated 1 % faster cost it 0.14 s.
+const MARGIN_CHAIN: usize = 12;
+
+/// Share of its chords' estimated time a short run's fit must save to be kept.
+const SHORT_CHAIN_GAIN: f64 = 0.1;
 
 /// Shortest run of chords worth fitting.
 const MIN_CHAIN: usize = 3;
