@@ -37,8 +37,10 @@ fn dot(a: V2, b: V2) -> f64 {
 fn cross(a: V2, b: V2) -> f64 {
     a[0] * b[1] - a[1] * b[0]
 }
+/// Length of `a`; plain `sqrt`, not `hypot`: coordinates in mm cannot overflow, and libm's
+/// `hypot` was the largest single cost of fitting a trochoid.
 fn norm(a: V2) -> f64 {
-    a[0].hypot(a[1])
+    (a[0] * a[0] + a[1] * a[1]).sqrt()
 }
 fn unit(a: V2) -> Option<V2> {
     let n = norm(a);
@@ -96,10 +98,43 @@ impl ArcPiece {
 
     /// Distance from `p` to the arc (as a set of points).
     pub fn distance(&self, p: V2) -> f64 {
-        let k = self.curvature_per_mm;
-        let a = self.start;
-        let b = self.end();
+        ArcGeom::new(self).distance(p)
+    }
+}
+
+/// An arc's end points and centre, computed once for many [`ArcPiece::distance`] queries
+/// (the fit checks every chord vertex against every candidate biarc: with the sines,
+/// cosines and arc tangents recomputed per query, that check was a fifth of planning a
+/// trochoid).
+#[derive(Debug, Clone, Copy)]
+struct ArcGeom {
+    a: V2,
+    b: V2,
+    /// Centre, radial vectors to `a` and `b`, radius, turning sign and whether the arc turns
+    /// more than half a turn; `None` when straight.
+    circle: Option<(V2, V2, V2, f64, f64, bool)>,
+}
+
+impl ArcGeom {
+    fn new(arc: &ArcPiece) -> Self {
+        let k = arc.curvature_per_mm;
+        let (a, b) = (arc.start, arc.end());
         if k.abs() < 1e-9 {
+            return ArcGeom { a, b, circle: None };
+        }
+        let t0 = arc.tangent_at(0.0);
+        let c = [a[0] - t0[1] / k, a[1] + t0[0] / k];
+        let wide = (k * arc.length_mm).abs() > std::f64::consts::PI;
+        let circle = Some((c, sub(a, c), sub(b, c), 1.0 / k.abs(), k.signum(), wide));
+        ArcGeom { a, b, circle }
+    }
+
+    /// Distance from `p`: to the circle where `p` faces the arc, else to the nearer end. `p`
+    /// faces an arc of at most half a turn when it lies on the turning side of the start
+    /// radius and not past the end radius; a wider arc, when either holds.
+    fn distance(&self, p: V2) -> f64 {
+        let (a, b) = (self.a, self.b);
+        let Some((c, ca, cb, r, sign, wide)) = self.circle else {
             let ab = sub(b, a);
             let l2 = dot(ab, ab);
             let t = if l2 > 0.0 {
@@ -108,14 +143,16 @@ impl ArcPiece {
                 0.0
             };
             return norm(sub(p, [a[0] + t * ab[0], a[1] + t * ab[1]]));
-        }
-        let t0 = self.tangent_at(0.0);
-        let c = [a[0] - t0[1] / k, a[1] + t0[0] / k];
-        let (ca, cp) = (sub(a, c), sub(p, c));
-        let phi = cross(ca, cp).atan2(dot(ca, cp)) * k.signum();
-        let r = 1.0 / k.abs();
-        let s = phi.rem_euclid(2.0 * std::f64::consts::PI) * r;
-        if s <= self.length_mm {
+        };
+        let cp = sub(p, c);
+        let after_start = sign * cross(ca, cp) >= 0.0;
+        let before_end = sign * cross(cp, cb) >= 0.0;
+        let faces = if wide {
+            after_start || before_end
+        } else {
+            after_start && before_end
+        };
+        if faces {
             (norm(cp) - r).abs()
         } else {
             norm(sub(p, a)).min(norm(sub(p, b)))
@@ -211,10 +248,11 @@ fn distance_to_polyline(p: V2, pts: &[V2]) -> f64 {
 /// inner vertex within half the tolerance of it, and points sampled along it within 0.9 of
 /// the tolerance of the chords near them.
 fn fits(b: &[ArcPiece; 2], pts: &[V2], tol: f64) -> bool {
+    let g = [ArcGeom::new(&b[0]), ArcGeom::new(&b[1])];
     let inner = &pts[1..pts.len() - 1];
     if inner
         .iter()
-        .any(|&p| b[0].distance(p).min(b[1].distance(p)) > 0.5 * tol)
+        .any(|&p| g[0].distance(p).min(g[1].distance(p)) > 0.5 * tol)
     {
         return false;
     }
@@ -432,6 +470,44 @@ pub fn split_marked(mut m: Marked, max_marks: usize, out: &mut Vec<Marked>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The distance from precomputed geometry is the distance to a densely sampled arc, for
+    /// arcs turning either way from 1° to 300° and points all around them.
+    #[test]
+    fn distance_matches_a_sampled_arc() {
+        for (k, len) in [
+            (0.5, 0.035),
+            (0.5, 2.0),
+            (-0.5, 4.0),
+            (0.5, 6.0),
+            (0.5, 10.0),
+            (-2.0, 2.6),
+        ] {
+            let arc = ArcPiece {
+                start: [1.0, 2.0],
+                heading_rad: 0.7,
+                curvature_per_mm: k,
+                length_mm: len,
+            };
+            let samples: Vec<V2> = (0..=20000)
+                .map(|i| arc.point_at(len * i as f64 / 20000.0))
+                .collect();
+            for i in 0..400 {
+                let a = i as f64 * 0.0157;
+                let rad = 0.3 + (i % 7) as f64 * 0.6;
+                let p = [1.0 + rad * a.cos() * 3.0, 2.0 + rad * a.sin() * 3.0];
+                let sampled = samples
+                    .iter()
+                    .map(|q| norm(sub(p, *q)))
+                    .fold(f64::INFINITY, f64::min);
+                let d = arc.distance(p);
+                assert!(
+                    d <= sampled + 1e-12 && d >= sampled - 1e-3,
+                    "k {k} len {len} p {p:?}: {d} vs sampled {sampled}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn marks_follow_the_vertices_and_split_long_arcs() {

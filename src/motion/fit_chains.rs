@@ -293,9 +293,14 @@ const SHORT_CHAIN_GAIN: f64 = 0.1;
 /// Shortest run of chords worth fitting.
 const MIN_CHAIN: usize = 3;
 
+/// XY length of a move (`sqrt`, not libm's slower `hypot`: mm cannot overflow).
+fn xy_len(m: &Move) -> f64 {
+    let (dx, dy) = (m.end_mm[0] - m.start_mm[0], m.end_mm[1] - m.start_mm[1]);
+    (dx * dx + dy * dy).sqrt()
+}
+
 fn xy_only(m: &Move) -> bool {
-    (2..NUM_AXES).all(|i| m.end_mm[i] == m.start_mm[i])
-        && (m.end_mm[0] - m.start_mm[0]).hypot(m.end_mm[1] - m.start_mm[1]) > 1e-9
+    (2..NUM_AXES).all(|i| m.end_mm[i] == m.start_mm[i]) && xy_len(m) > 1e-9
 }
 
 fn fittable(m: &Move, exact_mm: f64) -> bool {
@@ -307,14 +312,16 @@ fn fittable(m: &Move, exact_mm: f64) -> bool {
 
 fn dir2(m: &Move) -> V2 {
     let (dx, dy) = (m.end_mm[0] - m.start_mm[0], m.end_mm[1] - m.start_mm[1]);
-    let l = dx.hypot(dy);
+    let l = (dx * dx + dy * dy).sqrt();
     [dx / l, dy / l]
 }
 
 /// Runs `(first, last)` of raw moves that may be fitted into arcs: XY feed chords with one
 /// feed and one blend tolerance, nothing queued between them, turning gently.
 fn find_chains(moves: &[Move], joinable: &[bool], exact_mm: f64) -> Vec<(usize, usize)> {
-    let turn = |k: usize| turn(&moves[k], &moves[k + 1]);
+    // Each vertex's turn is looked at up to three times (link, and flips on both sides).
+    let turns: Vec<f64> = moves.windows(2).map(|w| turn(&w[0], &w[1])).collect();
+    let turn = |k: usize| turns[k];
     let link = |k: usize| {
         let (a, b) = (&moves[k], &moves[k + 1]);
         joinable[k]
@@ -341,10 +348,7 @@ fn find_chains(moves: &[Move], joinable: &[bool], exact_mm: f64) -> Vec<(usize, 
         while j + 1 < moves.len() && link(j) && !flips(j) {
             j += 1;
         }
-        let len: f64 = moves[i..=j]
-            .iter()
-            .map(|m| (m.end_mm[0] - m.start_mm[0]).hypot(m.end_mm[1] - m.start_mm[1]))
-            .sum();
+        let len: f64 = moves[i..=j].iter().map(xy_len).sum();
         if j + 1 - i >= MIN_CHAIN && len >= MIN_MEAN_CHORD_MM * (j + 1 - i) as f64 {
             out.push((i, j));
         }

@@ -87,7 +87,7 @@ pub fn estimate_s(pieces: &[Piece], junction: &[f64], ends: [f64; 2]) -> f64 {
 /// Unit direction of an XY move (as an axis vector).
 fn dir(m: &Move) -> [f64; NUM_AXES] {
     let (dx, dy) = (m.end_mm[0] - m.start_mm[0], m.end_mm[1] - m.start_mm[1]);
-    let l = dx.hypot(dy);
+    let l = (dx * dx + dy * dy).sqrt();
     let mut u = [0.0; NUM_AXES];
     u[0] = dx / l;
     u[1] = dy / l;
