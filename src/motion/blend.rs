@@ -91,7 +91,48 @@ impl Corner {
         if ok(cap_mm_s) {
             return cap_mm_s;
         }
+        // In closed form (below); a hair lower so that rounding cannot break `ok`, which is
+        // checked. The bisection stays as the fallback it never needs to be in the tests.
+        let v = cap_mm_s
+            .min(self.speed_for_half_length(room))
+            .min(self.speed_for_deviation(tolerance_mm));
+        let v = v * (1.0 - 1e-12);
+        if v >= 0.0 && ok(v) {
+            return v;
+        }
         bisect_max(0.0, cap_mm_s, rel, ok)
+    }
+
+    /// Speed at which the blend becomes accelerating-limited: below it the shape is two
+    /// jerk phases (`T = 2·√(v·β)`), above it `T = v·α + β/α`.
+    fn regime_speed(&self) -> f64 {
+        self.beta / (self.alpha * self.alpha)
+    }
+
+    /// Highest speed whose blend uses at most `room` of each move: `v·T/2 ≤ room`, i.e.
+    /// `v^1.5·√β ≤ room` in the jerk regime and `α/2·v² + β/(2α)·v ≤ room` above it.
+    fn speed_for_half_length(&self, room: f64) -> f64 {
+        let (a, b) = (self.alpha, self.beta);
+        let v = (room / b.sqrt()).powf(2.0 / 3.0);
+        if v <= self.regime_speed() {
+            return v;
+        }
+        let p = b / (2.0 * a);
+        (-p + (p * p + 2.0 * a * room).sqrt()) / a
+    }
+
+    /// Highest speed whose blend stays within `tol` of the corner: the farthest point is
+    /// `v·|du|·F(T/2)`, which is `v^1.5·|du|·√β/6` in the jerk regime and
+    /// `|du|/α·(w²/8 + tj²/24)` with `w = v·α`, `tj = β/α` above it.
+    fn speed_for_deviation(&self, tol: f64) -> f64 {
+        let (a, b) = (self.alpha, self.beta);
+        let v = (6.0 * tol / (self.du_norm * b.sqrt())).powf(2.0 / 3.0);
+        if v <= self.regime_speed() {
+            return v;
+        }
+        let tj = b / a;
+        let w2 = 8.0 * (tol * a / self.du_norm - tj * tj / 24.0);
+        w2.max(0.0).sqrt() / a
     }
 }
 
@@ -107,6 +148,31 @@ mod tests {
         u[0] = x / n;
         u[1] = y / n;
         u
+    }
+
+    /// The closed-form junction speed is the bisection's (to its 1e-9), and always fits:
+    /// corners from 1° to 179°, rooms and tolerances from µm to mm, both shape regimes.
+    #[test]
+    fn closed_form_junction_speed_matches_the_bisection() {
+        let lim = Limits::new(&MotionConfig::default());
+        for deg in [1.0f64, 5.0, 30.0, 90.0, 150.0, 179.0] {
+            let r = deg.to_radians();
+            let c = Corner::new(&unit(1.0, 0.0), &unit(r.cos(), r.sin()), &lim);
+            for len in [0.001, 0.02, 0.1, 1.0, 10.0, 100.0] {
+                for tol in [0.0001, 0.001, 0.01, 0.1, 1.0] {
+                    let cap = 200.0;
+                    let v = c.max_speed(cap, len, 2.0 * len, tol);
+                    let room = BLEND_ROOM_FRACTION * len;
+                    let ok = |v: f64| c.half_length_mm(v) <= room && c.deviation_mm(v) <= tol;
+                    let b = bisect_max(0.0, cap, 1e-12, ok);
+                    assert!(ok(v), "{deg}° len {len} tol {tol}: {v} does not fit");
+                    assert!(
+                        (v - b).abs() <= 1e-9 * cap,
+                        "{deg}° len {len} tol {tol}: {v} vs {b}"
+                    );
+                }
+            }
+        }
     }
 
     /// The blend segment starts and ends exactly on the two moves, and no point of it is
