@@ -177,6 +177,30 @@ fn arc_segments(p: &Plan) -> usize {
         .count()
 }
 
+/// Default settings with arc fitting off.
+fn fit_off() -> MotionConfig {
+    MotionConfig {
+        fit_arcs: false,
+        ..MotionConfig::default()
+    }
+}
+
+/// Plans `g` with fitting on (default settings) and off, asserts the fitted plan takes at
+/// most `ratio` times the chords' time and stays within every limit, and returns it.
+fn fitted_within(name: &str, g: &Prog, ratio: f64) -> Plan {
+    let on = MotionConfig::default();
+    let p_on = plan(&g.canon, &on).unwrap();
+    let p_off = plan(&g.canon, &fit_off()).unwrap();
+    assert!(
+        p_on.duration_s <= ratio * p_off.duration_s,
+        "{name}: {} s with arcs, {} s without",
+        p_on.duration_s,
+        p_off.duration_s
+    );
+    assert_within_limits(&run(&p_on, &on), &on);
+    p_on
+}
+
 /// Whether curve `name` of [`curves`] plans faster fitted than as chords at G64 P0.01, so
 /// that the planner fits it: the 0.05 mm chords of the tight sine and the wavy line run
 /// faster as chords (their blends are small), and `motion::fit_choice` keeps them.
@@ -195,11 +219,7 @@ fn plan_checked(name: &str, pts: &[V2], feed: f64, tol: f64) -> (Plan, Vec<[f64;
     if fitted_at_p001(name) {
         assert!(arc_segments(&p) > 0, "{name}: no arcs");
     } else if feed == 3000.0 {
-        let off = MotionConfig {
-            fit_arcs: false,
-            ..MotionConfig::default()
-        };
-        let chords = plan(&g.canon, &off).expect("the chords plan");
+        let chords = plan(&g.canon, &fit_off()).expect("the chords plan");
         assert!(
             p.duration_s <= chords.duration_s * (1.0 + 1e-9),
             "{name}: {} s, as chords {} s",
@@ -311,11 +331,6 @@ fn rounded_circle(r: f64, steps: [f64; 2], n: usize) -> Vec<V2> {
 /// README.
 #[test]
 fn fitting_does_not_plan_much_slower_than_the_chords() {
-    let on = MotionConfig::default();
-    let off = MotionConfig {
-        fit_arcs: false,
-        ..MotionConfig::default()
-    };
     for (name, pts) in [
         (
             "alternating 0.094/0.006 mm, r 8",
@@ -327,15 +342,7 @@ fn fitting_does_not_plan_much_slower_than_the_chords() {
         ),
     ] {
         let (g, _) = program(&pts, 3000.0, Some(0.01));
-        let p_on = plan(&g.canon, &on).unwrap();
-        let p_off = plan(&g.canon, &off).unwrap();
-        assert!(
-            p_on.duration_s <= 1.2 * p_off.duration_s,
-            "{name}: {} s with arcs, {} s without",
-            p_on.duration_s,
-            p_off.duration_s
-        );
-        assert_within_limits(&run(&p_on, &on), &on);
+        fitted_within(name, &g, 1.2);
     }
 }
 
@@ -347,11 +354,6 @@ fn fitting_does_not_plan_much_slower_than_the_chords() {
 /// fitted whole and planned slower than the chords).
 #[test]
 fn a_noisy_stretch_inside_a_clean_curve_keeps_the_clean_arcs() {
-    let on = MotionConfig::default();
-    let off = MotionConfig {
-        fit_arcs: false,
-        ..MotionConfig::default()
-    };
     let r: f64 = 20.0;
     let mut s: f64 = 0.0;
     let mut pts: Vec<V2> = Vec::new();
@@ -367,17 +369,9 @@ fn a_noisy_stretch_inside_a_clean_curve_keeps_the_clean_arcs() {
         pts.push([round(r * a.cos(), 3), round(r * a.sin(), 3)]);
     }
     let (g, path) = program(&pts, 3000.0, Some(0.01));
-    let p_on = plan(&g.canon, &on).unwrap();
-    let p_off = plan(&g.canon, &off).unwrap();
+    let p_on = fitted_within("noisy stretch", &g, 1.0);
     assert!(arc_segments(&p_on) > 0, "the clean parts are fitted");
-    assert!(
-        p_on.duration_s <= p_off.duration_s,
-        "{} s with arcs, {} s without",
-        p_on.duration_s,
-        p_off.duration_s
-    );
-    let tr = run(&p_on, &on);
-    assert_within_limits(&tr, &on);
+    let tr = run(&p_on, &MotionConfig::default());
     assert!(max_deviation(&tr, &path) <= 0.01 + 1e-9);
 }
 
@@ -427,11 +421,6 @@ fn faceted_waterline(r: f64) -> Vec<V2> {
 /// against 13.1 s with fitting off).
 #[test]
 fn a_faceted_waterline_plans_no_slower_fitted_than_as_chords() {
-    let on = MotionConfig::default();
-    let off = MotionConfig {
-        fit_arcs: false,
-        ..MotionConfig::default()
-    };
     for r in [7.8, 12.0] {
         let pts = faceted_waterline(r);
         // G64 before the rapid, so that its corner into the loop is blended within P too.
@@ -443,16 +432,8 @@ fn a_faceted_waterline_plans_no_slower_fitted_than_as_chords() {
             g.g1(p[0], p[1], 0.0);
             path.push(pose(p[0], p[1], 0.0));
         }
-        let p_on = plan(&g.canon, &on).unwrap();
-        let p_off = plan(&g.canon, &off).unwrap();
-        assert!(
-            p_on.duration_s <= p_off.duration_s * (1.0 + 1e-9),
-            "r {r}: {} s with arcs, {} s without",
-            p_on.duration_s,
-            p_off.duration_s
-        );
-        let tr = run(&p_on, &on);
-        assert_within_limits(&tr, &on);
+        let p_on = fitted_within(&format!("r {r}"), &g, 1.0 + 1e-9);
+        let tr = run(&p_on, &MotionConfig::default());
         assert!(max_deviation(&tr, &path) <= 0.01 + 1e-9);
     }
 }
