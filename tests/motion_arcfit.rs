@@ -189,8 +189,8 @@ fn fit_off() -> MotionConfig {
 /// most `ratio` times the chords' time and stays within every limit, and returns it.
 fn fitted_within(name: &str, g: &Prog, ratio: f64) -> Plan {
     let on = MotionConfig::default();
-    let p_on = plan(&g.canon, &on).unwrap();
-    let p_off = plan(&g.canon, &fit_off()).unwrap();
+    let p_on = plan(&g.canon, &on).expect("the fit plans");
+    let p_off = plan(&g.canon, &fit_off()).expect("the chords plan");
     assert!(
         p_on.duration_s <= ratio * p_off.duration_s,
         "{name}: {} s with arcs, {} s without",
