@@ -73,6 +73,22 @@ fn plan_refuses_a_subnormal_feed_by_position() {
     );
 }
 
+/// A program the planner refuses (a move past the soft limits) is named with its file and
+/// line, as a refused job is (`hytask plan` said only "line 2").
+#[test]
+fn plan_names_the_file_and_line_of_a_move_it_refuses() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("far.ngc");
+    std::fs::write(&p, "G21 G90\nG1 X5000 F600\nM2\n").unwrap();
+    let out = hytask(&["plan", p.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let e = stderr(&out);
+    assert!(
+        e.contains("far.ngc: line 2:") && e.contains("soft limits"),
+        "{e}"
+    );
+}
+
 /// Found in session 10: `hytask plan` of a slow but accepted feed (`F0.001`, 10 mm: a job
 /// of 600,000 s) ran the servo-period trace for hours and held GBs. Now the plan and its
 /// time are reported and the trace is not run beyond `--max-trace-s` (default 4 h), which

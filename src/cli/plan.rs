@@ -282,7 +282,9 @@ pub fn report(
 ) -> anyhow::Result<bool> {
     use std::fmt::Write;
     let t0 = std::time::Instant::now();
-    let plan = crate::motion::plan(canon, cfg)?;
+    // Named as the daemon names a refused job (`machine::job`): most plan errors carry only
+    // the line.
+    let plan = crate::motion::plan(canon, cfg).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
     let plan_s = t0.elapsed().as_secs_f64();
     let b = bounds::bounds(canon, cfg)?;
     let traced = check_traceable(&plan, max_trace_s);
