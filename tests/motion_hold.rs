@@ -98,8 +98,27 @@ fn hold_on_a_line_from_full_feed_is_near_the_fastest_stop() {
     assert!(rd >= 1.0 - 1e-3 && rt >= 1.0 - 1e-2, "faster than possible");
     // Session 9, with the 20 % reserve: 2.660× / 4.064× (7.315 mm, 0.415 s). Session 10
     // (the braking rate at the current scale, `Interpolator::braking`): 2.104× / 2.373×
-    // (5.785 mm, 0.261 s).
-    assert!(rd < 2.2 && rt < 2.5, "distance {rd}×, time {rt}×");
+    // (5.785 mm, 0.261 s). Session 13 (`motion::line_stop`): a hold whose fastest stop ends
+    // within the cruise segment is that stop; the worst, 1.612× / 1.355× (4.432 mm,
+    // 0.149 s), are holds near the cruise's end, where time scaling still brakes.
+    assert!(rd < 1.7 && rt < 1.4, "distance {rd}×, time {rt}×");
+    // Most holds in cruise are the fastest stop itself.
+    let (a, j) = (cfg.axes[0].max_acc_mm_s2, cfg.axes[0].max_jerk_mm_s3);
+    let stops = hold_stops(&line(), &cfg, |n| n % 7 == 0);
+    let cruise: Vec<_> = stops.iter().filter(|s| s.speed_mm_s > 49.9).collect();
+    let optimal = cruise
+        .iter()
+        .filter(|s| s.dist_mm <= optimal_stop(s.speed_mm_s, a, j).1 * (1.0 + 1e-6))
+        .count();
+    eprintln!(
+        "line: {optimal} of {} holds in cruise are the fastest stop",
+        cruise.len()
+    );
+    assert!(
+        optimal * 10 >= cruise.len() * 9,
+        "{optimal} of {}",
+        cruise.len()
+    );
 }
 
 #[test]

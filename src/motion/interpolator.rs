@@ -8,10 +8,17 @@
 //! the jerk `p'''k³ + 3p''k·k̇ + p'k̈`. The planner kept a reserve of acceleration and jerk
 //! for the `k̇`/`k̈` terms and capped `k` per segment ([`Segment::override_cap`]), so no
 //! override change, hold or abort can exceed a limit, and the tool never leaves the path.
+//!
+//! A stop (hold, abort, probe trip) on a straight segment whose fastest stop from the
+//! current speed and acceleration ends within the segment follows that stop instead
+//! ([`super::line_stop`]): along a straight line any speed profile keeps the path, so it
+//! needs no rate of `k` from the planner, only the axes' full limits along the line.
 
+use super::config::KinematicsConfig;
 use super::config::MotionConfig;
 use super::kinematics::{Kinematics, Machine};
 use super::limits::{override_rates, scale_jerk_at, scale_rate_at, AxisMax};
+use super::line_stop::LineStop;
 use super::segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
 use super::KinematicsError;
 use crate::gcode::canon::ProbeKind;
@@ -151,7 +158,49 @@ pub struct Interpolator {
     aux_ring: [Option<AuxItem>; AUX_RING],
     aux_head: usize,
     aux_len: usize,
+    /// Stops on straight segments follow [`LineStop`] (identity kinematics only: elsewhere a
+    /// Cartesian profile says nothing of the joints' accelerations).
+    line_stops: bool,
+    /// Velocity limit of every axis, mm/s (a stop begun while still accelerating first
+    /// speeds up a little).
+    vel_max: [f64; NUM_AXES],
+    /// The stop being followed along the current (straight) segment.
+    line_stop: Option<ActiveStop>,
     out: InterpOutput,
+}
+
+/// A [`LineStop`] in progress: time since its start and the segment's raw distance there.
+#[derive(Debug, Clone, Copy)]
+struct ActiveStop {
+    stop: LineStop,
+    elapsed_s: f64,
+    from_mm: f64,
+}
+
+/// Speeds at the ends of a straight segment and its direction, or `None` when the segment
+/// is not one straight transition (a blend, an arc, a windowed span piece, a dwell).
+fn straight(s: &Segment) -> Option<(f64, f64, [f64; NUM_AXES])> {
+    if s.window.is_some() || s.curvature_per_mm != 0.0 || s.kind == SegmentKind::Dwell {
+        return None;
+    }
+    let norm = |v: &[f64; NUM_AXES]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let (n0, n1) = (norm(&s.v0_mm_s), norm(&s.v1_mm_s));
+    let big = n0.max(n1);
+    if big <= 0.0 {
+        return None;
+    }
+    let along = if n1 >= n0 { &s.v1_mm_s } else { &s.v0_mm_s };
+    let u = along.map(|c| c / big);
+    let collinear = (0..NUM_AXES).all(|i| {
+        (s.v0_mm_s[i] - n0 * u[i]).abs() <= 1e-9 * big
+            && (s.v1_mm_s[i] - n1 * u[i]).abs() <= 1e-9 * big
+    });
+    collinear.then_some((n0, n1, u))
+}
+
+/// Distance along a straight segment of speeds `n0`, `n1` after `t` s of it.
+fn straight_distance(s: &Segment, n0: f64, n1: f64, t: f64) -> f64 {
+    n0 * t + (n1 - n0) * s.shape().eval(t).1
 }
 
 impl Interpolator {
@@ -186,6 +235,9 @@ impl Interpolator {
             aux_ring: [None; AUX_RING],
             aux_head: 0,
             aux_len: 0,
+            line_stops: matches!(cfg.kinematics, KinematicsConfig::Identity),
+            vel_max: cfg.axes.map(|a| a.max_vel_mm_s),
+            line_stop: None,
             out: InterpOutput {
                 pose_mm: start_mm,
                 joints: joints.unwrap_or(start_mm),
@@ -422,6 +474,81 @@ impl Interpolator {
         }
     }
 
+    /// A stop on a straight segment: where one is requested and the fastest stop from the
+    /// current speed and acceleration ([`LineStop`]) ends within this segment, it is
+    /// followed instead of braking the scale (whose rates are those every segment within one
+    /// braking allows). Returns the planned time to advance this period, or `None` to
+    /// scale as usual. Once begun, the stop runs to rest even if the hold is released
+    /// meanwhile: the resume then starts from rest, as from any hold.
+    fn line_stop_advance(&mut self, s: &Segment) -> Option<f64> {
+        if self.line_stop.is_none() {
+            if !self.stopping() || !self.line_stops || self.sync_skip {
+                return None;
+            }
+            self.line_stop = self.start_line_stop(s);
+        }
+        let (n0, n1, _) = straight(s)?;
+        let st = self.line_stop.as_mut()?;
+        st.elapsed_s += self.dt_s;
+        let (d, v, _) = st.stop.eval(st.elapsed_s);
+        // At rest from the period after the one that reached the end (which still moved):
+        // an abort or a probe flush acts on a period that did not.
+        let done = st.elapsed_s >= st.stop.duration_s() + 0.5 * self.dt_s;
+        let target = st.from_mm + d;
+        // The planned time at which the segment has covered `target` (its distance grows
+        // with time): bisection, a fixed number of cheap steps, during a stop only.
+        let (mut lo, mut hi) = (self.t_s, s.duration_s);
+        for _ in 0..64 {
+            let mid = 0.5 * (lo + hi);
+            if straight_distance(s, n0, n1, mid) <= target {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let planned = n0 + (n1 - n0) * s.shape().eval(lo).0;
+        self.kd = 0.0;
+        if done {
+            self.line_stop = None;
+            self.k = 0.0;
+        } else {
+            // Not 0 while moving (0 is "at rest" to an abort or a hold).
+            self.k = if planned > 1e-9 { v / planned } else { 0.0 }.max(1e-12);
+        }
+        Some((lo - self.t_s).max(0.0))
+    }
+
+    /// The stop along `s` from the current state, if `s` is straight and the stop ends
+    /// within it (and, begun while still accelerating, stays within the axes' velocity).
+    fn start_line_stop(&self, s: &Segment) -> Option<ActiveStop> {
+        let (n0, n1, u) = straight(s)?;
+        let sh = s.shape();
+        let t = self.t_s;
+        let planned = n0 + (n1 - n0) * sh.eval(t).0;
+        let planned_acc = (n1 - n0) * sh.rate(t);
+        let v = self.k * planned;
+        let a = self.k * self.k * planned_acc + self.kd * planned;
+        let (mut acc, mut jerk, mut vel) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+        for i in 0..NUM_AXES {
+            if u[i] != 0.0 {
+                acc = acc.min(self.axis_max.acc[i] / u[i].abs());
+                jerk = jerk.min(self.axis_max.jerk[i] / u[i].abs());
+                vel = vel.min(self.vel_max[i] / u[i].abs());
+            }
+        }
+        if v + a.max(0.0).powi(2) / (2.0 * jerk) > vel {
+            return None;
+        }
+        let stop = LineStop::new(v, a, acc, jerk)?;
+        let from_mm = straight_distance(s, n0, n1, t);
+        let room = straight_distance(s, n0, n1, s.duration_s) - from_mm;
+        (stop.distance_mm() < room * (1.0 - 1e-9)).then_some(ActiveStop {
+            stop,
+            elapsed_s: 0.0,
+            from_mm,
+        })
+    }
+
     /// One servo period.
     pub fn step(&mut self, src: &mut impl SegmentSource) -> &InterpOutput {
         let mut budget = MAX_ITEMS_PER_STEP;
@@ -455,6 +582,8 @@ impl Interpolator {
                 } else {
                     dt
                 }
+            } else if let Some(advance) = self.line_stop_advance(&s) {
+                advance
             } else {
                 let kdd = self.scale_jerk(&s, self.target_scale(&s));
                 let a = self.k * dt + self.kd * dt * dt / 2.0 + kdd * dt * dt * dt / 6.0;

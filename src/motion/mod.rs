@@ -84,6 +84,7 @@ pub mod interpolator;
 pub mod kinematics;
 pub mod limits;
 pub mod line_marks;
+pub mod line_stop;
 pub mod lookahead;
 pub mod merge;
 pub mod moves;

@@ -74,6 +74,21 @@ impl Shape {
         self.eval_first_half(t)
     }
 
+    /// `f'(t)` (1/s): multiply by `|Δv|` for the acceleration along a straight transition.
+    pub fn rate(&self, t: f64) -> f64 {
+        let big_t = self.duration_s;
+        if big_t <= 0.0 {
+            return 0.0;
+        }
+        let t = t.clamp(0.0, big_t);
+        let t = t.min(big_t - t);
+        if t < self.jerk_s {
+            self.peak_rate() * t / self.jerk_s
+        } else {
+            self.peak_rate()
+        }
+    }
+
     fn eval_first_half(&self, t: f64) -> (f64, f64) {
         let tj = self.jerk_s;
         let ap = self.peak_rate();
