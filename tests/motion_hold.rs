@@ -99,9 +99,10 @@ fn hold_on_a_line_from_full_feed_is_near_the_fastest_stop() {
     // Session 9, with the 20 % reserve: 2.660× / 4.064× (7.315 mm, 0.415 s). Session 10
     // (the braking rate at the current scale, `Interpolator::braking`): 2.104× / 2.373×
     // (5.785 mm, 0.261 s). Session 13 (`motion::line_stop`): a hold whose fastest stop ends
-    // within the cruise segment is that stop; the worst, 1.612× / 1.355× (4.432 mm,
-    // 0.149 s), are holds near the cruise's end, where time scaling still brakes.
-    assert!(rd < 1.7 && rt < 1.4, "distance {rd}×, time {rt}×");
+    // within the cruise segment or the next one is that stop; 552 of 553, the other 1.016× /
+    // 1.019× (2.790 mm, 0.112 s from 49.95 mm/s). (Within the cruise segment only, holds
+    // near its end still braked by time scaling: 1.612× / 1.355×.)
+    assert!(rd < 1.05 && rt < 1.05, "distance {rd}×, time {rt}×");
     // Most holds in cruise are the fastest stop itself.
     let (a, j) = (cfg.axes[0].max_acc_mm_s2, cfg.axes[0].max_jerk_mm_s3);
     let stops = hold_stops(&line(), &cfg, |n| n % 7 == 0);

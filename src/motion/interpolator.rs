@@ -166,6 +166,9 @@ pub struct Interpolator {
     vel_max: [f64; NUM_AXES],
     /// The stop being followed along the current (straight) segment.
     line_stop: Option<ActiveStop>,
+    /// The queue's next item, taken early to see whether a stop may continue into it (the
+    /// rest of the line); every read of the queue takes it first.
+    ahead: Option<Item>,
     out: InterpOutput,
 }
 
@@ -238,6 +241,7 @@ impl Interpolator {
             line_stops: matches!(cfg.kinematics, KinematicsConfig::Identity),
             vel_max: cfg.axes.map(|a| a.max_vel_mm_s),
             line_stop: None,
+            ahead: None,
             out: InterpOutput {
                 pose_mm: start_mm,
                 joints: joints.unwrap_or(start_mm),
@@ -334,13 +338,18 @@ impl Interpolator {
         a
     }
 
+    /// The next queue item: the one taken ahead, else the source's.
+    fn pop_item(&mut self, src: &mut impl SegmentSource) -> Option<Item> {
+        self.ahead.take().or_else(|| src.pop())
+    }
+
     /// Pulls items until a segment is current, a barrier is hit, the ring is full or the
     /// source is empty. Returns the number of items consumed.
     fn fetch(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
         self.seg = None;
         while *budget > 0 && !self.waiting && self.aux_len < AUX_RING {
             *budget -= 1;
-            match src.pop() {
+            match self.pop_item(src) {
                 Some(Item::Segment(s)) if self.sync_skip => {
                     self.out.pose_mm = s.end_mm;
                     self.moved = true;
@@ -475,38 +484,54 @@ impl Interpolator {
     }
 
     /// A stop on a straight segment: where one is requested and the fastest stop from the
-    /// current speed and acceleration ([`LineStop`]) ends within this segment, it is
+    /// current speed and acceleration ([`LineStop`]) ends within this segment or the next
+    /// (the rest of the line, see [`Self::start_line_stop`]), it is
     /// followed instead of braking the scale (whose rates are those every segment within one
     /// braking allows). Returns the planned time to advance this period, or `None` to
     /// scale as usual. Once begun, the stop runs to rest even if the hold is released
     /// meanwhile: the resume then starts from rest, as from any hold.
-    fn line_stop_advance(&mut self, s: &Segment) -> Option<f64> {
+    fn line_stop_advance(&mut self, s: &Segment, src: &mut impl SegmentSource) -> Option<f64> {
         if self.line_stop.is_none() {
             if !self.stopping() || !self.line_stops || self.sync_skip {
                 return None;
             }
+            if self.ahead.is_none() {
+                self.ahead = src.pop();
+            }
             self.line_stop = self.start_line_stop(s);
         }
         let (n0, n1, _) = straight(s)?;
+        let dt = self.dt_s;
         let st = self.line_stop.as_mut()?;
-        st.elapsed_s += self.dt_s;
+        st.elapsed_s += dt;
         let (d, v, _) = st.stop.eval(st.elapsed_s);
         // At rest from the period after the one that reached the end (which still moved):
         // an abort or a probe flush acts on a period that did not.
-        let done = st.elapsed_s >= st.stop.duration_s() + 0.5 * self.dt_s;
+        let done = st.elapsed_s >= st.stop.duration_s() + 0.5 * dt;
         let target = st.from_mm + d;
-        // The planned time at which the segment has covered `target` (its distance grows
-        // with time): bisection, a fixed number of cheap steps, during a stop only.
-        let (mut lo, mut hi) = (self.t_s, s.duration_s);
+        let end_here = straight_distance(s, n0, n1, s.duration_s);
+        let (seg, from_t, along, skip) = match self.ahead {
+            // Past this segment's end: into the next one, which continues the line
+            // (`start_line_stop` took the stop only if it ends there).
+            Some(Item::Segment(next)) if target >= end_here => {
+                st.from_mm -= end_here;
+                (next, 0.0, target - end_here, s.duration_s - self.t_s)
+            }
+            _ => (*s, self.t_s, target.min(end_here), 0.0),
+        };
+        let (m0, m1, _) = straight(&seg)?;
+        // The planned time at which the segment has covered `along` (its distance grows with
+        // time): bisection, a fixed number of cheap steps, during a stop only.
+        let (mut lo, mut hi) = (from_t, seg.duration_s);
         for _ in 0..64 {
             let mid = 0.5 * (lo + hi);
-            if straight_distance(s, n0, n1, mid) <= target {
+            if straight_distance(&seg, m0, m1, mid) <= along {
                 lo = mid;
             } else {
                 hi = mid;
             }
         }
-        let planned = n0 + (n1 - n0) * s.shape().eval(lo).0;
+        let planned = m0 + (m1 - m0) * seg.shape().eval(lo).0;
         self.kd = 0.0;
         if done {
             self.line_stop = None;
@@ -515,11 +540,12 @@ impl Interpolator {
             // Not 0 while moving (0 is "at rest" to an abort or a hold).
             self.k = if planned > 1e-9 { v / planned } else { 0.0 }.max(1e-12);
         }
-        Some((lo - self.t_s).max(0.0))
+        Some(skip + (lo - from_t).max(0.0))
     }
 
     /// The stop along `s` from the current state, if `s` is straight and the stop ends
-    /// within it (and, begun while still accelerating, stays within the axes' velocity).
+    /// within it or within the next queue item, a straight segment continuing the line at
+    /// speed (and, begun while still accelerating, stays within the axes' velocity).
     fn start_line_stop(&self, s: &Segment) -> Option<ActiveStop> {
         let (n0, n1, u) = straight(s)?;
         let sh = s.shape();
@@ -541,7 +567,17 @@ impl Interpolator {
         }
         let stop = LineStop::new(v, a, acc, jerk)?;
         let from_mm = straight_distance(s, n0, n1, t);
-        let room = straight_distance(s, n0, n1, s.duration_s) - from_mm;
+        let mut room = straight_distance(s, n0, n1, s.duration_s) - from_mm;
+        if let Some(Item::Segment(next)) = &self.ahead {
+            if let Some((m0, m1, w)) = straight(next) {
+                let same_line = m0 > 0.0
+                    && next.kind == s.kind
+                    && (0..NUM_AXES).all(|i| (w[i] - u[i]).abs() <= 1e-9);
+                if same_line {
+                    room += straight_distance(next, m0, m1, next.duration_s);
+                }
+            }
+        }
         (stop.distance_mm() < room * (1.0 - 1e-9)).then_some(ActiveStop {
             stop,
             elapsed_s: 0.0,
@@ -582,7 +618,7 @@ impl Interpolator {
                 } else {
                     dt
                 }
-            } else if let Some(advance) = self.line_stop_advance(&s) {
+            } else if let Some(advance) = self.line_stop_advance(&s, src) {
                 advance
             } else {
                 let kdd = self.scale_jerk(&s, self.target_scale(&s));
@@ -672,7 +708,7 @@ impl Interpolator {
     fn flush_probe(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
         while *budget > 0 && self.aux_len < AUX_RING {
             *budget -= 1;
-            match src.pop() {
+            match self.pop_item(src) {
                 Some(Item::Aux(a)) if matches!(a.kind, AuxKind::ProbeEnd { .. }) => {
                     self.probe_flush = false;
                     self.probe_stop = false;
@@ -697,7 +733,7 @@ impl Interpolator {
     fn finish_abort(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
         while *budget > 0 {
             *budget -= 1;
-            if src.pop().is_none() {
+            if self.pop_item(src).is_none() {
                 self.abort = false;
                 self.waiting = false;
                 self.moved = false;
