@@ -24,7 +24,11 @@ use crate::gcode::modal::Block;
 use crate::gcode::parser::{self, OKind};
 use crate::gcode::GcodeError;
 
-/// Maps X/Z onto the cycle frame (u: pass level, v: feed direction) and back.
+/// Maps X/Z onto the cycle frame (u: pass level, v: feed direction) and back, with
+/// rs274's operations, so that the signs of zero coordinates come out as in its trace:
+/// a point is the complex number Z + iX (v the real part, u the imaginary), G72 turns it
+/// by −i (`-p * I`, a complex product), then the imaginary and real parts are negated as
+/// needed; the way back is a product with ±i for G72 and negations.
 #[derive(Clone, Copy)]
 struct Frame {
     /// G72: u is Z and v is X.
@@ -33,18 +37,59 @@ struct Frame {
     sv: f64,
 }
 
+/// A complex number (real, imaginary).
+type Cx = (f64, f64);
+
+/// `x * y` as GCC multiplies `std::complex<double>` (no product is folded away, so the
+/// signs of zero parts follow IEEE arithmetic).
+fn cmul(x: Cx, y: Cx) -> Cx {
+    (x.0 * y.0 - x.1 * y.1, x.0 * y.1 + x.1 * y.0)
+}
+
 impl Frame {
+    /// rs274 negates the imaginary part (u) of the turned point: for G72 that is where u
+    /// is Z with its sign (the turn gives −Z).
+    fn flip_u(&self) -> bool {
+        if self.swap {
+            self.su > 0.0
+        } else {
+            self.su < 0.0
+        }
+    }
     fn to(&self, x: f64, z: f64) -> Pt {
-        let (l, t) = if self.swap { (z, x) } else { (x, z) };
-        [self.su * l, self.sv * t]
+        let mut p = (z, x);
+        if self.swap {
+            p = cmul((-p.0, -p.1), (0.0, 1.0));
+        }
+        if self.flip_u() {
+            p.1 = -p.1;
+        }
+        if self.sv < 0.0 {
+            p.0 = -p.0;
+        }
+        [p.1, p.0]
     }
     fn from(&self, p: Pt) -> (f64, f64) {
-        let (l, t) = (p[0] * self.su, p[1] * self.sv);
-        if self.swap {
-            (t, l)
+        let e = (p[1], p[0]);
+        let (fu, fv) = (self.flip_u(), self.sv < 0.0);
+        let q = if self.swap {
+            // rs274's swapped_motion 4–7: i·e, conj(i·e), −conj(i·e), (−i)·e.
+            match (fu, fv) {
+                (false, false) => cmul((0.0, 1.0), e),
+                (false, true) => {
+                    let q = cmul((0.0, 1.0), e);
+                    (q.0, -q.1)
+                }
+                (true, false) => {
+                    let q = cmul((0.0, 1.0), e);
+                    (-q.0, q.1)
+                }
+                (true, true) => cmul((-0.0, -1.0), e),
+            }
         } else {
-            (l, t)
-        }
+            (if fv { -e.0 } else { e.0 }, if fu { -e.1 } else { e.1 })
+        };
+        (q.1, q.0)
     }
     /// Counter-clockwise in (u, v) from counter-clockwise in rs274's (Z, X) arc plane.
     fn ccw(&self, ccw_zx: bool) -> bool {
@@ -182,11 +227,20 @@ impl Interp<'_> {
             cap,
             over: false,
         };
-        cy.traverse(s0);
+        // The move to the block's X/Z is an ordinary G0 (not mapped through the frame,
+        // which could change the sign of a zero).
+        cy.push(Move::Traverse(start));
         // A start beyond the profile's first point along the feed is brought level with
         // it, as rs274 does; the passes (and G70's returns) start from there.
         if let Some(e) = els.first() {
-            s0[1] = s0[1].max(e.a[1]);
+            if e.a[1] - s0[1] > 0.0 {
+                s0[1] = e.a[1];
+            }
+        }
+        if m != 700 {
+            // rs274 moves the roughing profile and its start by the block's U/W (zero
+            // here), which turns a -0 coordinate into +0.
+            s0 = displaced(s0);
         }
         cy.traverse(s0);
         if m == 700 {
@@ -198,8 +252,16 @@ impl Interp<'_> {
                     format!("{name}: I (depth of cut) must be > 0"),
                 ));
             }
-            let contour =
-                geom::offset(&els, w.d).map_err(|e| self.err(col, format!("{name}: {e}")))?;
+            let contour: Vec<El> = geom::offset(&els, w.d)
+                .map_err(|e| self.err(col, format!("{name}: {e}")))?
+                .iter()
+                .map(|e| El {
+                    a: displaced(e.a),
+                    b: displaced(e.b),
+                    arc: e.arc.map(|(c, ccw)| (displaced(c), ccw)),
+                    ..*e
+                })
+                .collect();
             let kind = match m % 10 {
                 0 => Kind::Rough,
                 1 => Kind::Bridge,
@@ -408,6 +470,13 @@ impl Interp<'_> {
         self.s.pos = p;
         Ok(())
     }
+}
+
+/// A point of the roughing profile after rs274's move by the cycle's U/W displacement,
+/// which hytask does not read (rs274 adds `(W, U)` in its frame; zero here): adding +0
+/// turns a -0 coordinate into +0, as in rs274's trace.
+fn displaced(p: Pt) -> Pt {
+    [p[0] + 0.0, p[1] + 0.0]
 }
 
 /// Centre (X, Z) of an R-format arc in the Z/X plane (rs274: negative R, the long way).
