@@ -579,10 +579,12 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
             s0[1] + (u - s0[0]) / (ps[0] - s0[0]) * (ps[1] - s0[1])
         }
     };
-    let level = |k: u32| s0[0] - f64::from(k) * w.i;
-    let mut k = 0;
-    while kind != Kind::Profile && level(k) > ps[0] + 1e-7 && !cy.over {
-        let u = level(k);
+    // The levels are counted down from the start by subtracting I once per level, as
+    // rs274 does (not start − k·I, which can differ in the last bit: a level that should
+    // be 0 is then +0 or a tiny value of either sign, printed 0.0000 or -0.0000).
+    let delta = w.i.max(MIN_DELTA);
+    let mut u = s0[0];
+    while kind != Kind::Profile && u > ps[0] + 1e-7 && !cy.over {
         let vk = entry_v(u);
         cy.traverse([u, vk]);
         let end = geom::first_reach(&els, 0, ps, u, false).map_or(els[els.len() - 1].b, |x| x.1);
@@ -592,7 +594,7 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         cy.traverse([u + r, ve + r]);
         cy.traverse([u + r, vk - r]);
         cy.traverse([u, vk]);
-        k += 1;
+        u -= delta;
     }
     if s0[0] <= ps[0] + 1e-7 {
         // The start is level with the profile's first point, so no pass is needed above
@@ -605,6 +607,9 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
     finish_along(&els, s0, w, kind, cy);
 }
 
+/// rs274's smallest depth of cut (twice its tolerance): a smaller I steps by this.
+const MIN_DELTA: f64 = 2e-6;
+
 /// The retract after a pass fed from `v0` to `v1`: R, but at most half the pass, so the
 /// way back never runs forward (rs274 then retracts to the middle of the pass).
 fn retract(r: f64, v0: f64, v1: f64) -> f64 {
@@ -614,6 +619,7 @@ fn retract(r: f64, v0: f64, v1: f64) -> f64 {
 /// The last pass: along the contour, roughing (or bridging) each pocket on the way.
 fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
     let pockets = kind != Kind::Bridge;
+    let delta = w.i.max(MIN_DELTA);
     let mut i = 0;
     let mut cur = els[0].a;
     while i < els.len() {
@@ -655,13 +661,24 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         }
         let bottom = geom::min_between(els, i + 1, e.b, j, back);
         // G7x: the cycle's levels below the lip; G7x.2: the lip's level, then down by I.
-        let (top, mut k) = match kind {
-            Kind::Profile => (ul, 0),
-            _ => (s0[0], ((s0[0] - ul) / w.i - 1e-9).ceil().max(0.0) as u32),
+        // (rs274: the first level not above the lip by more than 1e-6.)
+        let mut u = match kind {
+            Kind::Profile => ul,
+            _ => {
+                let (mut u, mut n) = (s0[0], 0);
+                while u - 1e-6 > ul {
+                    u -= delta;
+                    n += 1;
+                    if n > MAX_CYCLE_MOVES {
+                        cy.over = true;
+                        break;
+                    }
+                }
+                u
+            }
         };
         let (mut ci, mut cp) = (i + 1, e.b);
         loop {
-            let u = top - f64::from(k) * w.i;
             if u <= bottom + 1e-7 || cy.over {
                 break;
             }
@@ -679,7 +696,7 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
             cy.feed(a);
             ci = ai;
             cp = a;
-            k += 1;
+            u -= delta;
         }
         // Continue along the contour from where the pocket passes left it.
         (i, cur) = next_from(els, ci, cp);
