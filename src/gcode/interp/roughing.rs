@@ -596,7 +596,8 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         cy.traverse([u, vk]);
         u -= delta;
     }
-    if s0[0] <= ps[0] + 1e-7 {
+    let traversed = s0[0] > ps[0] + 1e-7;
+    if !traversed {
         // The start is level with the profile's first point, so no pass is needed above
         // it (also for G7x.2, which makes none): rs274 then cuts the move to the profile
         // as its first element, fed, not traversed.
@@ -604,7 +605,7 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
     } else {
         cy.traverse(ps);
     }
-    finish_along(&els, s0, w, kind, cy);
+    finish_along(&els, s0, w, kind, traversed, cy);
 }
 
 /// rs274's smallest depth of cut (twice its tolerance): a smaller I steps by this.
@@ -617,11 +618,19 @@ fn retract(r: f64, v0: f64, v1: f64) -> f64 {
 }
 
 /// The last pass: along the contour, roughing (or bridging) each pocket on the way.
-fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
+fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: &mut Cycle) {
     let pockets = kind != Kind::Bridge;
-    let delta = w.i.max(MIN_DELTA);
     let mut i = 0;
     let mut cur = els[0].a;
+    // A profile that goes down from its first point (reached by a traverse after the
+    // passes) has a pocket there: rs274 goes on with its levels into it, cutting each
+    // across to where the contour is back at the level (also G7x.1, whose bridging is of
+    // the pockets found later along the contour; G7x.2 makes no passes).
+    if start_dip && kind != Kind::Profile && geom::dips(&els[0], cur) {
+        if let Some(back) = geom::first_reach(els, 0, cur, cur[0], true) {
+            (i, cur) = rough_pocket(els, (0, cur), back, s0, w, Kind::Rough, cy);
+        }
+    }
     while i < els.len() {
         let e = els[i];
         // rs274's climb_only: a line climbs unless its end is below its start, compared
@@ -659,48 +668,65 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
             (i, cur) = next_from(els, j, back);
             continue;
         }
-        let bottom = geom::min_between(els, i + 1, e.b, j, back);
-        // G7x: the cycle's levels below the lip; G7x.2: the lip's level, then down by I.
-        // (rs274: the first level not above the lip by more than 1e-6.)
-        let mut u = match kind {
-            Kind::Profile => ul,
-            _ => {
-                let (mut u, mut n) = (s0[0], 0);
-                while u - 1e-6 > ul {
-                    u -= delta;
-                    n += 1;
-                    if n > MAX_CYCLE_MOVES {
-                        cy.over = true;
-                        break;
-                    }
-                }
-                u
-            }
-        };
-        let (mut ci, mut cp) = (i + 1, e.b);
-        loop {
-            if u <= bottom + 1e-7 || cy.over {
-                break;
-            }
-            let Some((ai, a)) = geom::first_drop(els, ci, cp, u) else {
-                break;
-            };
-            feed_along(els, ci, cp, ai, a, kind == Kind::Rough, cy);
-            let Some((_, bpt)) = geom::first_reach(els, ai, a, u, true) else {
-                break;
-            };
-            cy.feed(bpt);
-            let r = retract(w.r, a[1], bpt[1]);
-            cy.traverse([u + r, bpt[1] + r]);
-            cy.traverse([u + r, a[1] - r]);
-            cy.feed(a);
-            ci = ai;
-            cp = a;
-            u -= delta;
-        }
-        // Continue along the contour from where the pocket passes left it.
-        (i, cur) = next_from(els, ci, cp);
+        (i, cur) = rough_pocket(els, (i + 1, e.b), (j, back), s0, w, kind, cy);
     }
+}
+
+/// Roughs the pocket from its lip (`lip`: the element after it and the lip point) to where
+/// the contour is back at the lip's level (`back`), level by level, and returns the
+/// element and point to go on from.
+fn rough_pocket(
+    els: &[El],
+    lip: (usize, Pt),
+    back: (usize, Pt),
+    s0: Pt,
+    w: &Words,
+    kind: Kind,
+    cy: &mut Cycle,
+) -> (usize, Pt) {
+    let delta = w.i.max(MIN_DELTA);
+    let ul = lip.1[0];
+    let bottom = geom::min_between(els, lip.0, lip.1, back.0, back.1);
+    // G7x: the cycle's levels below the lip; G7x.2: the lip's level, then down by I.
+    // (rs274: the first level not above the lip by more than 1e-6.)
+    let mut u = match kind {
+        Kind::Profile => ul,
+        _ => {
+            let (mut u, mut n) = (s0[0], 0);
+            while u - 1e-6 > ul {
+                u -= delta;
+                n += 1;
+                if n > MAX_CYCLE_MOVES {
+                    cy.over = true;
+                    break;
+                }
+            }
+            u
+        }
+    };
+    let (mut ci, mut cp) = lip;
+    loop {
+        if u <= bottom + 1e-7 || cy.over {
+            break;
+        }
+        let Some((ai, a)) = geom::first_drop(els, ci, cp, u) else {
+            break;
+        };
+        feed_along(els, ci, cp, ai, a, kind == Kind::Rough, cy);
+        let Some((_, bpt)) = geom::first_reach(els, ai, a, u, true) else {
+            break;
+        };
+        cy.feed(bpt);
+        let r = retract(w.r, a[1], bpt[1]);
+        cy.traverse([u + r, bpt[1] + r]);
+        cy.traverse([u + r, a[1] - r]);
+        cy.feed(a);
+        ci = ai;
+        cp = a;
+        u -= delta;
+    }
+    // Continue along the contour from where the pocket passes left it.
+    next_from(els, ci, cp)
 }
 
 /// The element and point to go on from after reaching `p` on element `j`.
