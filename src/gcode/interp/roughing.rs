@@ -538,6 +538,16 @@ impl Cycle<'_> {
             None => self.feed(e.b),
             Some((c, ccw)) => {
                 let end = (self.pose)(e.b);
+                // rs274 makes no arc to where the tool already is (X and Z within 0.0001,
+                // its `equal`).
+                let here = self.out.last().map(|m| match m {
+                    Move::Traverse(p) | Move::Feed(p) | Move::Arc { end: p, .. } => *p,
+                });
+                if here
+                    .is_some_and(|h| (h[0] - end[0]).abs() < 1e-4 && (h[2] - end[2]).abs() < 1e-4)
+                {
+                    return;
+                }
                 let cp = (self.pose)(c);
                 self.push(Move::Arc {
                     end,
@@ -743,8 +753,9 @@ fn next_from(els: &[El], j: usize, p: Pt) -> (usize, Pt) {
 fn feed_along(els: &[El], i: usize, p: Pt, j: usize, q: Pt, zero: bool, cy: &mut Cycle) {
     if i == j {
         if geom::same(p, q) {
-            // rs274's G7x feeds to the pocket level even when the lip is on it (G7x.2 not).
-            if zero {
+            // rs274's G7x feeds to the pocket level even when the lip is on it (G7x.2 not),
+            // down a line; an arc it would cut there is a zero-length one, which it skips.
+            if zero && els[i].arc.is_none() {
                 cy.feed(q);
             }
         } else {
