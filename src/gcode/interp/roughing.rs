@@ -632,6 +632,8 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: 
     let pockets = kind != Kind::Bridge;
     let mut i = 0;
     let mut cur = els[0].a;
+    // G7x.2: the level of the pocket start rs274 keeps besides the cycle's start.
+    let mut pocket_top: Option<f64> = None;
     // A profile that goes down from its first point (reached by a traverse after the
     // passes) has a pocket there: rs274 goes on with its levels into it, cutting each
     // across to where the contour is back at the level (also G7x.1, whose bridging is of
@@ -658,6 +660,23 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: 
         // another element (a line into a groove arc): rs274 dives on through it.
         let going_down = e.tangent(e.b)[0] < -geom::EPS;
         let lip = !going_down && els.get(i + 1).is_some_and(|n| geom::dips(n, e.b));
+        // G7x.2: rs274 looks for a pocket at the end of every arc that climbs clockwise in
+        // (u, v) (counter-clockwise in its frame) and at every lip, from the level of the
+        // last pocket start it keeps (a lower one than that is kept, a higher one replaces
+        // it).
+        let arc_end = match e.arc {
+            Some((c, false)) => e.a[1] >= c[1] && e.b[1] >= c[1],
+            _ => false,
+        };
+        if kind == Kind::Profile && (lip || arc_end) {
+            if pocket_top.is_some_and(|t| cur[0] > t) {
+                pocket_top = None;
+            }
+            let top = *pocket_top.get_or_insert(cur[0]);
+            if !lip {
+                arc_end_pass(&e, cur, top, w, cy);
+            }
+        }
         if !lip {
             i += 1;
             continue;
@@ -680,6 +699,56 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: 
         }
         (i, cur) = rough_pocket(els, (i + 1, e.b), (j, back), s0, w, kind, cy);
     }
+}
+
+/// rs274's pocket check at the end `p` of a climbing arc `e` (G7x.2), with the pocket start
+/// level `top`: when `p` is on a level counted down from `top` (within 1e-6), rs274 cuts
+/// the arc at `p`'s level, with the radius of the arc's start (as `intersection_z`), and
+/// where that crossing lies more than 1e-6 ahead of `p` along the feed (the end of an offset
+/// arc is a little off the circle through its start) it makes a pass of that length: feed,
+/// retract, return, feed back (random lathe program 267: a pass 3.7e-6 long).
+fn arc_end_pass(e: &El, p: Pt, top: f64, w: &Words, cy: &mut Cycle) {
+    const TOL: f64 = 1e-6;
+    let Some((c, _)) = e.arc else {
+        return;
+    };
+    let delta = w.i.max(MIN_DELTA);
+    let mut x = top;
+    let mut n = 0;
+    while x - TOL > p[0] {
+        x -= delta;
+        n += 1;
+        if n > MAX_CYCLE_MOVES {
+            return;
+        }
+    }
+    if (p[0] - x).abs() > TOL {
+        return;
+    }
+    // In rs274's frame: real part v, imaginary part u.
+    let level = p[0];
+    let r = geom::norm(geom::sub(e.a, c));
+    let s = -((level - r - c[0]) * (level + r - c[0]));
+    if s < -TOL {
+        return;
+    }
+    let s = if s < 0.0 { 0.0 } else { s }.sqrt();
+    // Imaginary part of conj(q - c) * (pt - c), as GCC multiplies.
+    let side = |q: Pt, v: f64| (q[1] - c[1]) * (level - c[0]) + (-(q[0] - c[0])) * (v - c[1]);
+    let on = |v: f64| side(e.a, v) >= -TOL && side(e.b, v) <= TOL;
+    let dest = [c[1] - s, c[1] + s].into_iter().find(|&v| on(v));
+    let Some(dest) = dest else {
+        return;
+    };
+    let distance = (dest - p[1]).abs();
+    if dest - TOL > p[1] || distance < TOL {
+        return;
+    }
+    cy.feed([level, dest]);
+    let k = (distance / 2.0 / w.r).min(1.0) * w.r;
+    cy.traverse([level + k, dest + k]);
+    cy.traverse([level + k, p[1] - k]);
+    cy.feed(p);
 }
 
 /// Roughs the pocket from its lip (`lip`: the element after it and the lip point) to where
