@@ -252,7 +252,7 @@ impl Interp<'_> {
                     format!("{name}: I (depth of cut) must be > 0"),
                 ));
             }
-            let contour: Vec<El> = geom::offset(&els, w.d)
+            let contour: Vec<El> = geom::offset(&els, w.d * allowance_side(s0, &els))
                 .map_err(|e| self.err(col, format!("{name}: {e}")))?
                 .iter()
                 .map(|e| El {
@@ -326,7 +326,7 @@ impl Interp<'_> {
                 break;
             }
             let allowance = e + f64::from(passes - k) * (d - e) / f64::from(passes);
-            let contour = geom::offset(els, allowance)
+            let contour = geom::offset(els, allowance * allowance_side(s0, els))
                 .map_err(|m| self.err(self.loc.col, format!("G70: {m}")))?;
             if k > 1 {
                 cy.traverse(s0);
@@ -469,6 +469,25 @@ impl Interp<'_> {
         out.push((p[0], p[2], arc, b.get(b'a').unwrap_or(0.0)));
         self.s.pos = p;
         Ok(())
+    }
+}
+
+/// The side rs274 puts the allowance on: 1 for the left of the profile in (u, v) (the free
+/// side of a profile fed toward lower v with the stock above it), -1 when the lead-in from
+/// the start `s0` to the profile's first point turns clockwise from the line from `s0` to
+/// the start of its last element (rs274: the sign of `imag(v1 / v2)`, libgcc's complex
+/// division), as on a profile written for the other cycle (a turning profile under G72).
+fn allowance_side(s0: Pt, els: &[El]) -> f64 {
+    let (Some(first), Some(last)) = (els.first(), els.last()) else {
+        return 1.0;
+    };
+    // rs274's complex numbers: real part v, imaginary part u.
+    let v1 = (first.a[1] - s0[1], first.a[0] - s0[0]);
+    let v2 = (last.a[1] - s0[1], last.a[0] - s0[0]);
+    if super::roughing_steps::cdivc(v1, v2).1 < 0.0 {
+        -1.0
+    } else {
+        1.0
     }
 }
 
