@@ -657,7 +657,11 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: 
     // passes) has a pocket there: rs274 goes on with its levels into it, cutting each
     // across to where the contour is back at the level (also G7x.1, whose bridging is of
     // the pockets found later along the contour; G7x.2 makes no passes).
-    if start_dip && kind != Kind::Profile && geom::dips(&els[0], cur) {
+    // While the contour goes down from its first point rs274 draws it as it dives, without
+    // G7x.1's zero-length feed to each element's start.
+    let mut diving = start_dip && kind != Kind::Profile && geom::dips(&els[0], cur);
+    let mut after_sinking = false;
+    if diving {
         if let Some(back) = geom::first_reach(els, 0, cur, cur[0], true) {
             (i, cur) = rough_pocket(els, (0, cur), back, s0, w, Kind::Rough, cy);
         }
@@ -669,7 +673,16 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: 
         // to from where the tool is (a zero-length feed at its start), one that is not
         // climbing only drawn.
         let sinking_line = e.arc.is_none() && e.b[0] < e.a[0];
-        let fed_to_start = !pockets && e.whole && !sinking_line && geom::same(cur, e.a);
+        diving = diving && geom::dips(&e, cur);
+        // After a line that is not climbing (rs274 does not draw it), rs274's feed to where
+        // the next element is at the tool's level is that line: no zero-length feed then.
+        let fed_to_start = !pockets
+            && e.whole
+            && !sinking_line
+            && !diving
+            && !after_sinking
+            && geom::same(cur, e.a);
+        after_sinking = sinking_line;
         if fed_to_start {
             cy.feed(e.a);
         }
@@ -708,8 +721,11 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: 
         if !pockets {
             // G7x.1: straight across the pocket at the lip's level. A line fed to from its
             // start also feeds to the start of the (corner) arc that dips after it, as
-            // rs274 does.
-            if fed_to_start && e.arc.is_none() && els[i + 1].whole && els[i + 1].arc.is_some() {
+            // rs274 does when the arc turns clockwise in (u, v) (counter-clockwise in its
+            // frame: it feeds to the arc's nearer crossing of the level, its start; for the
+            // other turn to the farther one, across the pocket).
+            let cw_arc = els[i + 1].arc.is_some_and(|(_, ccw)| !ccw);
+            if fed_to_start && e.arc.is_none() && els[i + 1].whole && cw_arc {
                 cy.feed(e.b);
             }
             cy.feed(back);
