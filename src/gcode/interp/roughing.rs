@@ -24,7 +24,11 @@ use crate::gcode::modal::Block;
 use crate::gcode::parser::{self, OKind};
 use crate::gcode::GcodeError;
 
-/// Maps X/Z onto the cycle frame (u: pass level, v: feed direction) and back.
+/// Maps X/Z onto the cycle frame (u: pass level, v: feed direction) and back, with
+/// rs274's operations, so that the signs of zero coordinates come out as in its trace:
+/// a point is the complex number Z + iX (v the real part, u the imaginary), G72 turns it
+/// by −i (`-p * I`, a complex product), then the imaginary and real parts are negated as
+/// needed; the way back is a product with ±i for G72 and negations.
 #[derive(Clone, Copy)]
 struct Frame {
     /// G72: u is Z and v is X.
@@ -33,18 +37,59 @@ struct Frame {
     sv: f64,
 }
 
+/// A complex number (real, imaginary).
+type Cx = (f64, f64);
+
+/// `x * y` as GCC multiplies `std::complex<double>` (no product is folded away, so the
+/// signs of zero parts follow IEEE arithmetic).
+fn cmul(x: Cx, y: Cx) -> Cx {
+    (x.0 * y.0 - x.1 * y.1, x.0 * y.1 + x.1 * y.0)
+}
+
 impl Frame {
+    /// rs274 negates the imaginary part (u) of the turned point: for G72 that is where u
+    /// is Z with its sign (the turn gives −Z).
+    fn flip_u(&self) -> bool {
+        if self.swap {
+            self.su > 0.0
+        } else {
+            self.su < 0.0
+        }
+    }
     fn to(&self, x: f64, z: f64) -> Pt {
-        let (l, t) = if self.swap { (z, x) } else { (x, z) };
-        [self.su * l, self.sv * t]
+        let mut p = (z, x);
+        if self.swap {
+            p = cmul((-p.0, -p.1), (0.0, 1.0));
+        }
+        if self.flip_u() {
+            p.1 = -p.1;
+        }
+        if self.sv < 0.0 {
+            p.0 = -p.0;
+        }
+        [p.1, p.0]
     }
     fn from(&self, p: Pt) -> (f64, f64) {
-        let (l, t) = (p[0] * self.su, p[1] * self.sv);
-        if self.swap {
-            (t, l)
+        let e = (p[1], p[0]);
+        let (fu, fv) = (self.flip_u(), self.sv < 0.0);
+        let q = if self.swap {
+            // rs274's swapped_motion 4–7: i·e, conj(i·e), −conj(i·e), (−i)·e.
+            match (fu, fv) {
+                (false, false) => cmul((0.0, 1.0), e),
+                (false, true) => {
+                    let q = cmul((0.0, 1.0), e);
+                    (q.0, -q.1)
+                }
+                (true, false) => {
+                    let q = cmul((0.0, 1.0), e);
+                    (-q.0, q.1)
+                }
+                (true, true) => cmul((-0.0, -1.0), e),
+            }
         } else {
-            (l, t)
-        }
+            (if fv { -e.0 } else { e.0 }, if fu { -e.1 } else { e.1 })
+        };
+        (q.1, q.0)
     }
     /// Counter-clockwise in (u, v) from counter-clockwise in rs274's (Z, X) arc plane.
     fn ccw(&self, ccw_zx: bool) -> bool {
@@ -182,11 +227,20 @@ impl Interp<'_> {
             cap,
             over: false,
         };
-        cy.traverse(s0);
+        // The move to the block's X/Z is an ordinary G0 (not mapped through the frame,
+        // which could change the sign of a zero).
+        cy.push(Move::Traverse(start));
         // A start beyond the profile's first point along the feed is brought level with
         // it, as rs274 does; the passes (and G70's returns) start from there.
         if let Some(e) = els.first() {
-            s0[1] = s0[1].max(e.a[1]);
+            if e.a[1] - s0[1] > 0.0 {
+                s0[1] = e.a[1];
+            }
+        }
+        if m != 700 {
+            // rs274 moves the roughing profile and its start by the block's U/W (zero
+            // here), which turns a -0 coordinate into +0.
+            s0 = displaced(s0);
         }
         cy.traverse(s0);
         if m == 700 {
@@ -198,8 +252,16 @@ impl Interp<'_> {
                     format!("{name}: I (depth of cut) must be > 0"),
                 ));
             }
-            let contour =
-                geom::offset(&els, w.d).map_err(|e| self.err(col, format!("{name}: {e}")))?;
+            let contour: Vec<El> = geom::offset(&els, w.d * allowance_side(s0, &els))
+                .map_err(|e| self.err(col, format!("{name}: {e}")))?
+                .iter()
+                .map(|e| El {
+                    a: displaced(e.a),
+                    b: displaced(e.b),
+                    arc: e.arc.map(|(c, ccw)| (displaced(c), ccw)),
+                    ..*e
+                })
+                .collect();
             let kind = match m % 10 {
                 0 => Kind::Rough,
                 1 => Kind::Bridge,
@@ -264,7 +326,7 @@ impl Interp<'_> {
                 break;
             }
             let allowance = e + f64::from(passes - k) * (d - e) / f64::from(passes);
-            let contour = geom::offset(els, allowance)
+            let contour = geom::offset(els, allowance * allowance_side(s0, els))
                 .map_err(|m| self.err(self.loc.col, format!("G70: {m}")))?;
             if k > 1 {
                 cy.traverse(s0);
@@ -410,6 +472,32 @@ impl Interp<'_> {
     }
 }
 
+/// The side rs274 puts the allowance on: 1 for the left of the profile in (u, v) (the free
+/// side of a profile fed toward lower v with the stock above it), -1 when the lead-in from
+/// the start `s0` to the profile's first point turns clockwise from the line from `s0` to
+/// the start of its last element (rs274: the sign of `imag(v1 / v2)`, libgcc's complex
+/// division), as on a profile written for the other cycle (a turning profile under G72).
+fn allowance_side(s0: Pt, els: &[El]) -> f64 {
+    let (Some(first), Some(last)) = (els.first(), els.last()) else {
+        return 1.0;
+    };
+    // rs274's complex numbers: real part v, imaginary part u.
+    let v1 = (first.a[1] - s0[1], first.a[0] - s0[0]);
+    let v2 = (last.a[1] - s0[1], last.a[0] - s0[0]);
+    if super::roughing_steps::cdivc(v1, v2).1 < 0.0 {
+        -1.0
+    } else {
+        1.0
+    }
+}
+
+/// A point of the roughing profile after rs274's move by the cycle's U/W displacement,
+/// which hytask does not read (rs274 adds `(W, U)` in its frame; zero here): adding +0
+/// turns a -0 coordinate into +0, as in rs274's trace.
+fn displaced(p: Pt) -> Pt {
+    [p[0] + 0.0, p[1] + 0.0]
+}
+
 /// Centre (X, Z) of an R-format arc in the Z/X plane (rs274: negative R, the long way).
 fn r_center(p0: [f64; 6], p: [f64; 6], r: f64, cw: bool) -> (f64, f64) {
     let (a, b) = ((p0[2], p0[0]), (p[2], p[0]));
@@ -469,6 +557,16 @@ impl Cycle<'_> {
             None => self.feed(e.b),
             Some((c, ccw)) => {
                 let end = (self.pose)(e.b);
+                // rs274 makes no arc to where the tool already is (X and Z within 0.0001,
+                // its `equal`).
+                let here = self.out.last().map(|m| match m {
+                    Move::Traverse(p) | Move::Feed(p) | Move::Arc { end: p, .. } => *p,
+                });
+                if here
+                    .is_some_and(|h| (h[0] - end[0]).abs() < 1e-4 && (h[2] - end[2]).abs() < 1e-4)
+                {
+                    return;
+                }
                 let cp = (self.pose)(c);
                 self.push(Move::Arc {
                     end,
@@ -510,10 +608,12 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
             s0[1] + (u - s0[0]) / (ps[0] - s0[0]) * (ps[1] - s0[1])
         }
     };
-    let level = |k: u32| s0[0] - f64::from(k) * w.i;
-    let mut k = 0;
-    while kind != Kind::Profile && level(k) > ps[0] + 1e-7 && !cy.over {
-        let u = level(k);
+    // The levels are counted down from the start by subtracting I once per level, as
+    // rs274 does (not start − k·I, which can differ in the last bit: a level that should
+    // be 0 is then +0 or a tiny value of either sign, printed 0.0000 or -0.0000).
+    let delta = w.i.max(MIN_DELTA);
+    let mut u = s0[0];
+    while kind != Kind::Profile && u > ps[0] + 1e-7 && !cy.over {
         let vk = entry_v(u);
         cy.traverse([u, vk]);
         let end = geom::first_reach(&els, 0, ps, u, false).map_or(els[els.len() - 1].b, |x| x.1);
@@ -523,9 +623,10 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         cy.traverse([u + r, ve + r]);
         cy.traverse([u + r, vk - r]);
         cy.traverse([u, vk]);
-        k += 1;
+        u -= delta;
     }
-    if s0[0] <= ps[0] + 1e-7 {
+    let traversed = s0[0] > ps[0] + 1e-7;
+    if !traversed {
         // The start is level with the profile's first point, so no pass is needed above
         // it (also for G7x.2, which makes none): rs274 then cuts the move to the profile
         // as its first element, fed, not traversed.
@@ -533,8 +634,11 @@ fn rough(contour: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
     } else {
         cy.traverse(ps);
     }
-    finish_along(&els, s0, w, kind, cy);
+    finish_along(&els, s0, w, kind, traversed, cy);
 }
+
+/// rs274's smallest depth of cut (twice its tolerance): a smaller I steps by this.
+const MIN_DELTA: f64 = 2e-6;
 
 /// The retract after a pass fed from `v0` to `v1`: R, but at most half the pass, so the
 /// way back never runs forward (rs274 then retracts to the middle of the pass).
@@ -543,10 +647,25 @@ fn retract(r: f64, v0: f64, v1: f64) -> f64 {
 }
 
 /// The last pass: along the contour, roughing (or bridging) each pocket on the way.
-fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
+fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: &mut Cycle) {
     let pockets = kind != Kind::Bridge;
     let mut i = 0;
     let mut cur = els[0].a;
+    // G7x.2: the level of the pocket start rs274 keeps besides the cycle's start.
+    let mut pocket_top: Option<f64> = None;
+    // A profile that goes down from its first point (reached by a traverse after the
+    // passes) has a pocket there: rs274 goes on with its levels into it, cutting each
+    // across to where the contour is back at the level (also G7x.1, whose bridging is of
+    // the pockets found later along the contour; G7x.2 makes no passes).
+    // While the contour goes down from its first point rs274 draws it as it dives, without
+    // G7x.1's zero-length feed to each element's start.
+    let mut diving = start_dip && kind != Kind::Profile && geom::dips(&els[0], cur);
+    let mut after_sinking = false;
+    if diving {
+        if let Some(back) = geom::first_reach(els, 0, cur, cur[0], true) {
+            (i, cur) = rough_pocket(els, (0, cur), back, s0, w, Kind::Rough, cy);
+        }
+    }
     while i < els.len() {
         let e = els[i];
         // rs274's climb_only: a line climbs unless its end is below its start, compared
@@ -554,7 +673,16 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         // to from where the tool is (a zero-length feed at its start), one that is not
         // climbing only drawn.
         let sinking_line = e.arc.is_none() && e.b[0] < e.a[0];
-        let fed_to_start = !pockets && e.whole && !sinking_line && geom::same(cur, e.a);
+        diving = diving && geom::dips(&e, cur);
+        // After a line that is not climbing (rs274 does not draw it), rs274's feed to where
+        // the next element is at the tool's level is that line: no zero-length feed then.
+        let fed_to_start = !pockets
+            && e.whole
+            && !sinking_line
+            && !diving
+            && !after_sinking
+            && geom::same(cur, e.a);
+        after_sinking = sinking_line;
         if fed_to_start {
             cy.feed(e.a);
         }
@@ -564,6 +692,23 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         // another element (a line into a groove arc): rs274 dives on through it.
         let going_down = e.tangent(e.b)[0] < -geom::EPS;
         let lip = !going_down && els.get(i + 1).is_some_and(|n| geom::dips(n, e.b));
+        // G7x.2: rs274 looks for a pocket at the end of every arc that climbs clockwise in
+        // (u, v) (counter-clockwise in its frame) and at every lip, from the level of the
+        // last pocket start it keeps (a lower one than that is kept, a higher one replaces
+        // it).
+        let arc_end = match e.arc {
+            Some((c, false)) => e.a[1] >= c[1] && e.b[1] >= c[1],
+            _ => false,
+        };
+        if kind == Kind::Profile && (lip || arc_end) {
+            if pocket_top.is_some_and(|t| cur[0] > t) {
+                pocket_top = None;
+            }
+            let top = *pocket_top.get_or_insert(cur[0]);
+            if !lip {
+                arc_end_pass(&e, cur, top, w, cy);
+            }
+        }
         if !lip {
             i += 1;
             continue;
@@ -576,45 +721,126 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, cy: &mut Cycle) {
         if !pockets {
             // G7x.1: straight across the pocket at the lip's level. A line fed to from its
             // start also feeds to the start of the (corner) arc that dips after it, as
-            // rs274 does.
-            if fed_to_start && e.arc.is_none() && els[i + 1].whole && els[i + 1].arc.is_some() {
+            // rs274 does when the arc turns clockwise in (u, v) (counter-clockwise in its
+            // frame: it feeds to the arc's nearer crossing of the level, its start; for the
+            // other turn to the farther one, across the pocket).
+            let cw_arc = els[i + 1].arc.is_some_and(|(_, ccw)| !ccw);
+            if fed_to_start && e.arc.is_none() && els[i + 1].whole && cw_arc {
                 cy.feed(e.b);
             }
             cy.feed(back);
             (i, cur) = next_from(els, j, back);
             continue;
         }
-        let bottom = geom::min_between(els, i + 1, e.b, j, back);
-        // G7x: the cycle's levels below the lip; G7x.2: the lip's level, then down by I.
-        let (top, mut k) = match kind {
-            Kind::Profile => (ul, 0),
-            _ => (s0[0], ((s0[0] - ul) / w.i - 1e-9).ceil().max(0.0) as u32),
-        };
-        let (mut ci, mut cp) = (i + 1, e.b);
-        loop {
-            let u = top - f64::from(k) * w.i;
-            if u <= bottom + 1e-7 || cy.over {
-                break;
-            }
-            let Some((ai, a)) = geom::first_drop(els, ci, cp, u) else {
-                break;
-            };
-            feed_along(els, ci, cp, ai, a, kind == Kind::Rough, cy);
-            let Some((_, bpt)) = geom::first_reach(els, ai, a, u, true) else {
-                break;
-            };
-            cy.feed(bpt);
-            let r = retract(w.r, a[1], bpt[1]);
-            cy.traverse([u + r, bpt[1] + r]);
-            cy.traverse([u + r, a[1] - r]);
-            cy.feed(a);
-            ci = ai;
-            cp = a;
-            k += 1;
-        }
-        // Continue along the contour from where the pocket passes left it.
-        (i, cur) = next_from(els, ci, cp);
+        (i, cur) = rough_pocket(els, (i + 1, e.b), (j, back), s0, w, kind, cy);
     }
+}
+
+/// rs274's pocket check at the end `p` of a climbing arc `e` (G7x.2), with the pocket start
+/// level `top`: when `p` is on a level counted down from `top` (within 1e-6), rs274 cuts
+/// the arc at `p`'s level, with the radius of the arc's start (as `intersection_z`), and
+/// where that crossing lies more than 1e-6 ahead of `p` along the feed (the end of an offset
+/// arc is a little off the circle through its start) it makes a pass of that length: feed,
+/// retract, return, feed back (random lathe program 267: a pass 3.7e-6 long).
+fn arc_end_pass(e: &El, p: Pt, top: f64, w: &Words, cy: &mut Cycle) {
+    const TOL: f64 = 1e-6;
+    let Some((c, _)) = e.arc else {
+        return;
+    };
+    let delta = w.i.max(MIN_DELTA);
+    let mut x = top;
+    let mut n = 0;
+    while x - TOL > p[0] {
+        x -= delta;
+        n += 1;
+        if n > MAX_CYCLE_MOVES {
+            return;
+        }
+    }
+    if (p[0] - x).abs() > TOL {
+        return;
+    }
+    // In rs274's frame: real part v, imaginary part u.
+    let level = p[0];
+    let r = geom::norm(geom::sub(e.a, c));
+    let s = -((level - r - c[0]) * (level + r - c[0]));
+    if s < -TOL {
+        return;
+    }
+    let s = if s < 0.0 { 0.0 } else { s }.sqrt();
+    // Imaginary part of conj(q - c) * (pt - c), as GCC multiplies.
+    let side = |q: Pt, v: f64| (q[1] - c[1]) * (level - c[0]) + (-(q[0] - c[0])) * (v - c[1]);
+    let on = |v: f64| side(e.a, v) >= -TOL && side(e.b, v) <= TOL;
+    let dest = [c[1] - s, c[1] + s].into_iter().find(|&v| on(v));
+    let Some(dest) = dest else {
+        return;
+    };
+    let distance = (dest - p[1]).abs();
+    if dest - TOL > p[1] || distance < TOL {
+        return;
+    }
+    cy.feed([level, dest]);
+    let k = (distance / 2.0 / w.r).min(1.0) * w.r;
+    cy.traverse([level + k, dest + k]);
+    cy.traverse([level + k, p[1] - k]);
+    cy.feed(p);
+}
+
+/// Roughs the pocket from its lip (`lip`: the element after it and the lip point) to where
+/// the contour is back at the lip's level (`back`), level by level, and returns the
+/// element and point to go on from.
+fn rough_pocket(
+    els: &[El],
+    lip: (usize, Pt),
+    back: (usize, Pt),
+    s0: Pt,
+    w: &Words,
+    kind: Kind,
+    cy: &mut Cycle,
+) -> (usize, Pt) {
+    let delta = w.i.max(MIN_DELTA);
+    let ul = lip.1[0];
+    let bottom = geom::min_between(els, lip.0, lip.1, back.0, back.1);
+    // G7x: the cycle's levels below the lip; G7x.2: the lip's level, then down by I.
+    // (rs274: the first level not above the lip by more than 1e-6.)
+    let mut u = match kind {
+        Kind::Profile => ul,
+        _ => {
+            let (mut u, mut n) = (s0[0], 0);
+            while u - 1e-6 > ul {
+                u -= delta;
+                n += 1;
+                if n > MAX_CYCLE_MOVES {
+                    cy.over = true;
+                    break;
+                }
+            }
+            u
+        }
+    };
+    let (mut ci, mut cp) = lip;
+    loop {
+        if u <= bottom + 1e-7 || cy.over {
+            break;
+        }
+        let Some((ai, a)) = geom::first_drop(els, ci, cp, u) else {
+            break;
+        };
+        feed_along(els, ci, cp, ai, a, kind == Kind::Rough, cy);
+        let Some((_, bpt)) = geom::first_reach(els, ai, a, u, true) else {
+            break;
+        };
+        cy.feed(bpt);
+        let r = retract(w.r, a[1], bpt[1]);
+        cy.traverse([u + r, bpt[1] + r]);
+        cy.traverse([u + r, a[1] - r]);
+        cy.feed(a);
+        ci = ai;
+        cp = a;
+        u -= delta;
+    }
+    // Continue along the contour from where the pocket passes left it.
+    next_from(els, ci, cp)
 }
 
 /// The element and point to go on from after reaching `p` on element `j`.
@@ -631,8 +857,9 @@ fn next_from(els: &[El], j: usize, p: Pt) -> (usize, Pt) {
 fn feed_along(els: &[El], i: usize, p: Pt, j: usize, q: Pt, zero: bool, cy: &mut Cycle) {
     if i == j {
         if geom::same(p, q) {
-            // rs274's G7x feeds to the pocket level even when the lip is on it (G7x.2 not).
-            if zero {
+            // rs274's G7x feeds to the pocket level even when the lip is on it (G7x.2 not),
+            // down a line; an arc it would cut there is a zero-length one, which it skips.
+            if zero && els[i].arc.is_none() {
                 cy.feed(q);
             }
         } else {

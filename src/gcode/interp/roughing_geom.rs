@@ -78,33 +78,6 @@ impl El {
         }
     }
 
-    /// The same element shifted `d` to its left (the free side of the profile).
-    fn offset(&self, d: f64) -> Option<El> {
-        match self.arc {
-            None => {
-                let n = mul(left(self.tangent(self.a)), d);
-                Some(El {
-                    a: add(self.a, n),
-                    b: add(self.b, n),
-                    ..*self
-                })
-            }
-            Some((c, ccw)) => {
-                let r = norm(sub(self.a, c));
-                let r2 = if ccw { r - d } else { r + d };
-                if r2 <= EPS {
-                    return None;
-                }
-                let k = r2 / r;
-                Some(El {
-                    a: add(c, mul(sub(self.a, c), k)),
-                    b: add(c, mul(sub(self.b, c), k)),
-                    ..*self
-                })
-            }
-        }
-    }
-
     /// Angle swept from `p` to `q` along the arc, in [0, 2π).
     fn sweep(&self, p: Pt, q: Pt) -> f64 {
         let Some((c, ccw)) = self.arc else {
@@ -286,14 +259,11 @@ pub(super) fn round_corners(els: &[El], rounds: &[f64]) -> Result<Vec<El>, Strin
 /// The profile shifted `d` toward its free (left) side, away from it when negative, as rs274
 /// shifts it (`roughing_steps.rs`): elements that no longer meet are trimmed to their
 /// crossing at inside corners, and joined by an arc about the corner at outside corners.
+/// An arc smaller than the allowance on its inside shrinks in those steps until it is
+/// dropped (below 0.001), as in rs274, which does not refuse it.
 pub(super) fn offset(els: &[El], d: f64) -> Result<Vec<El>, String> {
     if d == 0.0 {
         return Ok(els.to_vec());
-    }
-    if els.iter().any(|e| e.offset(d).is_none()) {
-        return Err(format!(
-            "an arc of the profile is smaller than the finishing allowance D{d}"
-        ));
     }
     super::roughing_steps::offset(els, d)
 }

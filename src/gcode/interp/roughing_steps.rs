@@ -70,7 +70,7 @@ fn forward(e: &El) -> bool {
 }
 
 /// A complex number as rs274 has it: (v, u) (real part along the feed).
-type C = (f64, f64);
+pub(super) type C = (f64, f64);
 
 fn cplx(p: Pt) -> C {
     (p[1], p[0])
@@ -105,7 +105,7 @@ fn cdiv(a: f64, y: C) -> C {
 }
 
 /// `x / y` for complex numbers, in libgcc's order of operations.
-fn cdivc(x: C, y: C) -> C {
+pub(super) fn cdivc(x: C, y: C) -> C {
     let ((a, b), (c, d)) = (x, y);
     if c.abs() < d.abs() {
         let ratio = c / d;
