@@ -814,8 +814,8 @@ mod tests {
         );
         // Hang guard only: without the budget this ran to the loop limit.
         assert!(t0.elapsed() < Duration::from_secs(60), "{:?}", t0.elapsed());
-        // Cancelled before or while it runs: it ends cancelled. (Its own token: the global
-        // `cancel_current` would also cancel other tests' preparations.)
+        // Cancelled before or while it runs: it ends cancelled. (Its own token: these
+        // preparations belong to no machine, see `job_cancel::with_owner`.)
         let token = Cancel::new();
         let (tx, rx) = std::sync::mpsc::channel();
         let t = std::thread::spawn({

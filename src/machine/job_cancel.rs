@@ -14,7 +14,7 @@
 //! with its token registered and its budget running.
 
 use crate::machine::api::ApiError;
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use std::sync::{mpsc, Arc, Mutex, PoisonError};
 use std::time::Duration;
@@ -91,18 +91,38 @@ impl Cancel {
     }
 }
 
-/// The token of the preparation holding the one-at-a-time lock, for [`cancel_current`].
-static CURRENT: Mutex<Option<Cancel>> = Mutex::new(None);
+/// The token of the preparation holding the one-at-a-time lock and the machine it prepares
+/// for ([`with_owner`]), for [`cancel_current`].
+static CURRENT: Mutex<Option<(usize, Cancel)>> = Mutex::new(None);
 
-/// Cancels the preparation in progress, if any (`job.abort`, `estop`). Preparations waiting
-/// for it are not cancelled: they were asked for after it and run next.
-pub fn cancel_current(why: Why) {
-    if let Some(c) = CURRENT
+thread_local! {
+    static OWNER: Cell<usize> = const { Cell::new(0) };
+}
+
+/// Runs `f` with the preparations it starts on this thread registered as `owner`'s (a
+/// machine's identity), so that only that machine's `estop` or `job.abort` cancels them.
+/// Without it, in a process with several machines (a cell, the test binaries) one machine's
+/// e-stop cancelled another's MDI line (CI caught it: `machine_api`'s e-stop test failed
+/// its neighbour's `mdi M8`).
+pub fn with_owner<R>(owner: usize, f: impl FnOnce() -> R) -> R {
+    let previous = OWNER.with(|o| o.replace(owner));
+    let out = f();
+    OWNER.with(|o| o.set(previous));
+    out
+}
+
+/// Cancels the preparation in progress for `owner` ([`with_owner`]), if any (`job.abort`,
+/// `estop`). Preparations waiting for it are not cancelled: they were asked for after it and
+/// run next.
+pub fn cancel_current(owner: usize, why: Why) {
+    if let Some((o, c)) = CURRENT
         .lock()
         .unwrap_or_else(PoisonError::into_inner)
         .as_ref()
     {
-        c.cancel(why);
+        if *o == owner {
+            c.cancel(why);
+        }
     }
 }
 
@@ -112,7 +132,8 @@ pub(crate) struct Current(());
 
 impl Current {
     pub(crate) fn enter(token: &Cancel) -> Current {
-        *CURRENT.lock().unwrap_or_else(PoisonError::into_inner) = Some(token.clone());
+        let owner = OWNER.with(Cell::get);
+        *CURRENT.lock().unwrap_or_else(PoisonError::into_inner) = Some((owner, token.clone()));
         Current(())
     }
 }

@@ -73,6 +73,12 @@ pub(super) struct Receivers {
 }
 
 impl Machine {
+    /// This machine's identity for [`job_cancel::with_owner`]: its address, fixed while it
+    /// lives (a deployed machine is shared in an `Arc`).
+    pub(super) fn preparation_owner(&self) -> usize {
+        self as *const Machine as usize
+    }
+
     /// Keeps `msg` in the fault history (status `faults`), the oldest dropped when full.
     fn remember_fault(&self, msg: String) {
         let mut book = lock(&self.book);
@@ -95,7 +101,7 @@ impl Machine {
             if e.mode == Mode::Estop {
                 // Whatever put the machine in e-stop (its e-stop input, the PLC, the socket):
                 // a preparation in progress stops as for the `estop` method.
-                job_cancel::cancel_current(job_cancel::Why::Estop);
+                job_cancel::cancel_current(self.preparation_owner(), job_cancel::Why::Estop);
             }
             let mode = serde_json::to_value(e.mode).unwrap_or(Value::Null);
             tracing::info!("mode: {mode}");

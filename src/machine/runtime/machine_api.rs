@@ -126,7 +126,10 @@ impl MachineApi for Machine {
     /// e-stop is taken in the next cycle even when its command slots are all busy.
     fn estop(&self) -> Result<(), ApiError> {
         self.estop_request.fetch_add(1, Ordering::AcqRel);
-        crate::machine::job_cancel::cancel_current(crate::machine::job_cancel::Why::Estop);
+        crate::machine::job_cancel::cancel_current(
+            self.preparation_owner(),
+            crate::machine::job_cancel::Why::Estop,
+        );
         let t0 = Instant::now();
         loop {
             self.wait_for_cycle_end();
@@ -219,20 +222,24 @@ impl MachineApi for Machine {
 
     fn mdi(&self, line: &str) -> Result<(), ApiError> {
         self.check_can_run(false)?;
-        let job = job::prepare_mdi_within(
-            line,
-            &self.interp_opts_now(),
-            &self.motion_cfg,
-            self.actual_pose(),
-            self.config.job.prepare_timeout(),
-        )?;
+        let job = crate::machine::job_cancel::with_owner(self.preparation_owner(), || {
+            job::prepare_mdi_within(
+                line,
+                &self.interp_opts_now(),
+                &self.motion_cfg,
+                self.actual_pose(),
+                self.config.job.prepare_timeout(),
+            )
+        })?;
         self.start_job(Arc::new(job), false)
     }
 
     fn job_load(&self, src: &JobSource) -> Result<JobInfo, ApiError> {
         let opts = self.interp_opts_now();
         let budget = self.config.job.prepare_timeout();
-        let job = job::prepare_within(src, &opts, &self.motion_cfg, self.actual_pose(), budget)?;
+        let job = crate::machine::job_cancel::with_owner(self.preparation_owner(), || {
+            job::prepare_within(src, &opts, &self.motion_cfg, self.actual_pose(), budget)
+        })?;
         let info = JobInfo {
             name: job.name.clone(),
             lines: job.total_lines,
@@ -274,7 +281,10 @@ impl MachineApi for Machine {
     }
 
     fn job_abort(&self) -> Result<(), ApiError> {
-        crate::machine::job_cancel::cancel_current(crate::machine::job_cancel::Why::Abort);
+        crate::machine::job_cancel::cancel_current(
+            self.preparation_owner(),
+            crate::machine::job_cancel::Why::Abort,
+        );
         self.command(MachineCmd::Abort).map(|_| ())
     }
 
