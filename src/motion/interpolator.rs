@@ -618,7 +618,10 @@ impl Interpolator {
                 } else {
                     dt
                 }
-            } else if let Some(advance) = self.line_stop_advance(&s, src) {
+            } else if let Some(advance) = (self.line_stop.is_some() || self.stopping())
+                .then(|| self.line_stop_advance(&s, src))
+                .flatten()
+            {
                 advance
             } else {
                 let kdd = self.scale_jerk(&s, self.target_scale(&s));
