@@ -564,48 +564,41 @@ fn fanuc_m98_repeats_share_parameters_and_l0_calls_nothing() {
 fn fanuc_m98_errors_name_the_line() {
     // rs274 names the line its search for the subprogram stopped at: the end of the file
     // (its last line, or the closing %), or a definition of the wrong kind; the message
-    // names the call's line.
-    let e = err("G21\nM98 P77\nM2\n");
-    assert_eq!((e.line, e.col), (3, 1));
-    assert!(
-        e.message.contains("O77") && e.message.contains("line 2"),
-        "{}",
-        e.message
-    );
-    let e = err("%\nM98 P1\nM30\n%\nO1\nM99\n");
-    assert_eq!(e.line, 4, "{}", e.message);
-    let e = err("%\nM98 P1\nM30\nO1 sub\nO1 endsub\n%\n");
-    assert_eq!(e.line, 4, "{}", e.message);
-    assert!(
-        e.message.contains("must be called with 'O.... call'"),
-        "{}",
-        e.message
-    );
-    let e = err("%\nO1 call\nM30\nO1\nM99\n%\n");
-    assert_eq!(e.line, 4, "{}", e.message);
-    assert!(
-        e.message.contains("must be called with 'M98'"),
-        "{}",
-        e.message
-    );
-    let e = err("o<nosub> call\nM2\n(end)\n");
-    assert_eq!(e.line, 3, "{}", e.message);
-    assert!(
-        e.message.contains("o<nosub>") && e.message.contains("line 1"),
-        "{}",
-        e.message
-    );
-    // a definition a call found ahead, which the program then runs into
-    let e = err("O1\nO2 call\nG0 X1\nO2 sub\nG0 Z3\nO2 endsub\nG0 X2\nM2\n");
-    assert_eq!(e.line, 4, "{}", e.message);
-    assert!(e.message.contains("illegal location"), "{}", e.message);
-    let e = err("M98 P10\nM2\nO10\nG0 X1 M99\n");
-    assert_eq!(e.line, 4);
-    assert!(
-        e.message.contains("M99 must begin its line"),
-        "{}",
-        e.message
-    );
+    // names the call's line. (program, error line, every text the message must contain)
+    let cases: [(&str, u32, &[&str]); 7] = [
+        ("G21\nM98 P77\nM2\n", 3, &["O77", "line 2"]),
+        ("%\nM98 P1\nM30\n%\nO1\nM99\n", 4, &[]),
+        (
+            "%\nM98 P1\nM30\nO1 sub\nO1 endsub\n%\n",
+            4,
+            &["must be called with 'O.... call'"],
+        ),
+        (
+            "%\nO1 call\nM30\nO1\nM99\n%\n",
+            4,
+            &["must be called with 'M98'"],
+        ),
+        ("o<nosub> call\nM2\n(end)\n", 3, &["o<nosub>", "line 1"]),
+        // a definition a call found ahead, which the program then runs into
+        (
+            "O1\nO2 call\nG0 X1\nO2 sub\nG0 Z3\nO2 endsub\nG0 X2\nM2\n",
+            4,
+            &["illegal location"],
+        ),
+        (
+            "M98 P10\nM2\nO10\nG0 X1 M99\n",
+            4,
+            &["M99 must begin its line"],
+        ),
+    ];
+    for (program, line, texts) in cases {
+        let e = err(program);
+        assert_eq!(e.line, line, "{program:?}: {}", e.message);
+        for t in texts {
+            assert!(e.message.contains(t), "{program:?}: {}", e.message);
+        }
+    }
+    assert_eq!(err("G21\nM98 P77\nM2\n").col, 1);
 }
 
 /// The machine's ini values: `[RS274NGC] ORIENT_OFFSET` is added to every M19 angle,
