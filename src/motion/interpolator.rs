@@ -19,7 +19,7 @@ use super::config::MotionConfig;
 use super::kinematics::{Kinematics, Machine};
 use super::limits::{override_rates, scale_jerk_at, scale_rate_at, AxisMax};
 use super::line_stop::LineStop;
-use super::segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
+use super::segment::{norm, AuxItem, AuxKind, Item, Segment, SegmentKind};
 use super::KinematicsError;
 use crate::gcode::canon::ProbeKind;
 use crate::gcode::NUM_AXES;
@@ -161,9 +161,6 @@ pub struct Interpolator {
     /// Stops on straight segments follow [`LineStop`] (identity kinematics only: elsewhere a
     /// Cartesian profile says nothing of the joints' accelerations).
     line_stops: bool,
-    /// Velocity limit of every axis, mm/s (a stop begun while still accelerating first
-    /// speeds up a little).
-    vel_max: [f64; NUM_AXES],
     /// The stop being followed along the current (straight) segment.
     line_stop: Option<ActiveStop>,
     /// The queue's next item, taken early to see whether a stop may continue into it (the
@@ -186,7 +183,6 @@ fn straight(s: &Segment) -> Option<(f64, f64, [f64; NUM_AXES])> {
     if s.window.is_some() || s.curvature_per_mm != 0.0 || s.kind == SegmentKind::Dwell {
         return None;
     }
-    let norm = |v: &[f64; NUM_AXES]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
     let (n0, n1) = (norm(&s.v0_mm_s), norm(&s.v1_mm_s));
     let big = n0.max(n1);
     if big <= 0.0 {
@@ -199,11 +195,6 @@ fn straight(s: &Segment) -> Option<(f64, f64, [f64; NUM_AXES])> {
             && (s.v1_mm_s[i] - n1 * u[i]).abs() <= 1e-9 * big
     });
     collinear.then_some((n0, n1, u))
-}
-
-/// Distance along a straight segment of speeds `n0`, `n1` after `t` s of it.
-fn straight_distance(s: &Segment, n0: f64, n1: f64, t: f64) -> f64 {
-    n0 * t + (n1 - n0) * s.shape().eval(t).1
 }
 
 impl Interpolator {
@@ -239,7 +230,6 @@ impl Interpolator {
             aux_head: 0,
             aux_len: 0,
             line_stops: matches!(cfg.kinematics, KinematicsConfig::Identity),
-            vel_max: cfg.axes.map(|a| a.max_vel_mm_s),
             line_stop: None,
             ahead: None,
             out: InterpOutput {
@@ -500,7 +490,7 @@ impl Interpolator {
             }
             self.line_stop = self.start_line_stop(s);
         }
-        let (n0, n1, _) = straight(s)?;
+        straight(s)?;
         let dt = self.dt_s;
         let st = self.line_stop.as_mut()?;
         st.elapsed_s += dt;
@@ -509,7 +499,7 @@ impl Interpolator {
         // an abort or a probe flush acts on a period that did not.
         let done = st.elapsed_s >= st.stop.duration_s() + 0.5 * dt;
         let target = st.from_mm + d;
-        let end_here = straight_distance(s, n0, n1, s.duration_s);
+        let end_here = s.length_mm;
         let (seg, from_t, along, skip) = match self.ahead {
             // Past this segment's end: into the next one, which continues the line
             // (`start_line_stop` took the stop only if it ends there).
@@ -519,19 +509,19 @@ impl Interpolator {
             }
             _ => (*s, self.t_s, target.min(end_here), 0.0),
         };
-        let (m0, m1, _) = straight(&seg)?;
+        straight(&seg)?;
         // The planned time at which the segment has covered `along` (its distance grows with
         // time): bisection, a fixed number of cheap steps, during a stop only.
         let (mut lo, mut hi) = (from_t, seg.duration_s);
         for _ in 0..64 {
             let mid = 0.5 * (lo + hi);
-            if straight_distance(&seg, m0, m1, mid) <= along {
+            if seg.travelled_mm(mid) <= along {
                 lo = mid;
             } else {
                 hi = mid;
             }
         }
-        let planned = m0 + (m1 - m0) * seg.shape().eval(lo).0;
+        let planned = seg.speed_at(lo);
         self.kd = 0.0;
         if done {
             self.line_stop = None;
@@ -548,33 +538,26 @@ impl Interpolator {
     /// speed (and, begun while still accelerating, stays within the axes' velocity).
     fn start_line_stop(&self, s: &Segment) -> Option<ActiveStop> {
         let (n0, n1, u) = straight(s)?;
-        let sh = s.shape();
         let t = self.t_s;
-        let planned = n0 + (n1 - n0) * sh.eval(t).0;
-        let planned_acc = (n1 - n0) * sh.rate(t);
+        let planned = s.speed_at(t);
+        let planned_acc = (n1 - n0) * s.shape().rate(t);
         let v = self.k * planned;
         let a = self.k * self.k * planned_acc + self.kd * planned;
-        let (mut acc, mut jerk, mut vel) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
-        for i in 0..NUM_AXES {
-            if u[i] != 0.0 {
-                acc = acc.min(self.axis_max.acc[i] / u[i].abs());
-                jerk = jerk.min(self.axis_max.jerk[i] / u[i].abs());
-                vel = vel.min(self.vel_max[i] / u[i].abs());
-            }
-        }
+        // A stop begun while still accelerating first speeds up by a²/2J.
+        let (vel, acc, jerk) = self.axis_max.along(&u);
         if v + a.max(0.0).powi(2) / (2.0 * jerk) > vel {
             return None;
         }
         let stop = LineStop::new(v, a, acc, jerk)?;
-        let from_mm = straight_distance(s, n0, n1, t);
-        let mut room = straight_distance(s, n0, n1, s.duration_s) - from_mm;
+        let from_mm = s.travelled_mm(t);
+        let mut room = s.length_mm - from_mm;
         if let Some(Item::Segment(next)) = &self.ahead {
-            if let Some((m0, m1, w)) = straight(next) {
+            if let Some((m0, _, w)) = straight(next) {
                 let same_line = m0 > 0.0
                     && next.kind == s.kind
                     && (0..NUM_AXES).all(|i| (w[i] - u[i]).abs() <= 1e-9);
                 if same_line {
-                    room += straight_distance(next, m0, m1, next.duration_s);
+                    room += next.length_mm;
                 }
             }
         }

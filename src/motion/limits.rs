@@ -306,6 +306,8 @@ fn scale_rate(seg: &Segment, cap: f64, cfg: &MotionConfig, k1: f64, k2: f64) -> 
 /// interpolator to compute scale rates at the current scale.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AxisMax {
+    /// mm/s.
+    pub vel: [f64; NUM_AXES],
     /// mm/s².
     pub acc: [f64; NUM_AXES],
     /// mm/s³.
@@ -316,9 +318,25 @@ impl AxisMax {
     /// From the configuration.
     pub fn new(cfg: &MotionConfig) -> Self {
         AxisMax {
+            vel: cfg.axes.map(|a| a.max_vel_mm_s),
             acc: cfg.axes.map(|a| a.max_acc_mm_s2),
             jerk: cfg.axes.map(|a| a.max_jerk_mm_s3),
         }
+    }
+
+    /// `(velocity, acceleration, jerk)` allowed along unit direction `u`: the full limits of
+    /// the axes it moves, each divided by its share (as [`Limits::vcap`] and
+    /// [`Limits::tangential`] do with the planning limits).
+    pub fn along(&self, u: &[f64; NUM_AXES]) -> (f64, f64, f64) {
+        let mut out = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+        for i in 0..NUM_AXES {
+            if u[i] != 0.0 {
+                out.0 = out.0.min(self.vel[i] / u[i].abs());
+                out.1 = out.1.min(self.acc[i] / u[i].abs());
+                out.2 = out.2.min(self.jerk[i] / u[i].abs());
+            }
+        }
+        out
     }
 }
 
