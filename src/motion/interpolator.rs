@@ -527,8 +527,7 @@ impl Interpolator {
             self.line_stop = None;
             self.k = 0.0;
         } else {
-            // Not 0 while moving (0 is "at rest" to an abort or a hold).
-            self.k = if planned > 1e-9 { v / planned } else { 0.0 }.max(1e-12);
+            self.k = if planned > 1e-9 { v / planned } else { 0.0 };
         }
         Some(skip + (lo - from_t).max(0.0))
     }
@@ -650,7 +649,9 @@ impl Interpolator {
             } else {
                 self.out.distance_to_go_mm = 0.0;
             }
-            let at_rest = self.k == 0.0 && self.kd.abs() <= self.k2 * dt;
+            // A line stop is at rest only once it has ended (see `line_stop_advance`).
+            let at_rest =
+                self.line_stop.is_none() && self.k == 0.0 && self.kd.abs() <= self.k2 * dt;
             // The tool stands still during a dwell whatever the scale: an abort ends it now
             // (else a `G4 P100000` ran to its end after `job.abort`).
             let dwelling = self.seg.is_some_and(|s| s.kind == SegmentKind::Dwell);
@@ -674,7 +675,7 @@ impl Interpolator {
         self.out.state = if self.waiting {
             InterpState::Waiting
         } else if self.seg.is_some() || self.probe_flush {
-            if self.hold && self.k == 0.0 {
+            if self.hold && self.k == 0.0 && self.line_stop.is_none() {
                 InterpState::Holding
             } else {
                 InterpState::Running
