@@ -88,6 +88,8 @@ struct JobBook {
     active: Option<ActiveJob>,
     status: JobStatus,
     faults: VecDeque<String>,
+    /// Servo cycle of the newest job event applied to `status` (see `Machine::status`).
+    news_cycle: u64,
 }
 
 /// A running machine.

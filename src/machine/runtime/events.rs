@@ -88,10 +88,41 @@ impl Machine {
         book.faults.push_back(msg);
     }
 
+    /// A snapshot and the job book (the job's status and the fault history) in step: every job event of the snapshot's cycle and
+    /// before is applied, and none after it.
+    ///
+    /// The machine task emits a job event in the same cycle as its mode change (an M0's hold,
+    /// a job's end), and the snapshot is published at the end of that cycle. Events drained
+    /// after the snapshot was read include every one of its cycle and before, so a status
+    /// never shows the new mode with the old job state. But on a fast (unpaced, simulated)
+    /// servo they may also include events of later cycles, which would show a job
+    /// "holding" beside the mode and position of a cycle before the hold; then the snapshot
+    /// is read again until it has caught up. The servo publishes within a cycle, so this
+    /// ends at once; a stopped servo (nothing newer will come) ends it after a short wait.
+    pub(super) fn consistent_view(&self) -> (StatusSnapshot, JobStatus, Vec<String>) {
+        let deadline = Instant::now() + Duration::from_millis(50);
+        loop {
+            let st = self.snapshot();
+            self.pump_events();
+            // Checked and copied under one lock: the bridge thread applies events too.
+            let book = lock(&self.book);
+            if book.news_cycle <= st.cycle || Instant::now() >= deadline {
+                let mut job = book.status.clone();
+                if let Some(a) = &book.active {
+                    apply_progress(&mut job, a, &st.setpoints);
+                    job.input_wait =
+                        crate::machine::servo::input_wait::status(&st.machine.wait, a.id);
+                }
+                let faults = book.faults.iter().cloned().collect();
+                return (st, job, faults);
+            }
+            drop(book);
+            std::thread::yield_now();
+        }
+    }
+
     /// Applies and forwards every pending realtime event. Called by the bridge every few
-    /// milliseconds, and by `status` after it read the snapshot: the machine task emits a
-    /// job's end in the same cycle as the mode change, so a status never shows the new mode
-    /// with the old job state.
+    /// milliseconds, and by `status` after it read the snapshot ([`Self::consistent_view`]).
     pub(super) fn pump_events(&self) {
         let mut guard = lock(&self.receivers);
         let Some(rx) = guard.as_mut() else {
@@ -178,7 +209,7 @@ fn update_progress(m: &Machine) {
 
 /// Job progress from the setpoints of one servo cycle: `status` applies the cycle it shows
 /// to its own copy, so its position and its progress never come from different cycles.
-pub(super) fn apply_progress(status: &mut JobStatus, a: &ActiveJob, sp: &Setpoints) {
+fn apply_progress(status: &mut JobStatus, a: &ActiveJob, sp: &Setpoints) {
     if sp.job != a.id || sp.tracking {
         return;
     }
@@ -207,6 +238,7 @@ fn handle_job_event(m: &Machine, news: JobNews) {
     if book.active.as_ref().is_some_and(|a| a.id != news.job) {
         return;
     }
+    book.news_cycle = book.news_cycle.max(news.cycle);
     let e = news.event;
     let (state, reason, end) = match e {
         JobEvent::Started => ("running", None, false),

@@ -2,7 +2,7 @@
 //! overrides, task introspection, SDO access and simulated faults. Why one file: it is the operator
 //! surface the control socket and the Zenoh bridge serve.
 
-use super::events::{apply_progress, describe_trip, internal_operation};
+use super::events::{describe_trip, internal_operation};
 use super::{lock, sdo_error, Machine, ACCEPT_TIMEOUT};
 use crate::config::IoKind;
 use crate::gcode::SourceLoc;
@@ -28,9 +28,8 @@ impl MachineApi for Machine {
 
     fn status(&self) -> Status {
         // One read: every value below belongs to servo cycle `st.cycle`.
-        let st = self.snapshot();
+        let (st, job, mut faults) = self.consistent_view();
         let (snap, sp, mon) = (&st.machine, &st.setpoints, &st.monitor);
-        self.pump_events();
         let axes = self
             .axes()
             .into_iter()
@@ -70,13 +69,6 @@ impl MachineApi for Machine {
         for (i, c) in map.ao.iter().enumerate() {
             out_map.insert(c.point.name.clone(), outputs.analog[i]);
         }
-        let book = lock(&self.book);
-        let mut job = book.status.clone();
-        if let Some(a) = &book.active {
-            apply_progress(&mut job, a, sp);
-            job.input_wait = crate::machine::servo::input_wait::status(&snap.wait, a.id);
-        }
-        let mut faults: Vec<String> = book.faults.iter().cloned().collect();
         if matches!(snap.mode, Mode::Fault | Mode::Estop) {
             if let Some(t) = snap.last_trip {
                 let msg = describe_trip(&t, 0);

@@ -109,6 +109,7 @@ mod tests {
         let n = JobNews {
             job: 3,
             event: super::super::JobEvent::Finished { line: 7 },
+            cycle: 12,
         };
         let v = n.json();
         assert_eq!(v["event"], "Finished");

@@ -431,6 +431,10 @@ pub struct JobNews {
     pub job: u32,
     /// What happened.
     pub event: JobEvent,
+    /// The servo cycle it happened in: a status shows it only with a snapshot of that cycle
+    /// or a later one, so a job never reads "holding" beside the mode and position of a
+    /// cycle before the hold.
+    pub cycle: u64,
 }
 
 /// Job life, from the machine task.

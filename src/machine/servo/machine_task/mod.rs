@@ -273,6 +273,7 @@ impl MachineTask {
             ev.emit(JobNews {
                 job: self.job_id,
                 event: e,
+                cycle: self.cycle,
             });
         }
     }
