@@ -9,17 +9,19 @@
 //! for the `k̇`/`k̈` terms and capped `k` per segment ([`Segment::override_cap`]), so no
 //! override change, hold or abort can exceed a limit, and the tool never leaves the path.
 //!
-//! A stop (hold, abort, probe trip) on a straight segment whose fastest stop from the
-//! current speed and acceleration ends within the segment follows that stop instead
-//! ([`super::line_stop`]): along a straight line any speed profile keeps the path, so it
-//! needs no rate of `k` from the planner, only the axes' full limits along the line.
+//! A stop (hold, abort, probe trip) whose fastest stop from the current speed and
+//! acceleration ends within the lines and arcs joined tangentially ahead of the tool
+//! follows that stop instead ([`super::line_stop`], [`super::path_stop`]): along them any
+//! speed profile keeps the path, so it needs no rate of `k` from the planner, only the
+//! axes' full limits (less an arc's normal acceleration).
 
 use super::config::KinematicsConfig;
 use super::config::MotionConfig;
 use super::kinematics::{Kinematics, Machine};
 use super::limits::{override_rates, scale_jerk_at, scale_rate_at, AxisMax};
 use super::line_stop::LineStop;
-use super::segment::{norm, AuxItem, AuxKind, Item, Segment, SegmentKind};
+use super::path_stop::{plan as plan_stop, Reach};
+use super::segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
 use super::KinematicsError;
 use crate::gcode::canon::ProbeKind;
 use crate::gcode::NUM_AXES;
@@ -28,6 +30,8 @@ use crate::gcode::NUM_AXES;
 pub const MAX_ITEMS_PER_STEP: usize = 256;
 /// Auxiliary items that can wait to be reported (one is reported per cycle).
 const AUX_RING: usize = 64;
+/// Queue items a stop may look ahead into (the pieces of path it may run along).
+const AHEAD: usize = 8;
 
 /// Where the interpolator takes its segments from: a `Vec` in tests, the realtime core's
 /// lock-free ring buffer in the daemon.
@@ -158,43 +162,32 @@ pub struct Interpolator {
     aux_ring: [Option<AuxItem>; AUX_RING],
     aux_head: usize,
     aux_len: usize,
-    /// Stops on straight segments follow [`LineStop`] (identity kinematics only: elsewhere a
+    /// Stops along lines and arcs follow [`LineStop`] (identity kinematics only: elsewhere a
     /// Cartesian profile says nothing of the joints' accelerations).
     line_stops: bool,
-    /// The stop being followed along the current (straight) segment.
+    /// The stop being followed along the path.
     line_stop: Option<ActiveStop>,
-    /// The queue's next item, taken early to see whether a stop may continue into it (the
-    /// rest of the line); every read of the queue takes it first.
-    ahead: Option<Item>,
+    /// The queue's next items, taken early to see how far a stop may run along the path;
+    /// every read of the queue takes them first (a ring: `ahead_len` from `ahead_head`).
+    ahead: [Option<Item>; AHEAD],
+    ahead_head: usize,
+    ahead_len: usize,
     out: InterpOutput,
 }
 
-/// A [`LineStop`] in progress: time since its start and the segment's raw distance there.
+/// A [`LineStop`] in progress along the path.
 #[derive(Debug, Clone, Copy)]
 struct ActiveStop {
     stop: LineStop,
+    /// Time since the stop (or its last re-planning) began, s.
     elapsed_s: f64,
+    /// Distance into the current segment at which it began, mm (less the lengths of the
+    /// segments passed since, so it may be negative).
     from_mm: f64,
-}
-
-/// Speeds at the ends of a straight segment and its direction, or `None` when the segment
-/// is not one straight transition (a blend, an arc, a windowed span piece, a dwell).
-fn straight(s: &Segment) -> Option<(f64, f64, [f64; NUM_AXES])> {
-    if s.window.is_some() || s.curvature_per_mm != 0.0 || s.kind == SegmentKind::Dwell {
-        return None;
-    }
-    let (n0, n1) = (norm(&s.v0_mm_s), norm(&s.v1_mm_s));
-    let big = n0.max(n1);
-    if big <= 0.0 {
-        return None;
-    }
-    let along = if n1 >= n0 { &s.v1_mm_s } else { &s.v0_mm_s };
-    let u = along.map(|c| c / big);
-    let collinear = (0..NUM_AXES).all(|i| {
-        (s.v0_mm_s[i] - n0 * u[i]).abs() <= 1e-9 * big
-            && (s.v1_mm_s[i] - n1 * u[i]).abs() <= 1e-9 * big
-    });
-    collinear.then_some((n0, n1, u))
+    /// The path it runs along, and the bounds there.
+    reach: Reach,
+    /// Items of the ring taken ahead that it may run into.
+    pieces: usize,
 }
 
 impl Interpolator {
@@ -231,7 +224,9 @@ impl Interpolator {
             aux_len: 0,
             line_stops: matches!(cfg.kinematics, KinematicsConfig::Identity),
             line_stop: None,
-            ahead: None,
+            ahead: [None; AHEAD],
+            ahead_head: 0,
+            ahead_len: 0,
             out: InterpOutput {
                 pose_mm: start_mm,
                 joints: joints.unwrap_or(start_mm),
@@ -328,9 +323,29 @@ impl Interpolator {
         a
     }
 
-    /// The next queue item: the one taken ahead, else the source's.
+    /// The next queue item: the first taken ahead, else the source's.
     fn pop_item(&mut self, src: &mut impl SegmentSource) -> Option<Item> {
-        self.ahead.take().or_else(|| src.pop())
+        if self.ahead_len == 0 {
+            return src.pop();
+        }
+        let it = self.ahead[self.ahead_head].take();
+        self.ahead_head = (self.ahead_head + 1) % AHEAD;
+        self.ahead_len -= 1;
+        it
+    }
+
+    /// The `i`-th queue item after the current segment, taken ahead from the source if it
+    /// was not yet (`None` past the ring's size or the source's end).
+    fn peek_ahead(&mut self, i: usize, src: &mut impl SegmentSource) -> Option<Item> {
+        while self.ahead_len <= i {
+            if self.ahead_len == AHEAD {
+                return None;
+            }
+            let it = src.pop()?;
+            self.ahead[(self.ahead_head + self.ahead_len) % AHEAD] = Some(it);
+            self.ahead_len += 1;
+        }
+        self.ahead[(self.ahead_head + i) % AHEAD]
     }
 
     /// Pulls items until a segment is current, a barrier is hit, the ring is full or the
@@ -473,43 +488,58 @@ impl Interpolator {
         }
     }
 
-    /// A stop on a straight segment: where one is requested and the fastest stop from the
-    /// current speed and acceleration ([`LineStop`]) ends within this segment or the next
-    /// (the rest of the line, see [`Self::start_line_stop`]), it is
-    /// followed instead of braking the scale (whose rates are those every segment within one
-    /// braking allows). Returns the planned time to advance this period, or `None` to
-    /// scale as usual. Once begun, the stop runs to rest even if the hold is released
-    /// meanwhile: the resume then starts from rest, as from any hold.
+    /// A stop along the path: where one is requested and the fastest stop from the current
+    /// speed and acceleration ([`LineStop`]) ends within the lines and arcs joined
+    /// tangentially ahead ([`Self::start_line_stop`]), it is followed instead of braking the
+    /// scale (whose rates are those every segment within one braking allows). Returns the
+    /// planned time to advance this period, or `None` to scale as usual. Once begun, the
+    /// stop runs to rest even if the hold is released meanwhile: the resume then starts
+    /// from rest, as from any hold. Where arcs are in reach, the stop is re-planned every
+    /// period from the speed reached: their normal acceleration falls with the speed and
+    /// leaves more to the stop.
     fn line_stop_advance(&mut self, s: &Segment, src: &mut impl SegmentSource) -> Option<f64> {
         if self.line_stop.is_none() {
             if !self.stopping() || !self.line_stops || self.sync_skip {
                 return None;
             }
-            if self.ahead.is_none() {
-                self.ahead = src.pop();
-            }
-            self.line_stop = self.start_line_stop(s);
+            self.line_stop = self.start_line_stop(s, src);
         }
-        straight(s)?;
         let dt = self.dt_s;
-        let st = self.line_stop.as_mut()?;
+        let mut st = self.line_stop?;
+        if st.reach.turns() {
+            let (d, v, a) = st.stop.eval(st.elapsed_s);
+            let left = st.stop.duration_s() - st.elapsed_s;
+            let gone = st.stop.distance_mm() - d;
+            match plan_stop(&st.reach, v, a, dt) {
+                Some(stop) if stop.duration_s() <= left && stop.distance_mm() <= gone => {
+                    st.stop = stop;
+                    st.elapsed_s = 0.0;
+                    st.from_mm += d;
+                }
+                _ => {}
+            }
+        }
         st.elapsed_s += dt;
         let (d, v, _) = st.stop.eval(st.elapsed_s);
         // At rest from the period after the one that reached the end (which still moved):
         // an abort or a probe flush acts on a period that did not.
         let done = st.elapsed_s >= st.stop.duration_s() + 0.5 * dt;
-        let target = st.from_mm + d;
-        let end_here = s.length_mm;
-        let (seg, from_t, along, skip) = match self.ahead {
-            // Past this segment's end: into the next one, which continues the line
-            // (`start_line_stop` took the stop only if it ends there).
-            Some(Item::Segment(next)) if target >= end_here => {
-                st.from_mm -= end_here;
-                (next, 0.0, target - end_here, s.duration_s - self.t_s)
-            }
-            _ => (*s, self.t_s, target.min(end_here), 0.0),
-        };
-        straight(&seg)?;
+        self.line_stop = Some(st);
+        // The segment the stop reaches this period: the current one or one taken ahead
+        // (`start_line_stop` took the stop only if it ends within them).
+        let (mut seg, mut from_t, mut skip) = (*s, self.t_s, 0.0);
+        let mut along = st.from_mm + d;
+        let mut i = 0;
+        while along >= seg.length_mm && i < st.pieces {
+            let Some(Item::Segment(next)) = self.ahead_at(i) else {
+                break;
+            };
+            skip += (seg.duration_s - from_t).max(0.0);
+            along -= seg.length_mm;
+            (seg, from_t) = (next, 0.0);
+            i += 1;
+        }
+        let along = along.min(seg.length_mm);
         // The planned time at which the segment has covered `along` (its distance grows with
         // time): bisection, a fixed number of cheap steps, during a stop only.
         let (mut lo, mut hi) = (from_t, seg.duration_s);
@@ -532,39 +562,43 @@ impl Interpolator {
         Some(skip + (lo - from_t).max(0.0))
     }
 
-    /// The stop along `s` from the current state, if `s` is straight and the stop ends
-    /// within it or within the next queue item, a straight segment continuing the line at
-    /// speed (and, begun while still accelerating, stays within the axes' velocity).
-    fn start_line_stop(&self, s: &Segment) -> Option<ActiveStop> {
-        let (n0, n1, u) = straight(s)?;
+    /// The `i`-th item taken ahead, if it was.
+    fn ahead_at(&self, i: usize) -> Option<Item> {
+        if i < self.ahead_len {
+            self.ahead[(self.ahead_head + i) % AHEAD]
+        } else {
+            None
+        }
+    }
+
+    /// The stop along the path from the current state, if the current segment is a line or
+    /// an arc and the stop ends within it or within the queue items after it that continue
+    /// it tangentially (up to [`AHEAD`] of them; [`Reach`]), and (begun while still
+    /// accelerating) stays within the axes' velocity.
+    fn start_line_stop(&mut self, s: &Segment, src: &mut impl SegmentSource) -> Option<ActiveStop> {
         let t = self.t_s;
         let planned = s.speed_at(t);
-        let planned_acc = (n1 - n0) * s.shape().rate(t);
         let v = self.k * planned;
-        let a = self.k * self.k * planned_acc + self.kd * planned;
-        // A stop begun while still accelerating first speeds up by a²/2J.
-        let (vel, acc, jerk) = self.axis_max.along(&u);
-        if v + a.max(0.0).powi(2) / (2.0 * jerk) > vel {
-            return None;
-        }
-        let stop = LineStop::new(v, a, acc, jerk)?;
+        let a = self.k * self.k * s.tangential_acc_at(t) + self.kd * planned;
         let from_mm = s.travelled_mm(t);
-        let mut room = s.length_mm - from_mm;
-        if let Some(Item::Segment(next)) = &self.ahead {
-            if let Some((m0, _, w)) = straight(next) {
-                let same_line = m0 > 0.0
-                    && next.kind == s.kind
-                    && (0..NUM_AXES).all(|i| (w[i] - u[i]).abs() <= 1e-9);
-                if same_line {
-                    room += next.length_mm;
-                }
+        let mut reach = Reach::new(s, from_mm, &self.axis_max)?;
+        let mut pieces = 0;
+        loop {
+            let stop = plan_stop(&reach, v, a, self.dt_s)?;
+            if stop.distance_mm() < reach.room_mm * (1.0 - 1e-9) {
+                return Some(ActiveStop {
+                    stop,
+                    elapsed_s: 0.0,
+                    from_mm,
+                    reach,
+                    pieces,
+                });
+            }
+            match self.peek_ahead(pieces, src) {
+                Some(Item::Segment(next)) if reach.extend(&next, &self.axis_max) => pieces += 1,
+                _ => return None,
             }
         }
-        (stop.distance_mm() < room * (1.0 - 1e-9)).then_some(ActiveStop {
-            stop,
-            elapsed_s: 0.0,
-            from_mm,
-        })
     }
 
     /// One servo period.
@@ -628,6 +662,11 @@ impl Interpolator {
             while self.t_s >= s.duration_s {
                 let rest = self.t_s - s.duration_s;
                 self.out.pose_mm = s.end_mm;
+                if let Some(st) = &mut self.line_stop {
+                    // A stop running on into the next segment (one of its pieces).
+                    st.from_mm -= s.length_mm;
+                    st.pieces = st.pieces.saturating_sub(1);
+                }
                 self.fetch(src, &mut budget);
                 match self.seg {
                     Some(n) => {

@@ -89,6 +89,7 @@ pub mod lookahead;
 pub mod merge;
 pub mod moves;
 pub mod nurbs;
+pub mod path_stop;
 pub mod profile;
 pub mod segment;
 pub mod span;

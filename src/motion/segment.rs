@@ -174,11 +174,25 @@ impl Segment {
             return self.window_speed_distance(t_s).0;
         }
         let (f, _) = self.shape().eval(t_s.clamp(0.0, self.duration_s.max(0.0)));
+        if self.curvature_per_mm != 0.0 {
+            // Along the arc: the speeds change, not the vectors (whose mean is a chord's).
+            let (s0, s1) = (norm(&self.v0_mm_s), norm(&self.v1_mm_s));
+            return s0 + (s1 - s0) * f;
+        }
         let mut v = [0.0; NUM_AXES];
         for (i, v) in v.iter_mut().enumerate() {
             *v = self.v0_mm_s[i] + (self.v1_mm_s[i] - self.v0_mm_s[i]) * f;
         }
         norm(&v)
+    }
+
+    /// Tangential acceleration (the rate of the path speed) at time `t_s`, mm/s².
+    pub fn tangential_acc_at(&self, t_s: f64) -> f64 {
+        let t = t_s.clamp(0.0, self.duration_s.max(0.0));
+        if self.window.is_some() {
+            return self.window.dv_mm_s * self.shape().rate(self.window.offset_s + t);
+        }
+        (norm(&self.v1_mm_s) - norm(&self.v0_mm_s)) * self.shape().rate(t)
     }
 
     /// Peak tangential acceleration of a windowed piece or an arc, mm/s² (the whole
