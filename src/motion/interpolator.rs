@@ -164,9 +164,9 @@ pub struct Interpolator {
     aux_len: usize,
     /// Stops along lines and arcs follow [`LineStop`] (identity kinematics only: elsewhere a
     /// Cartesian profile says nothing of the joints' accelerations).
-    line_stops: bool,
+    path_stops: bool,
     /// The stop being followed along the path.
-    line_stop: Option<ActiveStop>,
+    path_stop: Option<ActiveStop>,
     /// The queue's next items, taken early to see how far a stop may run along the path;
     /// every read of the queue takes them first (a ring: `ahead_len` from `ahead_head`).
     ahead: [Option<Item>; AHEAD],
@@ -222,8 +222,8 @@ impl Interpolator {
             aux_ring: [None; AUX_RING],
             aux_head: 0,
             aux_len: 0,
-            line_stops: matches!(cfg.kinematics, KinematicsConfig::Identity),
-            line_stop: None,
+            path_stops: matches!(cfg.kinematics, KinematicsConfig::Identity),
+            path_stop: None,
             ahead: [None; AHEAD],
             ahead_head: 0,
             ahead_len: 0,
@@ -490,22 +490,22 @@ impl Interpolator {
 
     /// A stop along the path: where one is requested and the fastest stop from the current
     /// speed and acceleration ([`LineStop`]) ends within the lines and arcs joined
-    /// tangentially ahead ([`Self::start_line_stop`]), it is followed instead of braking the
+    /// tangentially ahead ([`Self::start_path_stop`]), it is followed instead of braking the
     /// scale (whose rates are those every segment within one braking allows). Returns the
     /// planned time to advance this period, or `None` to scale as usual. Once begun, the
     /// stop runs to rest even if the hold is released meanwhile: the resume then starts
     /// from rest, as from any hold. Where arcs are in reach, the stop is re-planned every
     /// period from the speed reached: their normal acceleration falls with the speed and
     /// leaves more to the stop.
-    fn line_stop_advance(&mut self, s: &Segment, src: &mut impl SegmentSource) -> Option<f64> {
-        if self.line_stop.is_none() {
-            if !self.stopping() || !self.line_stops || self.sync_skip {
+    fn path_stop_advance(&mut self, s: &Segment, src: &mut impl SegmentSource) -> Option<f64> {
+        if self.path_stop.is_none() {
+            if !self.stopping() || !self.path_stops || self.sync_skip {
                 return None;
             }
-            self.line_stop = self.start_line_stop(s, src);
+            self.path_stop = self.start_path_stop(s, src);
         }
         let dt = self.dt_s;
-        let mut st = self.line_stop?;
+        let mut st = self.path_stop?;
         if st.reach.turns() {
             let (d, v, a) = st.stop.eval(st.elapsed_s);
             let left = st.stop.duration_s() - st.elapsed_s;
@@ -524,9 +524,9 @@ impl Interpolator {
         // At rest from the period after the one that reached the end (which still moved):
         // an abort or a probe flush acts on a period that did not.
         let done = st.elapsed_s >= st.stop.duration_s() + 0.5 * dt;
-        self.line_stop = Some(st);
+        self.path_stop = Some(st);
         // The segment the stop reaches this period: the current one or one taken ahead
-        // (`start_line_stop` took the stop only if it ends within them).
+        // (`start_path_stop` took the stop only if it ends within them).
         let (mut seg, mut from_t, mut skip) = (*s, self.t_s, 0.0);
         let mut along = st.from_mm + d;
         let mut i = 0;
@@ -554,7 +554,7 @@ impl Interpolator {
         let planned = seg.speed_at(lo);
         self.kd = 0.0;
         if done {
-            self.line_stop = None;
+            self.path_stop = None;
             self.k = 0.0;
         } else {
             self.k = if planned > 1e-9 { v / planned } else { 0.0 };
@@ -575,7 +575,7 @@ impl Interpolator {
     /// an arc and the stop ends within it or within the queue items after it that continue
     /// it tangentially (up to [`AHEAD`] of them; [`Reach`]), and (begun while still
     /// accelerating) stays within the axes' velocity.
-    fn start_line_stop(&mut self, s: &Segment, src: &mut impl SegmentSource) -> Option<ActiveStop> {
+    fn start_path_stop(&mut self, s: &Segment, src: &mut impl SegmentSource) -> Option<ActiveStop> {
         let t = self.t_s;
         let planned = s.speed_at(t);
         let v = self.k * planned;
@@ -634,8 +634,8 @@ impl Interpolator {
                 } else {
                     dt
                 }
-            } else if let Some(advance) = (self.line_stop.is_some() || self.stopping())
-                .then(|| self.line_stop_advance(&s, src))
+            } else if let Some(advance) = (self.path_stop.is_some() || self.stopping())
+                .then(|| self.path_stop_advance(&s, src))
                 .flatten()
             {
                 advance
@@ -662,7 +662,7 @@ impl Interpolator {
             while self.t_s >= s.duration_s {
                 let rest = self.t_s - s.duration_s;
                 self.out.pose_mm = s.end_mm;
-                if let Some(st) = &mut self.line_stop {
+                if let Some(st) = &mut self.path_stop {
                     // A stop running on into the next segment (one of its pieces).
                     st.from_mm -= s.length_mm;
                     st.pieces = st.pieces.saturating_sub(1);
@@ -688,9 +688,9 @@ impl Interpolator {
             } else {
                 self.out.distance_to_go_mm = 0.0;
             }
-            // A line stop is at rest only once it has ended (see `line_stop_advance`).
+            // A path stop is at rest only once it has ended (see `path_stop_advance`).
             let at_rest =
-                self.line_stop.is_none() && self.k == 0.0 && self.kd.abs() <= self.k2 * dt;
+                self.path_stop.is_none() && self.k == 0.0 && self.kd.abs() <= self.k2 * dt;
             // The tool stands still during a dwell whatever the scale: an abort ends it now
             // (else a `G4 P100000` ran to its end after `job.abort`).
             let dwelling = self.seg.is_some_and(|s| s.kind == SegmentKind::Dwell);
@@ -714,7 +714,7 @@ impl Interpolator {
         self.out.state = if self.waiting {
             InterpState::Waiting
         } else if self.seg.is_some() || self.probe_flush {
-            if self.hold && self.k == 0.0 && self.line_stop.is_none() {
+            if self.hold && self.k == 0.0 && self.path_stop.is_none() {
                 InterpState::Holding
             } else {
                 InterpState::Running
