@@ -251,3 +251,37 @@ fn many_mdi_coolant_lines_each_apply_their_output_and_end() {
     assert_eq!(s.job.state, "done");
     shutdown(&m);
 }
+
+/// A feed hold on a circle (G2, fitted into arcs: the hold runs along them as a path stop,
+/// `motion::path_stop`) stops on the circle, and the job resumes to its end.
+#[test]
+fn a_feed_hold_on_a_circle_stops_on_it_and_the_job_resumes() {
+    let (m, _dir) = sim_machine();
+    ready(&m);
+    // Forty circles: on the unpaced simulated clock they run in about a quarter of a
+    // second, so the pause, sent once the first has begun, lands on one of them.
+    let mut program = String::from("G21 G90 G64 P0.01\nG0 X160 Y150 Z-1\nF3000\n");
+    for _ in 0..40 {
+        program.push_str("G2 X160 Y150 I-10 J0\n");
+    }
+    program.push_str("G0 Z0\nM2\n");
+    m.job_load(&text("circles.ngc", &program)).unwrap();
+    m.job_run().unwrap();
+    let xy = |s: &Status| {
+        let c = |n: &str| s.axes.iter().find(|a| a.name == n).unwrap().commanded;
+        (c("X") - 150.0, c("Y") - 150.0)
+    };
+    wait(&m, "the first circle", |s| s.job.line >= 4);
+    m.job_pause().unwrap();
+    let held = wait(&m, "the hold", |s| s.mode == Mode::Holding);
+    assert_eq!(held.job.state, "holding");
+    assert!((4..44).contains(&held.job.line), "{:?}", held.job);
+    let (x, y) = xy(&held);
+    let r = x.hypot(y);
+    assert!((r - 10.0).abs() < 0.011, "held at ({x}, {y}), radius {r}");
+    m.job_resume().unwrap();
+    let done = wait(&m, "the end", |s| s.job.state == "done");
+    let (x, y) = xy(&done);
+    assert!((x - 10.0).abs() < 0.002 && y.abs() < 0.002, "({x}, {y})");
+    shutdown(&m);
+}
