@@ -139,7 +139,7 @@ impl Corner {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::motion::segment::{Segment, SegmentKind};
+    use crate::motion::segment::Segment;
     use crate::motion::MotionConfig;
 
     fn unit(x: f64, y: f64) -> [f64; NUM_AXES] {
@@ -199,26 +199,13 @@ mod tests {
             let seg = Segment {
                 start_mm: start,
                 end_mm: ub.map(|x| x * d),
-                v0_mm_s: ua.map(|x| x * v),
-                v1_mm_s: ub.map(|x| x * v),
-                duration_s: sh.duration_s,
-                jerk_s: sh.jerk_s,
-                kind: SegmentKind::Feed,
-                line: 1,
-                length_mm: 0.0,
-                move_rest_mm: 0.0,
-                override_cap: 1.0,
-                end_override_cap: 1.0,
-                scale_rate_max: 1.0,
-                end_scale_rate_max: 1.0,
-                scale_jerk_max: 1.0,
-                brake_scale_jerk_max: 1.0,
-                next_scale_jerk_max: 1.0,
-                curvature_per_mm: 0.0,
-                heading_rad: 0.0,
-                step_jerk_mm_s3: 0.0,
-                line_marks: Default::default(),
-                window: Default::default(),
+                ..Segment::for_test(
+                    ua.map(|x| x * v),
+                    ub.map(|x| x * v),
+                    sh.duration_s,
+                    sh.jerk_s,
+                    0.0,
+                )
             };
             let end = seg.integrated_end_mm();
             assert!(

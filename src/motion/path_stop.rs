@@ -211,36 +211,15 @@ pub fn plan(reach: &Reach, v: f64, a: f64, dt: f64) -> Option<LineStop> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::motion::line_marks::LineMarks;
-    use crate::motion::segment::Window;
 
     fn seg(v0: [f64; 2], v1: [f64; 2], kappa: f64, heading: f64, len: f64) -> Segment {
         let mut a = [0.0; NUM_AXES];
         let mut b = [0.0; NUM_AXES];
         (a[0], a[1], b[0], b[1]) = (v0[0], v0[1], v1[0], v1[1]);
         Segment {
-            start_mm: [0.0; NUM_AXES],
-            end_mm: [0.0; NUM_AXES],
-            v0_mm_s: a,
-            v1_mm_s: b,
-            duration_s: 1.0,
-            jerk_s: 0.1,
-            kind: SegmentKind::Feed,
-            line: 1,
-            length_mm: len,
-            move_rest_mm: 0.0,
-            override_cap: 1.0,
-            end_override_cap: 1.0,
-            scale_rate_max: 1.0,
-            end_scale_rate_max: 1.0,
-            scale_jerk_max: 1.0,
-            brake_scale_jerk_max: 1.0,
-            next_scale_jerk_max: 1.0,
             curvature_per_mm: kappa,
             heading_rad: heading,
-            step_jerk_mm_s3: 0.0,
-            line_marks: LineMarks::NONE,
-            window: Window::NONE,
+            ..Segment::for_test(a, b, 1.0, 0.1, len)
         }
     }
 

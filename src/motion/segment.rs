@@ -510,6 +510,44 @@ pub enum Item {
 }
 
 #[cfg(test)]
+impl Segment {
+    /// A straight feed segment from `v0` to `v1` (mm/s) with neutral override data, for unit
+    /// tests; struct update syntax sets the rest.
+    pub(crate) fn for_test(
+        v0: [f64; NUM_AXES],
+        v1: [f64; NUM_AXES],
+        duration_s: f64,
+        jerk_s: f64,
+        length_mm: f64,
+    ) -> Segment {
+        Segment {
+            start_mm: [0.0; NUM_AXES],
+            end_mm: [0.0; NUM_AXES],
+            v0_mm_s: v0,
+            v1_mm_s: v1,
+            duration_s,
+            jerk_s,
+            kind: SegmentKind::Feed,
+            line: 1,
+            length_mm,
+            move_rest_mm: 0.0,
+            override_cap: 1.0,
+            end_override_cap: 1.0,
+            scale_rate_max: 1.0,
+            end_scale_rate_max: 1.0,
+            scale_jerk_max: 1.0,
+            brake_scale_jerk_max: 1.0,
+            next_scale_jerk_max: 1.0,
+            curvature_per_mm: 0.0,
+            heading_rad: 0.0,
+            step_jerk_mm_s3: 0.0,
+            line_marks: LineMarks::NONE,
+            window: Window::NONE,
+        }
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
 
@@ -540,28 +578,9 @@ mod tests {
         (v1[0], v1[1]) = (50.0 * h1.cos(), 50.0 * h1.sin());
         let len = 5.0 * h1;
         let s = Segment {
-            start_mm: [0.0; NUM_AXES],
-            end_mm: [0.0; NUM_AXES],
-            v0_mm_s: v0,
-            v1_mm_s: v1,
-            duration_s: 2.0 * len / 80.0,
-            jerk_s: 0.02,
-            kind: SegmentKind::Feed,
-            line: 1,
-            length_mm: len,
-            move_rest_mm: 0.0,
-            override_cap: 1.0,
-            end_override_cap: 1.0,
-            scale_rate_max: 1.0,
-            end_scale_rate_max: 1.0,
-            scale_jerk_max: 1.0,
-            brake_scale_jerk_max: 1.0,
-            next_scale_jerk_max: 1.0,
             curvature_per_mm: 0.2,
             heading_rad: h0,
-            step_jerk_mm_s3: 0.0,
-            line_marks: LineMarks::NONE,
-            window: Window::NONE,
+            ..Segment::for_test(v0, v1, 2.0 * len / 80.0, 0.02, len)
         };
         let t = s.duration_s;
         assert!((s.speed_at(0.0) - 30.0).abs() < 1e-12);
