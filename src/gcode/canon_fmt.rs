@@ -405,6 +405,14 @@ pub fn write_trace_from(out: &mut Vec<u8>, canon: &[Canon], mut seq: u64) -> u64
 /// Appends one command as a trace line (numbered `seq + 1` unless it is a bare `PRINT` line
 /// or prints nothing) and advances `seq`.
 pub fn write_call(out: &mut Vec<u8>, cmd: &CanonCmd, seq: &mut u64) {
+    if let CanonCmd::StraightFeed(_) | CanonCmd::StraightTraverse(_) | CanonCmd::ArcFeed { .. } =
+        cmd
+    {
+        if write_motion(out, cmd, *seq + 1) {
+            *seq += 1;
+            return;
+        }
+    }
     if let CanonCmd::Print(m) = cmd {
         push_str(out, m);
         out.push(b'\n');
@@ -424,6 +432,160 @@ pub fn write_call(out: &mut Vec<u8>, cmd: &CanonCmd, seq: &mut u64) {
     } else {
         out.truncate(mark);
     }
+}
+
+/// The most a motion line of the fast path takes: the sequence number (at most 20 digits),
+/// ` N..... `, the call's name, nine numbers of at most 17 characters (the fast path prints
+/// only those below 1e11), the rotation, separators and the newline.
+const MOTION_LINE_MAX: usize = 256;
+
+/// The trace line of a move (`STRAIGHT_TRAVERSE`, `STRAIGHT_FEED`, `ARC_FEED`), numbered `n`,
+/// laid out in place: the output grows by [`MOTION_LINE_MAX`] once, the line is written
+/// into that space by index and the output is cut back to the line's length (the text is
+/// [`push_call`]'s, byte for byte). One capacity check and no per-number copy instead of
+/// one of each per number and separator: these lines are nearly the whole trace of a CAM
+/// program. Returns false, with `out` unchanged, for any other command or when a number
+/// needs `push_f4`'s slow path (a rounding tie, a huge value).
+fn write_motion(out: &mut Vec<u8>, cmd: &CanonCmd, n: u64) -> bool {
+    let mark = out.len();
+    out.resize(mark + MOTION_LINE_MAX, 0);
+    match motion_line(&mut out[mark..], cmd, n) {
+        Some(len) => {
+            out.truncate(mark + len);
+            true
+        }
+        None => {
+            out.truncate(mark);
+            false
+        }
+    }
+}
+
+fn motion_line(buf: &mut [u8], cmd: &CanonCmd, n: u64) -> Option<usize> {
+    // `%5d`: right-aligned in five columns.
+    let digits = n.checked_ilog10().unwrap_or(0) as usize + 1;
+    let mut i = 5usize.saturating_sub(digits);
+    buf.get_mut(..i)?.fill(b' ');
+    i = put_u64(buf, i, n, digits)?;
+    i = put(buf, i, b" N..... ")?;
+    match cmd {
+        CanonCmd::StraightTraverse(p) => {
+            i = put(buf, i, b"STRAIGHT_TRAVERSE(")?;
+            i = put_list(buf, i, six(p))?;
+        }
+        CanonCmd::StraightFeed(p) => {
+            i = put(buf, i, b"STRAIGHT_FEED(")?;
+            i = put_list(buf, i, six(p))?;
+        }
+        CanonCmd::ArcFeed {
+            first_end,
+            second_end,
+            first_center,
+            second_center,
+            rotation,
+            axis_end,
+            end,
+            ..
+        } => {
+            i = put(buf, i, b"ARC_FEED(")?;
+            i = put_list(
+                buf,
+                i,
+                &[*first_end, *second_end, *first_center, *second_center],
+            )?;
+            i = put(buf, i, b", ")?;
+            if *rotation < 0 {
+                i = put(buf, i, b"-")?;
+            }
+            let r = u64::from(rotation.unsigned_abs());
+            i = put_u64(buf, i, r, r.checked_ilog10().unwrap_or(0) as usize + 1)?;
+            i = put(buf, i, b", ")?;
+            i = put_list(buf, i, &[*axis_end, end[3], end[4], end[5]])?;
+        }
+        _ => return None,
+    }
+    put(buf, i, b")\n")
+}
+
+/// Copies `s` to `buf[i..]`; the index after it.
+fn put(buf: &mut [u8], i: usize, s: &[u8]) -> Option<usize> {
+    let e = i + s.len();
+    buf.get_mut(i..e)?.copy_from_slice(s);
+    Some(e)
+}
+
+/// The `digits` decimal digits of `n` at `buf[i..]`; the index after them.
+fn put_u64(buf: &mut [u8], i: usize, mut n: u64, digits: usize) -> Option<usize> {
+    let e = i + digits;
+    for b in buf.get_mut(i..e)?.iter_mut().rev() {
+        *b = b'0' + (n % 10) as u8;
+        n /= 10;
+    }
+    Some(e)
+}
+
+/// `vals` separated by `, ` at `buf[i..]`; the index after them.
+fn put_list(buf: &mut [u8], mut i: usize, vals: &[f64]) -> Option<usize> {
+    for (k, v) in vals.iter().enumerate() {
+        if k > 0 {
+            i = put(buf, i, b", ")?;
+        }
+        i = put_f4(buf, i, *v)?;
+    }
+    Some(i)
+}
+
+/// `v` as C's `%.4f` at `buf[i..]` (the digits written right to left in place), or None
+/// when it needs [`push_f4`]'s slow path: the same test and the same digits as its fast
+/// path.
+fn put_f4(buf: &mut [u8], i: usize, v: f64) -> Option<usize> {
+    if v == 0.0 {
+        return put(
+            buf,
+            i,
+            if v.is_sign_negative() {
+                b"-0.0000"
+            } else {
+                b"0.0000"
+            },
+        );
+    }
+    let a = (v * 10_000.0).abs();
+    if a >= 1e15 {
+        return None;
+    }
+    let t = a as u64;
+    let frac = a - t as f64;
+    if (frac - 0.5).abs() <= 1e-6 {
+        return None;
+    }
+    let n = t + u64::from(frac > 0.5);
+    let (mut k, d) = (n / 10_000, (n % 10_000) as usize);
+    let neg = usize::from(v.is_sign_negative());
+    let digits = k.checked_ilog10().unwrap_or(0) as usize + 1;
+    let e = i + neg + digits + 5;
+    let out = buf.get_mut(i..e)?;
+    let m = out.len();
+    out[m - 2..].copy_from_slice(&DIGITS2[2 * (d % 100)..2 * (d % 100) + 2]);
+    out[m - 4..m - 2].copy_from_slice(&DIGITS2[2 * (d / 100)..2 * (d / 100) + 2]);
+    out[m - 5] = b'.';
+    let mut j = m - 5;
+    while k >= 100 {
+        let r = (k % 100) as usize;
+        out[j - 2..j].copy_from_slice(&DIGITS2[2 * r..2 * r + 2]);
+        j -= 2;
+        k /= 100;
+    }
+    if k >= 10 {
+        let r = k as usize;
+        out[j - 2..j].copy_from_slice(&DIGITS2[2 * r..2 * r + 2]);
+    } else {
+        out[j - 1] = b'0' + k as u8;
+    }
+    if neg == 1 {
+        out[0] = b'-';
+    }
+    Some(e)
 }
 
 #[cfg(test)]
@@ -454,6 +616,65 @@ mod tests {
             let mag = 10f64.powi((x % 16) as i32 - 5);
             let v = ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * mag;
             assert_eq!(f4(v), format!("{v:.4}"), "value {v:e}");
+        }
+    }
+
+    /// The in-place motion lines are `push_call`'s text with the `%5d N..... ` prefix, for
+    /// values on the fast path and off it (ties, huge values, negative zeros).
+    #[test]
+    fn motion_lines_in_place_match_push_call() {
+        let mut x: u64 = 0x2545_f491_4f6c_dd1d;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let v = match x % 9 {
+                0 => 0.0,
+                1 => -0.0,
+                2 => -1e-9,
+                3 => 1.00005,
+                4 => 3e14,
+                _ => {
+                    ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 10f64.powi((x % 13) as i32 - 4)
+                }
+            };
+            (v, x)
+        };
+        for seq in [0u64, 8, 9, 98, 9_998, 99_998, 99_999, 1_234_567] {
+            for _ in 0..300 {
+                let mut p: Pose = [0.0; crate::gcode::canon::NUM_AXES];
+                for c in p.iter_mut() {
+                    *c = next().0;
+                }
+                let (v, r) = next();
+                let arc = CanonCmd::ArcFeed {
+                    first_end: p[0],
+                    second_end: p[1],
+                    first_center: p[2],
+                    second_center: v,
+                    rotation: (r % 7) as i32 - 3,
+                    axis_end: p[3],
+                    plane: Plane::Xy,
+                    end: p,
+                };
+                for cmd in [
+                    CanonCmd::StraightFeed(p),
+                    CanonCmd::StraightTraverse(p),
+                    arc,
+                ] {
+                    let mut fast = Vec::new();
+                    let mut s = seq;
+                    write_call(&mut fast, &cmd, &mut s);
+                    assert_eq!(s, seq + 1);
+                    let mut slow = format!("{:5} N..... ", seq + 1).into_bytes();
+                    assert!(push_call(&mut slow, &cmd));
+                    slow.push(b'\n');
+                    assert_eq!(
+                        String::from_utf8_lossy(&fast),
+                        String::from_utf8_lossy(&slow)
+                    );
+                }
+            }
         }
     }
 }

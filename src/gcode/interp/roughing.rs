@@ -668,6 +668,16 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: 
     }
     while i < els.len() {
         let e = els[i];
+        // G7x.1 reaching an arc that turns more than half a turn counter-clockwise in
+        // (u, v): see `climb_only_walk`.
+        if kind == Kind::Bridge
+            && e.arc.is_some_and(|(_, ccw)| ccw)
+            && e.sweep(e.a, e.b) > std::f64::consts::PI
+            && geom::same(cur, e.a)
+        {
+            climb_only_walk(&els[i..], cur, cy);
+            return;
+        }
         // rs274's climb_only: a line climbs unless its end is below its start, compared
         // without tolerance (one ending 7e-15 lower is not climbing); a climbing one is fed
         // to from where the tool is (a zero-length feed at its start), one that is not
@@ -733,6 +743,103 @@ fn finish_along(els: &[El], s0: Pt, w: &Words, kind: Kind, start_dip: bool, cy: 
             continue;
         }
         (i, cur) = rough_pocket(els, (i + 1, e.b), (j, back), s0, w, kind, cy);
+    }
+}
+
+/// G7x.1 from an arc that turns more than half a turn counter-clockwise in (u, v)
+/// (clockwise in rs274's frame), which only an unsuitable profile gives (the allowance
+/// offset joined the arc to the next element at the far crossing of their circles: a
+/// turning profile under G72.1, random lathe seeds 24 and 55). rs274's test whether a
+/// point is on an arc (two half-plane tests against the radii through its ends) is wrong
+/// for such an arc, so its walk along the contour (`climb_only`) skips it and goes on at
+/// the tool's level. From there on this is that walk, element by element, from `loc`:
+/// a line that climbs is fed to where it crosses the tool's level, then to its end; an
+/// arc is fed to the crossing rs274 picks (none, or one on the wrong side of its centre:
+/// skipped) and cut to its end, or to its top when it passes over it. The contour's arcs
+/// split at their top are taken whole again, as rs274 has them.
+fn climb_only_walk(els: &[El], mut loc: Pt, cy: &mut Cycle) {
+    const TOL: f64 = 1e-6;
+    let mut whole: Vec<El> = Vec::with_capacity(els.len());
+    for e in els {
+        if let (Some(prev), Some((c, ccw))) = (whole.last_mut(), e.arc) {
+            let top = prev
+                .arc
+                .map(|(pc, _)| [pc[0] + geom::norm(geom::sub(prev.a, pc)), pc[1]]);
+            if prev.arc == Some((c, ccw)) && prev.b == e.a && top == Some(e.a) {
+                prev.b = e.b;
+                continue;
+            }
+        }
+        whole.push(*e);
+    }
+    // Cross product in rs274's (real v, imaginary u): imag(conj(p) * q).
+    let cross = |p: Pt, q: Pt| p[1] * q[0] - p[0] * q[1];
+    for e in &whole {
+        let level = loc[0];
+        let Some((c, ccw_uv)) = e.arc else {
+            if e.b[0] < e.a[0] {
+                continue;
+            }
+            let (lo, hi) = (e.a[0].min(e.b[0]), e.a[0].max(e.b[0]));
+            if lo > level + TOL || hi < level - TOL {
+                continue;
+            }
+            loc[1] = if (e.a[0] - e.b[0]).abs() < TOL {
+                e.a[1]
+            } else {
+                (level - e.a[0]) / (e.b[0] - e.a[0]) * (e.b[1] - e.a[1]) + e.a[1]
+            };
+            cy.feed(loc);
+            cy.feed(e.b);
+            loc = e.b;
+            continue;
+        };
+        // rs274's sense of turning: counter-clockwise in its frame is clockwise in (u, v).
+        let ccw = !ccw_uv;
+        let r = geom::norm(geom::sub(e.a, c));
+        let s = -((level - r - c[0]) * (level + r - c[0]));
+        if s < -TOL {
+            continue;
+        }
+        let s = s.max(0.0).sqrt();
+        let (sa, sb) = (geom::sub(e.a, c), geom::sub(e.b, c));
+        let on = |v: f64| {
+            let q = [level - c[0], v - c[1]];
+            if ccw {
+                cross(sa, q) >= -TOL && cross(sb, q) <= TOL
+            } else {
+                cross(sa, q) <= TOL && cross(sb, q) >= -TOL
+            }
+        };
+        let is: Vec<f64> = [c[1] + s, c[1] - s]
+            .into_iter()
+            .filter(|&v| on(v))
+            .collect();
+        let (Some(&front), Some(&back)) = (is.first(), is.last()) else {
+            continue;
+        };
+        let end = if ccw {
+            if front < c[1] {
+                continue;
+            }
+            loc[1] = front;
+            if e.b[1] < c[1] {
+                [c[0] + r, c[1]]
+            } else {
+                e.b
+            }
+        } else {
+            if back > c[1] {
+                continue;
+            }
+            loc[1] = back;
+            e.b
+        };
+        cy.feed(loc);
+        if geom::norm(geom::sub(loc, end)) > 1e-3 {
+            cy.element(&e.piece(loc, end));
+        }
+        loc = end;
     }
 }
 

@@ -79,7 +79,7 @@ impl El {
     }
 
     /// Angle swept from `p` to `q` along the arc, in [0, 2π).
-    fn sweep(&self, p: Pt, q: Pt) -> f64 {
+    pub(super) fn sweep(&self, p: Pt, q: Pt) -> f64 {
         let Some((c, ccw)) = self.arc else {
             return 0.0;
         };
@@ -163,9 +163,13 @@ impl El {
 }
 
 /// An arc that passes over its highest `u` inside is cut there in two, as rs274 does for
-/// the walk along the contour; anything else stays whole.
+/// the walk along the contour; anything else stays whole. rs274 cuts only an arc that
+/// turns clockwise in (u, v) (counter-clockwise in its frame): one that turns the other
+/// way can only pass over its top when the allowance offset joined it to the next element
+/// at the far crossing of their circles (a profile that does not suit the cycle, such as a
+/// turning profile under G72), and rs274 draws it whole.
 pub(super) fn split_at_top(e: &El) -> Vec<El> {
-    let Some((c, _)) = e.arc else {
+    let Some((c, false)) = e.arc else {
         return vec![*e];
     };
     let top = [c[0] + norm(sub(e.a, c)), c[1]];
