@@ -55,6 +55,16 @@ fn g38_2_stops_at_the_surface_within_limits_and_ends_with_its_marker() {
         "overtravel {} mm at 10 mm/s",
         trip[2] - end[2]
     );
+    // The stop is the fastest jerk-limited one along the line (`motion::line_stop`):
+    // `v·(v/A + A/J)/2` = 0.150 mm from 10 mm/s at 500 mm/s², 50,000 mm/s³ (README, known
+    // gaps; braking by time scaling within the reserve took 0.48 mm).
+    let (v, a, j) = (10.0, cfg.axes[2].max_acc_mm_s2, cfg.axes[2].max_jerk_mm_s3);
+    let optimum = v * (v / a + a / j) / 2.0;
+    assert!(
+        (trip[2] - end[2] - optimum).abs() < 1e-6,
+        "overtravel {} mm, the fastest stop {optimum} mm",
+        trip[2] - end[2]
+    );
     assert_eq!((end[0], end[1]), (0.0, 0.0), "stays on the path");
     assert_within_limits(&tr, &cfg);
     let kinds = aux_kinds(&tr);

@@ -88,8 +88,8 @@ impl Machine {
         book.faults.push_back(msg);
     }
 
-    /// A snapshot and the job book (the job's status and the fault history) in step: every job event of the snapshot's cycle and
-    /// before is applied, and none after it.
+    /// A snapshot and the job book (the job's status and the fault history) in step: every
+    /// job event of the snapshot's cycle and before is applied, and none after it.
     ///
     /// The machine task emits a job event in the same cycle as its mode change (an M0's hold,
     /// a job's end), and the snapshot is published at the end of that cycle. Events drained
