@@ -17,6 +17,7 @@
 
 use super::config::KinematicsConfig;
 use super::config::MotionConfig;
+use super::fifo::Fifo;
 use super::kinematics::{Kinematics, Machine};
 use super::limits::{override_rates, scale_jerk_at, scale_rate_at, AxisMax};
 use super::line_stop::LineStop;
@@ -159,19 +160,15 @@ pub struct Interpolator {
     /// Between `SpindleSync` and `SpindleSyncEnd` with `external_sync`: the planned
     /// segments are skipped (the machine has run the move).
     sync_skip: bool,
-    aux_ring: [Option<AuxItem>; AUX_RING],
-    aux_head: usize,
-    aux_len: usize,
+    aux: Fifo<AuxItem, AUX_RING>,
     /// Stops along lines and arcs follow [`LineStop`] (identity kinematics only: elsewhere a
     /// Cartesian profile says nothing of the joints' accelerations).
     path_stops: bool,
     /// The stop being followed along the path.
     path_stop: Option<ActiveStop>,
     /// The queue's next items, taken early to see how far a stop may run along the path;
-    /// every read of the queue takes them first (a ring: `ahead_len` from `ahead_head`).
-    ahead: [Option<Item>; AHEAD],
-    ahead_head: usize,
-    ahead_len: usize,
+    /// every read of the queue takes them first.
+    ahead: Fifo<Item, AHEAD>,
     out: InterpOutput,
 }
 
@@ -219,14 +216,10 @@ impl Interpolator {
             probe_flush: false,
             external_sync: false,
             sync_skip: false,
-            aux_ring: [None; AUX_RING],
-            aux_head: 0,
-            aux_len: 0,
+            aux: Fifo::new(),
             path_stops: matches!(cfg.kinematics, KinematicsConfig::Identity),
             path_stop: None,
-            ahead: [None; AHEAD],
-            ahead_head: 0,
-            ahead_len: 0,
+            ahead: Fifo::new(),
             out: InterpOutput {
                 pose_mm: start_mm,
                 joints: joints.unwrap_or(start_mm),
@@ -306,53 +299,28 @@ impl Interpolator {
         &self.out
     }
 
-    fn push_aux(&mut self, a: AuxItem) {
-        if self.aux_len < AUX_RING {
-            self.aux_ring[(self.aux_head + self.aux_len) % AUX_RING] = Some(a);
-            self.aux_len += 1;
-        }
-    }
-
-    fn pop_aux(&mut self) -> Option<AuxItem> {
-        if self.aux_len == 0 {
-            return None;
-        }
-        let a = self.aux_ring[self.aux_head].take();
-        self.aux_head = (self.aux_head + 1) % AUX_RING;
-        self.aux_len -= 1;
-        a
-    }
-
     /// The next queue item: the first taken ahead, else the source's.
     fn pop_item(&mut self, src: &mut impl SegmentSource) -> Option<Item> {
-        if self.ahead_len == 0 {
-            return src.pop();
-        }
-        let it = self.ahead[self.ahead_head].take();
-        self.ahead_head = (self.ahead_head + 1) % AHEAD;
-        self.ahead_len -= 1;
-        it
+        self.ahead.pop().or_else(|| src.pop())
     }
 
     /// The `i`-th queue item after the current segment, taken ahead from the source if it
     /// was not yet (`None` past the ring's size or the source's end).
     fn peek_ahead(&mut self, i: usize, src: &mut impl SegmentSource) -> Option<Item> {
-        while self.ahead_len <= i {
-            if self.ahead_len == AHEAD {
+        while self.ahead.len() <= i {
+            if self.ahead.is_full() {
                 return None;
             }
-            let it = src.pop()?;
-            self.ahead[(self.ahead_head + self.ahead_len) % AHEAD] = Some(it);
-            self.ahead_len += 1;
+            self.ahead.push(src.pop()?);
         }
-        self.ahead[(self.ahead_head + i) % AHEAD]
+        self.ahead.get(i)
     }
 
     /// Pulls items until a segment is current, a barrier is hit, the ring is full or the
     /// source is empty. Returns the number of items consumed.
     fn fetch(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
         self.seg = None;
-        while *budget > 0 && !self.waiting && self.aux_len < AUX_RING {
+        while *budget > 0 && !self.waiting && !self.aux.is_full() {
             *budget -= 1;
             match self.pop_item(src) {
                 Some(Item::Segment(s)) if self.sync_skip => {
@@ -384,7 +352,7 @@ impl Interpolator {
                         AuxKind::SpindleSyncEnd => self.sync_skip = false,
                         _ => {}
                     }
-                    self.push_aux(a);
+                    self.aux.push(a);
                     self.out.line = a.line;
                     if a.kind.is_barrier() {
                         self.waiting = true;
@@ -531,7 +499,7 @@ impl Interpolator {
         let mut along = st.from_mm + d;
         let mut i = 0;
         while along >= seg.length_mm && i < st.pieces {
-            let Some(Item::Segment(next)) = self.ahead_at(i) else {
+            let Some(Item::Segment(next)) = self.ahead.get(i) else {
                 break;
             };
             skip += (seg.duration_s - from_t).max(0.0);
@@ -560,15 +528,6 @@ impl Interpolator {
             self.k = if planned > 1e-9 { v / planned } else { 0.0 };
         }
         Some(skip + (lo - from_t).max(0.0))
-    }
-
-    /// The `i`-th item taken ahead, if it was.
-    fn ahead_at(&self, i: usize) -> Option<Item> {
-        if i < self.ahead_len {
-            self.ahead[(self.ahead_head + i) % AHEAD]
-        } else {
-            None
-        }
     }
 
     /// The stop along the path from the current state, if the current segment is a line or
@@ -709,7 +668,7 @@ impl Interpolator {
             Ok(j) => self.out.joints = j,
             Err(e) => self.out.fault = Some(e),
         }
-        self.out.aux = self.pop_aux();
+        self.out.aux = self.aux.pop();
         self.out.scale = self.k;
         self.out.state = if self.waiting {
             InterpState::Waiting
@@ -732,14 +691,14 @@ impl Interpolator {
     /// result). What follows in the queue was planned from where the probe move ends, and
     /// the program is interpreted in pieces so that nothing but that marker follows it.
     fn flush_probe(&mut self, src: &mut impl SegmentSource, budget: &mut usize) {
-        while *budget > 0 && self.aux_len < AUX_RING {
+        while *budget > 0 && !self.aux.is_full() {
             *budget -= 1;
             match self.pop_item(src) {
                 Some(Item::Aux(a)) if matches!(a.kind, AuxKind::ProbeEnd { .. }) => {
                     self.probe_flush = false;
                     self.probe_stop = false;
                     self.probe = None;
-                    self.push_aux(a);
+                    self.aux.push(a);
                     self.out.line = a.line;
                     self.waiting = true;
                     // At rest: the next piece starts at its beginning, at the planned speed.
@@ -767,7 +726,7 @@ impl Interpolator {
                 self.probe_stop = false;
                 self.probe_flush = false;
                 self.sync_skip = false;
-                self.aux_len = 0;
+                self.aux.clear();
                 // At rest: the next job starts at the planned speed.
                 self.k = 1.0;
                 self.kd = 0.0;

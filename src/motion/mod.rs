@@ -77,6 +77,7 @@ pub mod css;
 pub mod draw;
 mod emit;
 mod error;
+pub mod fifo;
 mod fit_chains;
 pub mod fit_choice;
 pub mod from_canon;
