@@ -167,9 +167,53 @@ fn hold_on_a_fitted_spiral_runs_along_its_arcs() {
     let (v, rd, rt, _, _) = cruise_holds("spiral", &p, &cfg);
     // Session 15: 1.311× / 1.183× (3.542 mm, 0.129 s from 49.53 mm/s; there the normal
     // acceleration takes up to 450 of the 500 mm/s²), where braking the time scale
-    // (session 13) took 2.177× / 2.274× (5.880 mm, 0.248 s).
+    // (session 13) took 2.177× / 2.274× (5.880 mm, 0.248 s). Session 16 (each arc's limits
+    // at the speed the stop reaches it with, per-axis bounds, the deceleration traded
+    // against the normal jerk): 1.248× / 1.127× (3.377 mm, 0.123 s from 49.59 mm/s).
     assert!(v > 45.0, "cruise speed {v}");
-    assert!(rd < 1.4 && rt < 1.3, "distance {rd}×, time {rt}×");
+    assert!(rd < 1.3 && rt < 1.2, "distance {rd}×, time {rt}×");
+}
+
+/// `chords` chords of 0.02 mm (arc length) along y = 5·sin(2πx/40) at F3000 and G64 P0.05
+/// (the planner benchmark's dense stream): too short and too dense to be fitted into arcs,
+/// they are merged into lines of about 0.5 mm with a corner blend at every vertex.
+fn dense_sine_of(chords: u32) -> Prog {
+    let mut g = Prog::new();
+    g.feed(3000.0).g64(0.05);
+    let w = std::f64::consts::TAU / 40.0;
+    let mut x = 0.0f64;
+    for _ in 0..chords {
+        let slope = 5.0 * w * (w * x).cos();
+        x += 0.02 / (1.0 + slope * slope).sqrt();
+        g.g1(x, 5.0 * (w * x).sin(), 0.0);
+    }
+    g
+}
+
+/// A hold on the dense sine runs through its corner blends as along arcs (their length,
+/// curvature and curvature rate bounded, `motion::blend_path`), within every limit.
+#[test]
+fn hold_through_corner_blends_on_dense_chords() {
+    let cfg = MotionConfig::default();
+    let p = plan(&dense_sine_of(4000).canon, &cfg).unwrap();
+    let blends = p
+        .items
+        .iter()
+        .filter(|it| {
+            matches!(it, Item::Segment(s) if s.curvature_per_mm == 0.0
+                && !s.window.is_some()
+                && (0..2).any(|i| (s.v0_mm_s[i] - s.v1_mm_s[i]).abs() > 1e-6)
+                && (s.v0_mm_s[0] * s.v1_mm_s[1] - s.v0_mm_s[1] * s.v1_mm_s[0]).abs() > 1e-6)
+        })
+        .count();
+    assert!(blends > 30, "{blends} corner blends");
+    let (v, rd, rt, _, _) = cruise_holds("dense sine", &p, &cfg);
+    // Session 16: 1.641× / 1.473× (4.512 mm, 0.147 s from 49.99 mm/s), where braking the
+    // time scale through the blends took 2.040× / 1.852× (5.611 mm, 0.194 s). At full
+    // speed a blend's own normal jerk (`v³·dκ/ds`, the jerk it was planned with) leaves
+    // little to a stop that enters it, so stops near the sharper blends still brake slowly.
+    assert!(v > 45.0, "cruise speed {v}");
+    assert!(rd < 1.8 && rt < 1.6, "distance {rd}×, time {rt}×");
 }
 
 /// Overrides in [0, 2], hold, resume and abort at pseudo-random periods on arcs planned at
@@ -224,8 +268,9 @@ fn random_override_hold_abort_schedules_on_arcs_stay_within_limits() {
     }
 }
 
-/// A hold requested at *every* servo period of a square with blends, of the loops and of a
-/// spiral (stops along its arcs, across their curvature steps), then
+/// A hold requested at *every* servo period of a square with blends, of the loops, of a
+/// spiral (stops along its arcs, across their curvature steps) and of dense chords (stops
+/// through their corner blends), then
 /// after 1 to 150 periods (while the scale is still braking, at the rates raised at the
 /// current scale) a resume, a resume at 200 % override, a lower override or an abort: the
 /// trace of the hold and of the next 400 periods stays within every limit.
@@ -240,7 +285,13 @@ fn hold_then_resume_or_abort_at_every_period_stays_within_limits() {
     let square = plan(&g.canon, &cfg).unwrap();
     let (loops, _) = loops_of(80);
     let spiral = plan(&spiral_of(400).canon, &cfg).unwrap();
-    for (name, p) in [("square", &square), ("loops", &loops), ("spiral", &spiral)] {
+    let dense = plan(&dense_sine_of(600).canon, &cfg).unwrap();
+    for (name, p) in [
+        ("square", &square),
+        ("loops", &loops),
+        ("spiral", &spiral),
+        ("dense sine", &dense),
+    ] {
         let mut cases = 0;
         branch_at_periods(
             p,
@@ -279,6 +330,8 @@ fn hold_then_resume_or_abort_at_every_period_stays_within_limits() {
                 cases += 1;
             },
         );
-        assert!(cases > 1000, "{name}: {cases} cases");
+        // Every period of the run (the dense sine is short: 12 mm).
+        let periods = (p.duration_s / cfg.servo_period_s) as usize;
+        assert!(cases + 10 > periods && cases > 400, "{name}: {cases} cases");
     }
 }

@@ -10,10 +10,10 @@
 //! override change, hold or abort can exceed a limit, and the tool never leaves the path.
 //!
 //! A stop (hold, abort, probe trip) whose fastest stop from the current speed and
-//! acceleration ends within the lines and arcs joined tangentially ahead of the tool
-//! follows that stop instead ([`super::line_stop`], [`super::path_stop`]): along them any
-//! speed profile keeps the path, so it needs no rate of `k` from the planner, only the
-//! axes' full limits (less an arc's normal acceleration).
+//! acceleration ends within the lines, arcs and corner blends joined tangentially ahead of
+//! the tool follows that stop instead ([`super::line_stop`], [`super::path_stop`]): along
+//! them any speed profile keeps the path, so it needs no rate of `k` from the planner, only
+//! the axes' full limits (less what the curves' turning takes).
 
 use super::config::KinematicsConfig;
 use super::config::MotionConfig;
@@ -21,7 +21,7 @@ use super::fifo::Fifo;
 use super::kinematics::{Kinematics, Machine};
 use super::limits::{override_rates, scale_jerk_at, scale_rate_at, AxisMax};
 use super::line_stop::LineStop;
-use super::path_stop::{plan as plan_stop, Reach};
+use super::path_stop::{self, plan as plan_stop, Reach};
 use super::segment::{AuxItem, AuxKind, Item, Segment, SegmentKind};
 use super::KinematicsError;
 use crate::gcode::canon::ProbeKind;
@@ -32,7 +32,7 @@ pub const MAX_ITEMS_PER_STEP: usize = 256;
 /// Auxiliary items that can wait to be reported (one is reported per cycle).
 const AUX_RING: usize = 64;
 /// Queue items a stop may look ahead into (the pieces of path it may run along).
-const AHEAD: usize = 8;
+const AHEAD: usize = path_stop::MAX_PIECES - 1;
 
 /// Where the interpolator takes its segments from: a `Vec` in tests, the realtime core's
 /// lock-free ring buffer in the daemon.
@@ -183,6 +183,9 @@ struct ActiveStop {
     from_mm: f64,
     /// The path it runs along, and the bounds there.
     reach: Reach,
+    /// Path length from the reach's origin to where the stop (or its last re-planning)
+    /// began, mm.
+    gone_mm: f64,
     /// Items of the ring taken ahead that it may run into.
     pieces: usize,
 }
@@ -477,12 +480,13 @@ impl Interpolator {
         if st.reach.turns() {
             let (d, v, a) = st.stop.eval(st.elapsed_s);
             let left = st.stop.duration_s() - st.elapsed_s;
-            let gone = st.stop.distance_mm() - d;
-            match plan_stop(&st.reach, v, a, dt) {
-                Some(stop) if stop.duration_s() <= left && stop.distance_mm() <= gone => {
+            let rest = st.stop.distance_mm() - d;
+            match plan_stop(&st.reach, st.gone_mm + d, v, a, dt) {
+                Some(stop) if stop.duration_s() <= left && stop.distance_mm() <= rest => {
                     st.stop = stop;
                     st.elapsed_s = 0.0;
                     st.from_mm += d;
+                    st.gone_mm += d;
                 }
                 _ => {}
             }
@@ -497,28 +501,21 @@ impl Interpolator {
         // (`start_path_stop` took the stop only if it ends within them).
         let (mut seg, mut from_t, mut skip) = (*s, self.t_s, 0.0);
         let mut along = st.from_mm + d;
+        let mut len = path_stop::length_of(&seg);
         let mut i = 0;
-        while along >= seg.length_mm && i < st.pieces {
+        while along >= len && i < st.pieces {
             let Some(Item::Segment(next)) = self.ahead.get(i) else {
                 break;
             };
             skip += (seg.duration_s - from_t).max(0.0);
-            along -= seg.length_mm;
+            along -= len;
             (seg, from_t) = (next, 0.0);
+            len = path_stop::length_of(&seg);
             i += 1;
         }
-        let along = along.min(seg.length_mm);
-        // The planned time at which the segment has covered `along` (its distance grows with
-        // time): bisection, a fixed number of cheap steps, during a stop only.
-        let (mut lo, mut hi) = (from_t, seg.duration_s);
-        for _ in 0..64 {
-            let mid = 0.5 * (lo + hi);
-            if seg.travelled_mm(mid) <= along {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
+        // The planned time at which the segment has covered `along` (a fixed amount of work,
+        // during a stop only).
+        let lo = path_stop::time_at(&seg, along.min(len), from_t);
         let planned = seg.speed_at(lo);
         self.kd = 0.0;
         if done {
@@ -530,31 +527,32 @@ impl Interpolator {
         Some(skip + (lo - from_t).max(0.0))
     }
 
-    /// The stop along the path from the current state, if the current segment is a line or
-    /// an arc and the stop ends within it or within the queue items after it that continue
+    /// The stop along the path from the current state, if the current segment is a line, an
+    /// arc or a blend and the stop ends within it or within the queue items after it that continue
     /// it tangentially (up to [`AHEAD`] of them; [`Reach`]), and (begun while still
     /// accelerating) stays within the axes' velocity.
     fn start_path_stop(&mut self, s: &Segment, src: &mut impl SegmentSource) -> Option<ActiveStop> {
         let t = self.t_s;
         let planned = s.speed_at(t);
         let v = self.k * planned;
-        let a = self.k * self.k * s.tangential_acc_at(t) + self.kd * planned;
-        let from_mm = s.travelled_mm(t);
+        let a = self.k * self.k * path_stop::tangential_acc(s, t) + self.kd * planned;
+        let from_mm = path_stop::travelled(s, t);
         let mut reach = Reach::new(s, from_mm, &self.axis_max)?;
         let mut pieces = 0;
         loop {
-            let stop = plan_stop(&reach, v, a, self.dt_s)?;
+            let stop = plan_stop(&reach, 0.0, v, a, self.dt_s)?;
             if stop.distance_mm() < reach.room_mm * (1.0 - 1e-9) {
                 return Some(ActiveStop {
                     stop,
                     elapsed_s: 0.0,
                     from_mm,
                     reach,
+                    gone_mm: 0.0,
                     pieces,
                 });
             }
             match self.peek_ahead(pieces, src) {
-                Some(Item::Segment(next)) if reach.extend(&next, &self.axis_max) => pieces += 1,
+                Some(Item::Segment(next)) if reach.extend(&next) => pieces += 1,
                 _ => return None,
             }
         }
@@ -623,7 +621,7 @@ impl Interpolator {
                 self.out.pose_mm = s.end_mm;
                 if let Some(st) = &mut self.path_stop {
                     // A stop running on into the next segment (one of its pieces).
-                    st.from_mm -= s.length_mm;
+                    st.from_mm -= path_stop::length_of(&s);
                     st.pieces = st.pieces.saturating_sub(1);
                 }
                 self.fetch(src, &mut budget);

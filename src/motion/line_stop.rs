@@ -61,6 +61,33 @@ impl LineStop {
         self.eval(f64::INFINITY).0
     }
 
+    /// The highest speed the stop has from where it has covered `d_mm` on (the speed there,
+    /// or the peak where it is still accelerating), or `None` if it ends before (bisection
+    /// on the distance, which grows with time).
+    pub fn speed_at_distance(&self, d_mm: f64) -> Option<f64> {
+        if d_mm >= self.distance_mm() {
+            return None;
+        }
+        if d_mm <= 0.0 {
+            return Some(self.v0);
+        }
+        let (mut lo, mut hi) = (0.0, self.duration_s());
+        for _ in 0..48 {
+            let mid = 0.5 * (lo + hi);
+            if self.eval(mid).0 <= d_mm {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let (_, speed, acc) = self.eval(lo);
+        if acc > 0.0 {
+            // Still rising: the peak, where the first phase's jerk has brought it to zero.
+            return Some(speed.max(self.eval(self.a0 / self.jerk[2]).1));
+        }
+        Some(speed)
+    }
+
     /// `(distance, speed, acceleration)` at `t` s into the stop (clamped to it; the speed is
     /// never below 0).
     pub fn eval(&self, t: f64) -> (f64, f64, f64) {

@@ -71,6 +71,7 @@
 pub mod arcfit;
 pub mod arcs;
 pub mod blend;
+pub mod blend_path;
 pub mod bounds;
 pub mod config;
 pub mod css;
@@ -96,6 +97,7 @@ pub mod segment;
 pub mod span;
 pub mod spindle_lock;
 pub mod spindle_sync;
+pub mod stop_bounds;
 pub mod stream;
 pub mod svg;
 pub mod trace;
