@@ -69,6 +69,7 @@ impl InterpArgs {
         };
         let mut subroutine_path = self.subroutine_path.clone();
         let mut ini = base.ini.clone();
+        let mut python = base.python.clone();
         if let Some(p) = &self.ini {
             let text = std::fs::read_to_string(p)
                 .with_context(|| format!("reading the ini file {}", p.display()))?;
@@ -79,6 +80,7 @@ impl InterpArgs {
                     .map(|d| dir.join(d)),
             );
             ini = std::sync::Arc::new(crate::gcode::IniValues::parse(&text));
+            python = crate::gcode::python::PythonConfig::from_ini(&text, dir);
         }
         Ok(InterpOptions {
             tool_table: super::plan::tool_table(self.tool_table.as_deref(), machine.as_ref()),
@@ -86,6 +88,7 @@ impl InterpArgs {
             block_delete: self.block_delete,
             machine_units,
             ini,
+            python,
             ..base
         })
     }
