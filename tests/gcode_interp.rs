@@ -682,3 +682,36 @@ fn embedded_python_errors_name_the_line_and_moves_arrive_as_commands() {
     let e = err("o<go> call\nM2\n");
     assert!(e.message.contains("Failed to find subroutine o<go>"), "{e}");
 }
+
+/// A Python procedure that never returns does not hold a cancelled interpretation: the
+/// cancel flag is polled while Python runs, and the child is killed.
+#[test]
+fn cancel_stops_a_python_procedure_that_never_returns() {
+    use hytask::gcode::python::PythonConfig;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("top.py"), "import oword\n").unwrap();
+    std::fs::write(
+        dir.path().join("oword.py"),
+        "def spin(self):\n    while True:\n        pass\n",
+    )
+    .unwrap();
+    let ini = "[PYTHON]\nPATH_PREPEND = .\nTOPLEVEL = top.py\n";
+    let cancel = Arc::new(AtomicBool::new(false));
+    let opts = InterpOptions {
+        python: PythonConfig::from_ini(ini, dir.path()),
+        cancel: Some(cancel.clone()),
+        ..InterpOptions::default()
+    };
+    let stop = std::thread::spawn(move || {
+        std::thread::sleep(std::time::Duration::from_millis(500));
+        cancel.store(true, Ordering::Relaxed);
+    });
+    let t0 = std::time::Instant::now();
+    let e = err_with("G0 X1\no<spin> call\nM2\n", &opts);
+    stop.join().unwrap();
+    assert_eq!(e.line, 2);
+    assert!(e.message.contains("cancelled"), "{e}");
+    assert!(t0.elapsed() < std::time::Duration::from_secs(10));
+}

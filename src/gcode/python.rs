@@ -97,6 +97,9 @@ pub enum PyError {
     /// The pipes to the child failed, or it ended.
     #[error("the Python child process stopped: {0}")]
     Io(#[from] std::io::Error),
+    /// The interpretation was cancelled while Python ran (the child is killed).
+    #[error("Interpretation cancelled while Python was running")]
+    Cancelled,
     /// The child said something that is not the protocol.
     #[error("the Python child process sent {line:?}: {why}")]
     Protocol {
@@ -230,8 +233,29 @@ impl Bridge {
         Ok(())
     }
 
-    /// Receives the next event.
-    pub(crate) fn recv(&mut self) -> Result<Event, PyError> {
+    /// Receives the next event. While it waits, `cancel` (the interpretation's cancel flag)
+    /// is polled every 100 ms: a Python procedure that never returns must not keep a
+    /// cancelled job's preparation busy forever.
+    pub(crate) fn recv(
+        &mut self,
+        cancel: Option<&std::sync::atomic::AtomicBool>,
+    ) -> Result<Event, PyError> {
+        if let Some(c) = cancel {
+            use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+            use std::os::fd::AsFd as _;
+            while self.rx.buffer().is_empty() {
+                let mut fds = [PollFd::new(self.rx.get_ref().as_fd(), PollFlags::POLLIN)];
+                match poll(&mut fds, PollTimeout::from(100u16)) {
+                    Ok(0) | Err(nix::errno::Errno::EINTR) => {}
+                    Ok(_) => break,
+                    Err(e) => return Err(PyError::Io(e.into())),
+                }
+                if c.load(std::sync::atomic::Ordering::Relaxed) {
+                    let _ = self.child.kill();
+                    return Err(PyError::Cancelled);
+                }
+            }
+        }
         self.line.clear();
         if self.rx.read_line(&mut self.line)? == 0 {
             let status = self.child.wait()?;

@@ -82,8 +82,9 @@ impl Interp<'_> {
         // Python is stopped with it, and it is the one reported.
         let mut stopped: Option<GcodeError> = None;
         loop {
+            let cancel = self.opts.cancel.clone();
             let ev = match self.py.as_mut() {
-                Some(b) => b.recv(),
+                Some(b) => b.recv(cancel.as_deref()),
                 None => return Err(self.py_fail(format!("{what}: Python is not running"))),
             };
             let ev = ev.map_err(|e| self.py_io(what, e))?;
