@@ -626,3 +626,92 @@ fn ini_orient_offset_and_read_only_ini_values() {
     // Without an ini file (rs274 standalone) it may be set.
     run("#<_ini[vars]toolchange_x> = 3\nM2\n");
 }
+
+/// Embedded Python (LinuxCNC's `[PYTHON]` and `;py,`): a missing interpreter is an error on
+/// the line that needed it, not a panic or a silent skip; a Python procedure's moves and
+/// printed lines arrive as commands; a program without Python never starts it.
+#[test]
+fn embedded_python_errors_name_the_line_and_moves_arrive_as_commands() {
+    use hytask::gcode::python::PythonConfig;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("top.py"), "import oword\n").unwrap();
+    std::fs::write(
+        dir.path().join("oword.py"),
+        "import emccanon\n\
+         def go(self, x):\n    print('going to', x)\n    \
+         emccanon.STRAIGHT_FEED(1, x, 2, 3, 0, 0, 0, 0, 0, 0)\n    return x * 2\n",
+    )
+    .unwrap();
+    let ini = "[PYTHON]\nPATH_PREPEND = .\nTOPLEVEL = top.py\n";
+    let cfg = PythonConfig::from_ini(ini, dir.path()).unwrap();
+    let opts = InterpOptions {
+        python: Some(cfg.clone()),
+        ..InterpOptions::default()
+    };
+    let p = load_str(
+        "t.ngc",
+        "G0 X1\no<go> call [4]\n#<r> = #<_value>\nG1 X#<r> F10\nM2\n",
+        &opts,
+    )
+    .unwrap();
+    let b = body(&p);
+    assert!(b.contains(&CanonCmd::Print("going to 4.0".into())), "{b:?}");
+    assert!(b
+        .iter()
+        .any(|c| matches!(c, CanonCmd::StraightFeed(e) if e[..3] == [4.0, 2.0, 3.0])));
+    assert_eq!(feeds(&p).last(), Some(&[8.0, 0.0, 0.0]));
+
+    let missing = InterpOptions {
+        python: Some(PythonConfig {
+            python: "/nonexistent/python3".into(),
+            ..cfg
+        }),
+        ..InterpOptions::default()
+    };
+    let e = err_with("G0 X1\n\no<go> call [4]\nM2\n", &missing);
+    assert_eq!((e.line, e.file.as_str()), (3, "t.ngc"));
+    assert!(
+        e.message.contains("cannot start the Python interpreter"),
+        "{e}"
+    );
+
+    let e = err("G0 X1\n;py,assert 1 == 2, 'one is not two'\nM2\n");
+    assert_eq!(e.line, 2);
+    assert!(e.message.contains("AssertionError: one is not two"), "{e}");
+    // without [PYTHON], an o-call of a name Python would have is an ordinary missing sub
+    let e = err("o<go> call\nM2\n");
+    assert!(e.message.contains("Failed to find subroutine o<go>"), "{e}");
+}
+
+/// A Python procedure that never returns does not hold a cancelled interpretation: the
+/// cancel flag is polled while Python runs, and the child is killed.
+#[test]
+fn cancel_stops_a_python_procedure_that_never_returns() {
+    use hytask::gcode::python::PythonConfig;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("top.py"), "import oword\n").unwrap();
+    std::fs::write(
+        dir.path().join("oword.py"),
+        "def spin(self):\n    while True:\n        pass\n",
+    )
+    .unwrap();
+    let ini = "[PYTHON]\nPATH_PREPEND = .\nTOPLEVEL = top.py\n";
+    let cancel = Arc::new(AtomicBool::new(false));
+    let opts = InterpOptions {
+        python: PythonConfig::from_ini(ini, dir.path()),
+        cancel: Some(cancel.clone()),
+        ..InterpOptions::default()
+    };
+    let stop = std::thread::spawn(move || {
+        std::thread::sleep(std::time::Duration::from_millis(500));
+        cancel.store(true, Ordering::Relaxed);
+    });
+    let t0 = std::time::Instant::now();
+    let e = err_with("G0 X1\no<spin> call\nM2\n", &opts);
+    stop.join().unwrap();
+    assert_eq!(e.line, 2);
+    assert!(e.message.contains("cancelled"), "{e}");
+    assert!(t0.elapsed() < std::time::Duration::from_secs(10));
+}

@@ -42,7 +42,9 @@ pub struct InterpArgs {
     /// LinuxCNC ini file, as `rs274 -i` reads it, so that a trace can be diffed against
     /// rs274 run with the same file: its numbers are the `#<_ini[section]name>` values
     /// (instead of `--config`'s), its `[RS274NGC] SUBROUTINE_PATH` is searched after
-    /// `--subroutine-path` (relative entries from the ini file's directory).
+    /// `--subroutine-path` (relative entries from the ini file's directory), and its
+    /// `[PYTHON]` section (`TOPLEVEL`, `PATH_PREPEND`, `PATH_APPEND`) makes the TOPLEVEL's
+    /// `oword` functions O-word procedures (run by `python3`, as rs274's embedded Python).
     #[arg(long)]
     pub ini: Option<PathBuf>,
 }
@@ -69,6 +71,7 @@ impl InterpArgs {
         };
         let mut subroutine_path = self.subroutine_path.clone();
         let mut ini = base.ini.clone();
+        let mut python = base.python.clone();
         if let Some(p) = &self.ini {
             let text = std::fs::read_to_string(p)
                 .with_context(|| format!("reading the ini file {}", p.display()))?;
@@ -79,6 +82,7 @@ impl InterpArgs {
                     .map(|d| dir.join(d)),
             );
             ini = std::sync::Arc::new(crate::gcode::IniValues::parse(&text));
+            python = crate::gcode::python::PythonConfig::from_ini(&text, dir);
         }
         Ok(InterpOptions {
             tool_table: super::plan::tool_table(self.tool_table.as_deref(), machine.as_ref()),
@@ -86,6 +90,7 @@ impl InterpArgs {
             block_delete: self.block_delete,
             machine_units,
             ini,
+            python,
             ..base
         })
     }
@@ -152,6 +157,21 @@ mod tests {
             machine_units: None,
             ini: None,
         }
+    }
+
+    /// `--ini` reads the ini's `[PYTHON]` section, its paths from the ini's directory; without
+    /// `--ini` there is none.
+    #[test]
+    fn ini_python_section_configures_embedded_python() {
+        let dir = tempfile::tempdir().unwrap();
+        let ini = dir.path().join("m.ini");
+        std::fs::write(&ini, "[PYTHON]\nPATH_PREPEND = py\nTOPLEVEL = py/top.py\n").unwrap();
+        let mut a = args(None, None);
+        assert_eq!(a.options().unwrap().python, None);
+        a.ini = Some(ini);
+        let py = a.options().unwrap().python.unwrap();
+        assert_eq!(py.toplevel, Some(dir.path().join("py/top.py")));
+        assert_eq!(py.path_prepend, vec![dir.path().join("py")]);
     }
 
     /// `gcode canon` picks its table as `plan` does: the flag, else the machine's, else

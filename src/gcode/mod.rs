@@ -31,6 +31,7 @@ pub mod lexer;
 pub mod modal;
 pub mod params;
 pub mod parser;
+pub mod python;
 pub mod session;
 pub mod tooltable;
 pub mod trace_spill;
@@ -118,6 +119,9 @@ pub struct InterpOptions {
     pub parameters: Option<Arc<VarFile>>,
     /// Values of `#<_ini[section]name>` (see [`IniValues`]).
     pub ini: Arc<IniValues>,
+    /// The ini file's `[PYTHON]` section: Python O-word procedures (see [`python`]). Without
+    /// it only `;py,` comments start Python.
+    pub python: Option<python::PythonConfig>,
     /// The tool table slot the interpreter takes as its current pocket at start (LinuxCNC's
     /// `GET_EXTERNAL_TOOL_SLOT`) while the spindle is still empty: 0 on a machine. rs274's
     /// standalone canon says 1 ([`RS274_START_POCKET`]), so a `G10 L1`/`L10`/`L11` that
@@ -153,6 +157,7 @@ impl Default for InterpOptions {
             user_mcodes: Vec::new(),
             parameters: None,
             ini: Arc::default(),
+            python: None,
             start_pocket: 0,
             limits: Limits::default(),
             cancel: None,

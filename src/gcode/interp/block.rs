@@ -380,6 +380,10 @@ impl Interp<'_> {
             }
             return Ok(());
         }
+        if lower.starts_with("py,") {
+            // LinuxCNC's `(py,…)`: the statement as written, after the `py,`
+            return self.py_exec(&text[skip + 3..]);
+        }
         if lower.starts_with("print,") {
             let body = self.substitute(&text[skip + 6..]);
             return self.emit(CanonCmd::Print(body));

@@ -18,6 +18,7 @@ mod ocode;
 mod param_comment;
 mod persistent;
 mod polar;
+mod pycall;
 mod roughing;
 mod roughing_comp;
 mod roughing_geom;
@@ -280,6 +281,12 @@ pub(crate) struct Interp<'a> {
     /// Streaming hook ([`crate::gcode::session::Chunked`]): `resume` returns once this many
     /// commands are collected, so a long program never holds all its commands at once.
     pub(crate) yield_after: usize,
+    /// The embedded-Python child process, once started (see [`crate::gcode::python`]).
+    py: Option<crate::gcode::python::Bridge>,
+    /// Text Python has printed that does not end a line yet.
+    py_out: String,
+    /// A Python O-word procedure is running (it counts as a call level).
+    py_in_call: bool,
 }
 
 /// A probe move the interpreter has emitted and whose result it needs before going on.
@@ -343,6 +350,9 @@ impl<'a> Interp<'a> {
             pending_wait: None,
             live_wait: false,
             yield_after: usize::MAX,
+            py: None,
+            py_out: String::new(),
+            py_in_call: false,
         };
         it.restore_persistent()?;
         Ok(it)
@@ -578,6 +588,12 @@ impl<'a> Interp<'a> {
             }
             self.pc = (f, l + 1);
             return self.exec_o(f, l, &o, &line);
+        }
+        // LinuxCNC's `;py,` comment: only at the very start of the line, as written.
+        if let Some(code) = self.files[f].line_text(l).strip_prefix(";py,") {
+            let code = code.trim_end_matches('\r').to_string();
+            self.pc = (f, l + 1);
+            return self.py_exec(&code);
         }
         let mut line = std::mem::take(&mut self.scratch);
         let parsed = {

@@ -240,6 +240,10 @@ impl Interp<'_> {
                         ),
                     ));
                 }
+                // A Python procedure of the ini's `oword` module comes first, as in rs274.
+                if self.py_oword(&label, &args)? {
+                    return Ok(());
+                }
                 let call = self.loc.line;
                 let target = match self.subs.get(&label).copied() {
                     Some(t) => t,
