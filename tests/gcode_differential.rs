@@ -88,6 +88,14 @@ fn options_for(p: &Path) -> InterpOptions {
             .map(|d| dir.join(d))
             .collect();
     }
+    // The embedded-Python programs run Python as rs274 does even without an ini
+    // (`hytask gcode canon --python`); nothing else does.
+    let py = p
+        .file_name()
+        .is_some_and(|n| n.to_string_lossy().starts_with("py_"));
+    if py && o.python.is_none() {
+        o.python = Some(PythonConfig::bare());
+    }
     o
 }
 

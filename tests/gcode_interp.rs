@@ -629,7 +629,7 @@ fn ini_orient_offset_and_read_only_ini_values() {
 
 /// Embedded Python (LinuxCNC's `[PYTHON]` and `;py,`): a missing interpreter is an error on
 /// the line that needed it, not a panic or a silent skip; a Python procedure's moves and
-/// printed lines arrive as commands; a program without Python never starts it.
+/// printed lines arrive as commands; a program without Python enabled never starts it.
 #[test]
 fn embedded_python_errors_name_the_line_and_moves_arrive_as_commands() {
     use hytask::gcode::python::PythonConfig;
@@ -675,9 +675,29 @@ fn embedded_python_errors_name_the_line_and_moves_arrive_as_commands() {
         "{e}"
     );
 
-    let e = err("G0 X1\n;py,assert 1 == 2, 'one is not two'\nM2\n");
+    let bare = InterpOptions {
+        python: Some(PythonConfig::bare()),
+        ..InterpOptions::default()
+    };
+    let e = err_with("G0 X1\n;py,assert 1 == 2, 'one is not two'\nM2\n", &bare);
     assert_eq!(e.line, 2);
     assert!(e.message.contains("AssertionError: one is not two"), "{e}");
+    // Without Python enabled (the default, and the daemon's), a program alone runs no code
+    // on the host: `;py,` and `(py,…)` are ordinary comments.
+    let marker = dir.path().join("ran");
+    let escape = format!(
+        "G0 X1\n;py,open('{}', 'w').close(); assert False\n(py,assert False)\nG0 X2\nM2\n",
+        marker.display()
+    );
+    let p = run(&escape);
+    assert!(body(&p)
+        .iter()
+        .any(|c| matches!(c, CanonCmd::StraightTraverse(e) if e[0] == 2.0)));
+    assert!(!marker.exists(), "Python ran");
+    // The same program with Python enabled runs it (the check above can fail).
+    let e = err_with(&escape, &bare);
+    assert_eq!(e.line, 2);
+    assert!(marker.exists());
     // without [PYTHON], an o-call of a name Python would have is an ordinary missing sub
     let e = err("o<go> call\nM2\n");
     assert!(e.message.contains("Failed to find subroutine o<go>"), "{e}");

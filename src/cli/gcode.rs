@@ -47,6 +47,11 @@ pub struct InterpArgs {
     /// `oword` functions O-word procedures (run by `python3`, as rs274's embedded Python).
     #[arg(long)]
     pub ini: Option<PathBuf>,
+    /// Run `;py,` and `(py,…)` comments with `python3` even without an ini `[PYTHON]`
+    /// section (as rs274's embedded Python does). Without it, or a `[PYTHON]` section in
+    /// `--ini`, they are ordinary comments: a program alone never runs code on this host.
+    #[arg(long)]
+    pub python: bool,
 }
 
 impl InterpArgs {
@@ -83,6 +88,9 @@ impl InterpArgs {
             );
             ini = std::sync::Arc::new(crate::gcode::IniValues::parse(&text));
             python = crate::gcode::python::PythonConfig::from_ini(&text, dir);
+        }
+        if self.python && python.is_none() {
+            python = Some(crate::gcode::python::PythonConfig::bare());
         }
         Ok(InterpOptions {
             tool_table: super::plan::tool_table(self.tool_table.as_deref(), machine.as_ref()),
@@ -156,6 +164,7 @@ mod tests {
             block_delete: false,
             machine_units: None,
             ini: None,
+            python: false,
         }
     }
 

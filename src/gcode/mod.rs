@@ -119,8 +119,10 @@ pub struct InterpOptions {
     pub parameters: Option<Arc<VarFile>>,
     /// Values of `#<_ini[section]name>` (see [`IniValues`]).
     pub ini: Arc<IniValues>,
-    /// The ini file's `[PYTHON]` section: Python O-word procedures (see [`python`]). Without
-    /// it only `;py,` comments start Python.
+    /// Embedded Python (see [`python`]): `None` (the default, and always in the daemon) runs
+    /// none, and `;py,`/`(py,…)` comments are ordinary comments, so that a G-code program
+    /// cannot run code on the host. `Some` (an ini's `[PYTHON]` section given on purpose, or
+    /// [`python::PythonConfig::bare`]) runs them, and the TOPLEVEL's O-word procedures.
     pub python: Option<python::PythonConfig>,
     /// The tool table slot the interpreter takes as its current pocket at start (LinuxCNC's
     /// `GET_EXTERNAL_TOOL_SLOT`) while the spindle is still empty: 0 on a machine. rs274's

@@ -38,6 +38,15 @@ pub struct PythonConfig {
 }
 
 impl PythonConfig {
+    /// Python enabled without an ini's `[PYTHON]` section: `;py,` comments run, no O-word
+    /// procedures (`hytask gcode canon --python`).
+    pub fn bare() -> PythonConfig {
+        PythonConfig {
+            python: PathBuf::from("python3"),
+            ..PythonConfig::default()
+        }
+    }
+
     /// The `[PYTHON]` section of an ini file's `text`, if it has one; relative paths are
     /// taken from `dir` (the ini file's directory). `PATH_PREPEND`/`PATH_APPEND` may repeat
     /// and hold colon-separated lists.
@@ -51,10 +60,7 @@ impl PythonConfig {
             if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
                 inside = name.trim().eq_ignore_ascii_case("PYTHON");
                 if inside && cfg.is_none() {
-                    cfg = Some(PythonConfig {
-                        python: PathBuf::from("python3"),
-                        ..PythonConfig::default()
-                    });
+                    cfg = Some(PythonConfig::bare());
                 }
                 continue;
             }

@@ -294,7 +294,8 @@ def classify(path, hytask, timeout, tmp):
             rc_r, out_r, err_r, with_ini = rc_i, out_i, err_i, True
     if rc_r is None:
         return {"class": "rs274-hang"}
-    cmd = [hytask, "gcode", "canon", "--machine-units", "inch", "--tool-table", tbl]
+    # --python: rs274 runs `;py,` comments (its embedded Python); hytask only on request.
+    cmd = [hytask, "gcode", "canon", "--python", "--machine-units", "inch", "--tool-table", tbl]
     if own:
         cmd += ["--ini", ini]
     for s in subs:

@@ -261,8 +261,14 @@ impl Interp<'_> {
     }
 
     /// A `;py,` or `(py,…)` comment: `code` runs in the Python module context (TOPLEVEL's
-    /// namespace, where `interpreter.this` is `self`).
+    /// namespace, where `interpreter.this` is `self`). Only where the options enable Python
+    /// ([`crate::gcode::InterpOptions::python`]): a program alone must not run code on the
+    /// host (a job sent to the daemon would run it as the daemon's user), so without that
+    /// it is an ordinary comment.
     pub(super) fn py_exec(&mut self, code: &str) -> Result<(), GcodeError> {
+        if self.opts.python.is_none() {
+            return Ok(());
+        }
         let what = format!("Python statement '{code}'");
         self.py_request(&json!({ "op": "exec", "code": code }), &what)?;
         Ok(())
