@@ -146,5 +146,61 @@ fn interpolator(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, planner, interpolator);
+/// The servo periods of feed holds on the 10,000-chord plan (a corner blend every 0.5 mm:
+/// the path stop runs through them, re-planned every period), side by side with the same
+/// number of periods running on from the same states: the ratio is what a stop costs a
+/// period. Holds requested every 97 periods of a nominal run, each stepped to rest.
+fn hold_periods(c: &mut Criterion) {
+    use hytask::motion::InterpState;
+    let cfg = MotionConfig::default();
+    let [_, (_, chords)]: [(&str, Vec<Canon>); 2] = cases().try_into().unwrap();
+    let p = plan(&chords, &cfg).unwrap();
+    // Interpolator states in cruise (cloned with their queue position), and the periods
+    // each hold takes to rest.
+    let mut starts = Vec::new();
+    let mut it = Interpolator::new(&cfg, p.start_mm);
+    let mut src = SliceSource::new(&p.items);
+    for n in 0.. {
+        if it.step(&mut src).state == InterpState::Done {
+            break;
+        }
+        if n % 97 == 50 {
+            let (mut h, mut hs) = (it.clone(), src.clone());
+            h.hold();
+            let mut periods = 0u64;
+            while h.step(&mut hs).state == InterpState::Running {
+                periods += 1;
+            }
+            starts.push((it.clone(), src.clone(), periods));
+        }
+    }
+    let total: u64 = starts.iter().map(|s| s.2).sum();
+    let mut g = c.benchmark_group("hold");
+    g.sample_size(20);
+    g.throughput(Throughput::Elements(total));
+    g.bench_function("10000x0.02mm hold periods", |b| {
+        b.iter(|| {
+            for (it, src, periods) in &starts {
+                let (mut h, mut hs) = (it.clone(), src.clone());
+                h.hold();
+                for _ in 0..*periods {
+                    black_box(h.step(&mut hs));
+                }
+            }
+        })
+    });
+    g.bench_function("10000x0.02mm running periods", |b| {
+        b.iter(|| {
+            for (it, src, periods) in &starts {
+                let (mut h, mut hs) = (it.clone(), src.clone());
+                for _ in 0..*periods {
+                    black_box(h.step(&mut hs));
+                }
+            }
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, planner, interpolator, hold_periods);
 criterion_main!(benches);

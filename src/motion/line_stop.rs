@@ -62,30 +62,52 @@ impl LineStop {
     }
 
     /// The highest speed the stop has from where it has covered `d_mm` on (the speed there,
-    /// or the peak where it is still accelerating), or `None` if it ends before (bisection
-    /// on the distance, which grows with time).
+    /// or the peak where it is still accelerating), or `None` if it ends before. The phase
+    /// that covers `d_mm` is found by walking the three, and the time in it by Newton steps
+    /// on its cubic kept within a shrinking bracket (the distance grows with time); the
+    /// speed is taken at the bracket's early end, so it is never below the true one.
     pub fn speed_at_distance(&self, d_mm: f64) -> Option<f64> {
-        if d_mm >= self.distance_mm() {
-            return None;
-        }
+        let peak = if self.a0 > 0.0 {
+            self.v0 + self.a0 * self.a0 / (2.0 * self.jerk[2])
+        } else {
+            self.v0
+        };
         if d_mm <= 0.0 {
-            return Some(self.v0);
+            return Some(peak);
         }
-        let (mut lo, mut hi) = (0.0, self.duration_s());
-        for _ in 0..48 {
-            let mid = 0.5 * (lo + hi);
-            if self.eval(mid).0 <= d_mm {
-                lo = mid;
-            } else {
-                hi = mid;
+        let (mut s, mut v, mut a) = (0.0, self.v0, self.a0);
+        for (j, dur) in self.jerk.into_iter().zip(self.dur) {
+            let at = |h: f64| s + v * h + a * h * h / 2.0 + j * h * h * h / 6.0;
+            if at(dur) > d_mm {
+                let (mut lo, mut hi) = (0.0, dur);
+                let mut h = ((d_mm - s) / v.max(1e-9)).clamp(0.0, dur);
+                for _ in 0..40 {
+                    let e = at(h) - d_mm;
+                    if e > 0.0 {
+                        hi = h;
+                    } else {
+                        lo = h;
+                    }
+                    if e.abs() <= 1e-12 * d_mm.max(1.0) || hi - lo <= 1e-15 {
+                        break;
+                    }
+                    let rate = v + a * h + j * h * h / 2.0;
+                    h = if rate > 0.0 { h - e / rate } else { f64::NAN };
+                    if !(h > lo && h < hi) {
+                        h = 0.5 * (lo + hi);
+                    }
+                }
+                let early = lo.min(h);
+                if a + j * early > 0.0 {
+                    return Some(peak);
+                }
+                return Some((v + a * early + j * early * early / 2.0).max(0.0));
             }
+            s = at(dur);
+            v += a * dur + j * dur * dur / 2.0;
+            a += j * dur;
         }
-        let (_, speed, acc) = self.eval(lo);
-        if acc > 0.0 {
-            // Still rising: the peak, where the first phase's jerk has brought it to zero.
-            return Some(speed.max(self.eval(self.a0 / self.jerk[2]).1));
-        }
-        Some(speed)
+        None
     }
 
     /// `(distance, speed, acceleration)` at `t` s into the stop (clamped to it; the speed is
@@ -117,6 +139,28 @@ mod tests {
 
     const A: f64 = 500.0;
     const J: f64 = 50_000.0;
+
+    /// The speed where the stop has covered a distance agrees with its timing, and is the
+    /// peak while it still accelerates.
+    #[test]
+    fn speed_at_distance_follows_the_stop() {
+        for (v, a) in [(50.0, 0.0), (30.0, 400.0), (40.0, -300.0), (2.0, 0.0)] {
+            let s = LineStop::new(v, a, A, J).unwrap();
+            let peak = v + a.max(0.0).powi(2) / (2.0 * J);
+            for k in 1..100 {
+                let t = s.duration_s() * f64::from(k) / 100.0;
+                let (d, speed, acc) = s.eval(t);
+                let got = s.speed_at_distance(d).unwrap();
+                let want = if acc > 0.0 { peak } else { speed };
+                assert!(
+                    got >= want - 1e-9 && got <= want + 1e-6,
+                    "{v} {a} {t}: {got} {want}"
+                );
+            }
+            assert_eq!(s.speed_at_distance(s.distance_mm() + 1e-9), None);
+            assert_eq!(s.speed_at_distance(0.0), Some(peak));
+        }
+    }
 
     /// From a cruise the stop is the symmetric S-curve: `T = v/A + A/J` once the full
     /// acceleration is reached, `2·√(v/J)` below that, distance `v·T/2`.
