@@ -3,12 +3,13 @@
 //!
 //! hytask links no Python. The interpreter runs in the job-preparation thread, never in the
 //! realtime path, so Python runs there too, in a `python3` child process started when it is
-//! first needed (an ini with a `[PYTHON]` section and an `o<…> call`, or a `;py,` comment)
-//! and ended with the interpreter. [`BRIDGE`] (`python_bridge.py`) is the child's program: it
+//! first needed (an `o<…> call` with the ini's `[PYTHON]` section, or a `;py,` comment) and
+//! ended with the interpreter. Only where the interpreter's options enable it
+//! ([`crate::gcode::InterpOptions::python`]): a G-code file alone never runs code on the host. [`BRIDGE`] (`python_bridge.py`) is the child's program: it
 //! gives Python LinuxCNC's `interpreter` and `emccanon` modules and `self.params`, and
 //! forwards every parameter access and canonical call to the interpreter over the child's
 //! pipes, one JSON object per line. The interpreter's side of the conversation is in
-//! `interp/python.rs`.
+//! `interp/pycall.rs`.
 
 use serde::Deserialize;
 use std::io::{BufRead as _, BufReader, Write as _};
