@@ -177,17 +177,21 @@ fn hold_on_a_fitted_spiral_runs_along_its_arcs() {
 /// `chords` chords of 0.02 mm (arc length) along y = 5·sin(2πx/40) at F3000 and G64 P0.05
 /// (the planner benchmark's dense stream): too short and too dense to be fitted into arcs,
 /// they are merged into lines of about 0.5 mm with a corner blend at every vertex.
-fn dense_sine_of(chords: u32) -> Prog {
+/// Also returns the programmed polyline.
+fn dense_sine_of(chords: u32) -> (Prog, Vec<[f64; 9]>) {
     let mut g = Prog::new();
     g.feed(3000.0).g64(0.05);
+    let mut path = vec![pose(0.0, 0.0, 0.0)];
     let w = std::f64::consts::TAU / 40.0;
     let mut x = 0.0f64;
     for _ in 0..chords {
         let slope = 5.0 * w * (w * x).cos();
         x += 0.02 / (1.0 + slope * slope).sqrt();
-        g.g1(x, 5.0 * (w * x).sin(), 0.0);
+        let y = 5.0 * (w * x).sin();
+        g.g1(x, y, 0.0);
+        path.push(pose(x, y, 0.0));
     }
-    g
+    (g, path)
 }
 
 /// A hold on the dense sine runs through its corner blends as along arcs (their length,
@@ -195,7 +199,7 @@ fn dense_sine_of(chords: u32) -> Prog {
 #[test]
 fn hold_through_corner_blends_on_dense_chords() {
     let cfg = MotionConfig::default();
-    let p = plan(&dense_sine_of(4000).canon, &cfg).unwrap();
+    let p = plan(&dense_sine_of(4000).0.canon, &cfg).unwrap();
     let blends = p
         .items
         .iter()
@@ -221,8 +225,23 @@ fn hold_through_corner_blends_on_dense_chords() {
 /// `Limits::arc`): never beyond a limit, never off the path, exact end unless aborted.
 #[test]
 fn random_override_hold_abort_schedules_on_arcs_stay_within_limits() {
-    let cfg = MotionConfig::default();
     let (p, path) = loops_of(120);
+    random_schedules(&p, &path);
+}
+
+/// The same random schedules on dense chords, whose stops run through corner blends.
+#[test]
+fn random_override_hold_abort_schedules_on_dense_chords_stay_within_limits() {
+    let (g, path) = dense_sine_of(800);
+    let p = plan(&g.canon, &MotionConfig::default()).unwrap();
+    random_schedules(&p, &path);
+}
+
+/// Overrides in [0, 2], hold, resume and abort at 60 pseudo-random schedules of five events
+/// on `p`: never beyond a limit, never farther from the polyline `path` than its G64 P0.05,
+/// exact end unless aborted.
+fn random_schedules(p: &Plan, path: &[[f64; 9]]) {
+    let cfg = MotionConfig::default();
     let total = (p.duration_s / cfg.servo_period_s) as u64;
     let mut seed = 0x2545_f491_4f6c_dd1du64;
     let mut next = |m: u64| {
@@ -236,7 +255,7 @@ fn random_override_hold_abort_schedules_on_arcs_stay_within_limits() {
         let mut ev: Vec<(usize, u64)> = (0..5).map(|_| (next(total) as usize, next(8))).collect();
         ev.sort_unstable();
         let mut aborted = false;
-        let tr = hytask::motion::trace::run(&p, &cfg, max_periods(&p, &cfg), |n, it| {
+        let tr = hytask::motion::trace::run(p, &cfg, max_periods(p, &cfg), |n, it| {
             for &(at, act) in ev.iter().filter(|e| e.0 == n) {
                 match act {
                     0 => it.set_feed_override(2.0),
@@ -260,7 +279,7 @@ fn random_override_hold_abort_schedules_on_arcs_stay_within_limits() {
             }
         });
         assert_within_limits(&tr, &cfg);
-        let dev = max_deviation(&tr, &path);
+        let dev = max_deviation(&tr, path);
         assert!(dev <= 0.05 + 1e-9, "case {case} {ev:?}: deviation {dev}");
         if !aborted {
             assert_eq!(last(&tr), p.end_mm, "case {case} {ev:?}");
@@ -285,7 +304,7 @@ fn hold_then_resume_or_abort_at_every_period_stays_within_limits() {
     let square = plan(&g.canon, &cfg).unwrap();
     let (loops, _) = loops_of(80);
     let spiral = plan(&spiral_of(400).canon, &cfg).unwrap();
-    let dense = plan(&dense_sine_of(600).canon, &cfg).unwrap();
+    let dense = plan(&dense_sine_of(600).0.canon, &cfg).unwrap();
     for (name, p) in [
         ("square", &square),
         ("loops", &loops),
