@@ -203,17 +203,6 @@ impl BlendPath {
         let middle = 3.0 * rate * rate * w_dv(f_tj, 1.0 - f_tj) / w.powi(6);
         (kappa, self.wedge * ends.max(middle))
     }
-
-    /// Axes the blend moves (bit `i` for axis `i`): its turn is bounded by the weakest.
-    pub fn axes(&self) -> u16 {
-        (0..NUM_AXES).fold(0, |m, i| {
-            if self.v0[i] != 0.0 || self.dv[i] != 0.0 {
-                m | (1 << i)
-            } else {
-                m
-            }
-        })
-    }
 }
 
 #[cfg(test)]
@@ -334,9 +323,5 @@ mod tests {
         assert!(BlendPath::of(&blend(0.0, (40.0, 20.0))).is_none());
         assert!(BlendPath::of(&blend(150.0, (40.0, 40.0))).is_none());
         assert!(BlendPath::of(&blend(110.0, (40.0, 40.0))).is_some());
-        assert_eq!(
-            BlendPath::of(&blend(40.0, (40.0, 40.0))).unwrap().axes(),
-            0b11
-        );
     }
 }

@@ -437,6 +437,16 @@ mod tests {
         );
         (blend.duration_s, blend.jerk_s) = (0.04, 0.01);
         let exact = BlendPath::of(&blend).unwrap().length();
+        // An XY blend turns in X and Y only.
+        let p = piece(&blend).unwrap();
+        assert!(p.share_t[..2]
+            .iter()
+            .chain(&p.share_n[..2])
+            .all(|s| *s > 0.0));
+        assert!(p.share_t[2..]
+            .iter()
+            .chain(&p.share_n[2..])
+            .all(|s| *s == 0.0));
         assert!(r.extend(&blend));
         assert!((r.room_mm - 2.0 - exact).abs() < 1e-12 && exact < 1.6);
         assert!(r.turns());
